@@ -1,0 +1,5 @@
+import sys
+
+from tdmon.cli import main
+
+sys.exit(main())

@@ -1,0 +1,59 @@
+"""The ``tdmon`` command line: one entry point, one sub-command module per area.
+
+Each module in ``_COMMAND_MODULES`` exposes ``register(subparsers)``, which adds its commands
+and sets ``func`` (a callable taking the parsed arguments and returning the exit code).
+User mistakes surface as :class:`tdmon.errors.TdmonError` and are printed as one line on stderr
+with exit code 2; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from tdmon import __version__
+from tdmon.errors import TdmonError
+
+_COMMAND_MODULES = ("model", "lab", "run", "record")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="tdmon",
+        description=(
+            "Real-time torque-and-drag monitor: modelled pick-up, slack-off and rotating loads "
+            "with temperature-dependent friction, live friction back-calculation, MCAP flight "
+            "recording. Quantities are SI on output (N, N m, m); inputs accept units."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"tdmon {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in _COMMAND_MODULES:
+        module = importlib.import_module(f"tdmon.cli.{name}")
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func = getattr(args, "func", None)
+    if func is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return int(func(args) or 0)
+    except TdmonError as exc:
+        print(f"tdmon: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("tdmon: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

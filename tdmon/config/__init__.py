@@ -1,0 +1,1 @@
+"""Pydantic models of the TOML files and adapters to model arguments."""

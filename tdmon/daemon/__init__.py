@@ -1,0 +1,1 @@
+"""The asyncio daemon: sources -> decode -> record -> align -> rig state -> monitor -> sinks."""

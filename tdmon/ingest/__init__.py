@@ -1,0 +1,1 @@
+"""Sources (MQTT, Zenoh, MCAP replay) and the pure payload decoders kept apart from them."""

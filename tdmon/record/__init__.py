@@ -1,0 +1,1 @@
+"""The flight recorder (MCAP), Rerun views and the post-well report."""
