@@ -1,0 +1,624 @@
+"""The MCAP flight recorder: a sink that writes every daemon message to rotating MCAP files.
+
+Design points (ECOSYSTEM.md, STYLE.md):
+
+* JSON messages, one JSON Schema per channel, registered once per file; integer-nanosecond log
+  times; zstd chunks.
+* ``Writer.flush()`` at least every ``flush_interval_s`` (also from a background thread when
+  the pipeline is quiet): a SIGKILLed writer then loses at most that much, and the footer-less
+  file it leaves is rewritten by :func:`tdmon.record.recover.recover_folder` on the next start.
+* ``finish()`` always runs: on ``close()``, on leaving the ``with`` block, on rotation, and at
+  interpreter exit for a recorder nobody closed.
+* A failure while running (disk full, file too large, folder removed) never raises into the
+  daemon's pipeline: the recorder keeps the error, reports an ``alarm``-shaped message through
+  ``on_alarm``, counts every message it could not keep, and retries a new file every
+  ``retry_s`` seconds. Only start-up problems raise :class:`tdmon.errors.RecordError`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import functools
+import io
+import json
+import logging
+import math
+import os
+import re
+import shutil
+import threading
+import time
+import weakref
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Final
+
+from mcap.writer import CompressionType, Writer
+
+from tdmon import __version__
+from tdmon.errors import RecordError
+from tdmon.record import schemas
+from tdmon.record.sink import AlarmHook, Message
+
+log = logging.getLogger(__name__)
+
+MIB: Final = 1024 * 1024
+LIBRARY: Final = f"tdmon {__version__}"
+FILE_PATTERN: Final = re.compile(r"^(?P<prefix>.+)_(?P<seq>\d{5,})_(?P<start>\d{8}T\d{6}Z)\.mcap$")
+
+_dumps = functools.partial(json.dumps, separators=(",", ":"), allow_nan=False)
+
+
+def _numpy_default(value: Any) -> Any:
+    # numpy scalars and arrays (float32, int64, ndarray) are not JSON-serialisable as such.
+    tolist = getattr(value, "tolist", None)
+    if tolist is None:
+        raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+    return tolist()
+
+
+def _replace_nonfinite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {key: _replace_nonfinite(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_replace_nonfinite(item) for item in value]
+    if hasattr(value, "tolist"):
+        return _replace_nonfinite(value.tolist())
+    return value
+
+
+def encode_message(message: Message) -> tuple[bytes, bool]:
+    """JSON bytes of a message, and whether a NaN/inf had to be replaced by ``null``.
+
+    Raises ``TypeError``/``ValueError`` for something that is not JSON at all.
+    """
+    try:
+        return _dumps(message, default=_numpy_default).encode(), False
+    except ValueError:
+        cleaned = _replace_nonfinite(message)
+        return _dumps(cleaned, default=_numpy_default).encode(), True
+
+
+def file_name(prefix: str, sequence: int, start: datetime) -> str:
+    """``<prefix>_<sequence:05d>_<UTC start YYYYmmddTHHMMSSZ>.mcap``: sorts in recording order."""
+    return f"{prefix}_{sequence:05d}_{start.astimezone(UTC):%Y%m%dT%H%M%SZ}.mcap"
+
+
+def next_sequence(folder: Path, prefix: str) -> int:
+    """One more than the highest sequence number of ``prefix`` files already in ``folder``."""
+    highest = -1
+    for path in folder.glob(f"{prefix}_*.mcap"):
+        match = FILE_PATTERN.match(path.name)
+        if match and match["prefix"] == prefix:
+            highest = max(highest, int(match["seq"]))
+    return highest + 1
+
+
+@dataclass
+class RecorderStats:
+    """Counters of a recorder since it was created (a snapshot; see ``McapRecorder.stats``)."""
+
+    written: int = 0
+    """Messages handed to the MCAP writer and not later lost with a failed file."""
+    lost: int = 0
+    """Messages accepted but not recorded (failure state, or lost with a failed file)."""
+    nonfinite_replaced: int = 0
+    """Messages in which a NaN/inf was recorded as ``null``."""
+    unencodable: int = 0
+    """Messages that are not JSON at all (counted in ``lost`` too)."""
+    untyped_topics: int = 0
+    """Topics written without a registered schema (recorded with a permissive schema)."""
+    files: list[Path] = field(default_factory=list)
+    """Every file opened, in order (the last one is current unless the recorder failed)."""
+    flushes: int = 0
+    failures: int = 0
+    per_topic: dict[str, int] = field(default_factory=dict)
+    """Messages written per topic."""
+
+
+class _McapFile:
+    """One open MCAP file: mcap's ``Writer`` with the lock, the channels and ``finish()``."""
+
+    def __init__(
+        self,
+        path: Path,
+        topics: Mapping[str, Mapping[str, Any]],
+        chunk_size: int,
+        compression: CompressionType,
+        metadata: Mapping[str, str],
+        lock: threading.RLock,
+    ) -> None:
+        self.path = path
+        # "x": never overwrite a file another run left behind (it may need recovery).
+        self._raw = open(path, "xb", buffering=0)  # noqa: SIM115 - closed in finish/abandon
+        try:
+            # An exclusive lock tells a recovery scan in another process that this file is live.
+            fcntl.flock(self._raw.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            self._stream = io.BufferedWriter(self._raw, buffer_size=MIB)
+            self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
+            self._channels: dict[str, int] = {}
+            self.unflushed = 0
+            self.opened_at = time.monotonic()
+            self.last_flush = self.opened_at
+            self._finalizer = weakref.finalize(
+                self, _finish_at_exit, self._writer, self._stream, lock
+            )
+            self._writer.start(profile="", library=LIBRARY)
+            self._writer.add_metadata("tdmon", dict(metadata))
+            for topic, schema in topics.items():
+                self.add_topic(topic, schema)
+            self.flush()
+        except BaseException:
+            self.abandon()
+            raise
+
+    def add_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
+        schema_id = self._writer.register_schema(
+            name=schemas.schema_name(topic),
+            encoding="jsonschema",
+            data=schemas.schema_bytes(schema),
+        )
+        self._channels[topic] = self._writer.register_channel(
+            topic=topic, message_encoding="json", schema_id=schema_id
+        )
+
+    def add(self, topic: str, log_time_ns: int, data: bytes, sequence: int) -> None:
+        self._writer.add_message(
+            channel_id=self._channels[topic],
+            log_time=log_time_ns,
+            publish_time=log_time_ns,
+            data=data,
+            sequence=sequence,
+        )
+        self.unflushed += 1
+
+    def flush(self) -> None:
+        self._writer.flush()
+        self.unflushed = 0
+        self.last_flush = time.monotonic()
+
+    def size(self) -> int:
+        return self._stream.tell()
+
+    def finish(self) -> None:
+        """Write the summary and footer, then close; the file is complete."""
+        self._finalizer.detach()
+        try:
+            self._writer.finish()
+            self._stream.flush()
+        finally:
+            self._close_quietly()
+        self.unflushed = 0
+
+    def abandon(self) -> None:
+        """Close without a footer (after a write error); recovery rewrites it later."""
+        finalizer = getattr(self, "_finalizer", None)
+        if finalizer is not None:
+            finalizer.detach()
+        self._close_quietly()
+
+    def _close_quietly(self) -> None:
+        stream = getattr(self, "_stream", None)
+        if stream is not None:
+            # Closing the buffer retries the failed write; the raw file is closed regardless.
+            with contextlib.suppress(OSError, ValueError):
+                stream.close()
+        with contextlib.suppress(OSError):
+            self._raw.close()
+
+
+def _finish_at_exit(writer: Writer, stream: io.BufferedWriter[Any], lock: threading.RLock) -> None:
+    # A recorder that was never closed: finish its file at interpreter exit rather than leave
+    # a footer-less one. The lock keeps the flusher thread (still alive at exit) out of the way;
+    # errors cannot be reported anywhere useful this late.
+    locked = lock.acquire(timeout=2.0)
+    try:
+        with contextlib.suppress(Exception):
+            writer.finish()
+        with contextlib.suppress(OSError, ValueError):
+            stream.close()
+    finally:
+        if locked:
+            lock.release()
+
+
+class McapRecorder:
+    """A :class:`~tdmon.record.sink.Sink` writing MCAP files to ``folder``.
+
+    Parameters
+    ----------
+    folder
+        Output folder, created if missing. Files are named ``<prefix>_<seq>_<start>.mcap``
+        (see :func:`file_name`); the sequence continues after the highest one present, so a
+        restarted recorder always starts a new file.
+    prefix
+        File name prefix.
+    rotate_s
+        Start a new file after this many seconds of wall-clock time (``None``: never).
+    rotate_bytes
+        Start a new file once the current one reaches this size [bytes] (``None``: never).
+    flush_interval_s
+        Longest time [s] a written message stays in memory: bounds the loss on SIGKILL.
+    extra_topics
+        Topics beyond ``schemas.TOPIC_SCHEMAS`` (e.g. ``/truth/...``), with their JSON Schema.
+    on_alarm
+        Called with an ``alarm`` message (``kind`` ``recorder_failed`` / ``recorder_resumed``)
+        when recording fails or resumes. Called without the recorder's lock held, so it may
+        write to the recorder.
+    retry_s
+        After a failure, try a new file at most this often [s].
+    min_free_bytes
+        Refuse to start when the folder's file system has less free space than this.
+    recover
+        Before opening the first file, rewrite footer-less files of earlier runs in ``folder``
+        (:func:`tdmon.record.recover.recover_folder`); results in ``self.recovered``.
+    background_flush
+        Flush from a daemon thread so that data is flushed even when no message arrives.
+    path
+        Write exactly this file instead (no rotation, no sequence); ``folder``/``prefix`` are
+        then taken from it. Used for replays with ``--out Y.mcap``.
+    """
+
+    def __init__(
+        self,
+        folder: str | os.PathLike[str] | None = None,
+        *,
+        prefix: str = "tdmon",
+        rotate_s: float | None = 3600.0,
+        rotate_bytes: int | None = 512 * MIB,
+        flush_interval_s: float = 1.0,
+        chunk_size: int = 4 * MIB,
+        compression: str = "zstd",
+        extra_topics: Mapping[str, Mapping[str, Any]] | None = None,
+        on_alarm: AlarmHook | None = None,
+        retry_s: float = 10.0,
+        min_free_bytes: int = 16 * MIB,
+        recover: bool = True,
+        background_flush: bool = True,
+        path: str | os.PathLike[str] | None = None,
+    ) -> None:
+        if (folder is None) == (path is None):
+            raise RecordError("give the recorder either an output folder or a file path")
+        if flush_interval_s <= 0:
+            raise RecordError(f"flush interval must be positive, got {flush_interval_s}")
+        self._fixed_path = Path(path) if path is not None else None
+        self.folder = self._fixed_path.parent if self._fixed_path else Path(folder)  # type: ignore[arg-type]
+        self.prefix = prefix
+        self.rotate_s = rotate_s if self._fixed_path is None else None
+        self.rotate_bytes = rotate_bytes if self._fixed_path is None else None
+        self.flush_interval_s = flush_interval_s
+        self.retry_s = retry_s
+        self.on_alarm = on_alarm
+        self._chunk_size = chunk_size
+        try:
+            self._compression = CompressionType[compression.upper()]
+        except KeyError:
+            raise RecordError(f"unknown MCAP compression {compression!r}") from None
+        self._topics: dict[str, dict[str, Any]] = {
+            topic: dict(schema) for topic, schema in schemas.TOPIC_SCHEMAS.items()
+        }
+        for topic, schema in (extra_topics or {}).items():
+            self._topics[topic] = dict(schema)
+        self._sequence_numbers: dict[str, int] = {}
+        self._lock = threading.RLock()
+        self._file: _McapFile | None = None
+        self._error: RecordError | None = None
+        self._retry_at = 0.0
+        self._closed = False
+        self._pending_alarms: list[dict[str, Any]] = []
+        self._stats = RecorderStats()
+        self._next_seq = 0
+
+        self._prepare_folder(min_free_bytes)
+        self.recovered: list[Any] = []
+        if recover and self._fixed_path is None:
+            from tdmon.record.recover import recover_folder
+
+            self.recovered = recover_folder(self.folder)
+        self._next_seq = 0 if self._fixed_path else next_sequence(self.folder, prefix)
+        try:
+            self._file = self._open_next()
+        except OSError as exc:
+            raise RecordError(
+                f"cannot record to {self.folder}: {exc.strerror or exc}"
+            ) from exc
+
+        self._stop = threading.Event()
+        self._flusher: threading.Thread | None = None
+        if background_flush:
+            self._flusher = threading.Thread(
+                target=self._flush_loop, name="tdmon-mcap-flush", daemon=True
+            )
+            self._flusher.start()
+
+    # -- public ------------------------------------------------------------------------------
+
+    @property
+    def error(self) -> RecordError | None:
+        """The failure the recorder is in (``None`` while recording works)."""
+        return self._error
+
+    @property
+    def path(self) -> Path | None:
+        """The file being written, ``None`` while failed or after close."""
+        current = self._file
+        return current.path if current else None
+
+    @property
+    def stats(self) -> RecorderStats:
+        with self._lock:
+            snapshot = RecorderStats(**vars(self._stats))
+            snapshot.files = list(self._stats.files)
+            snapshot.per_topic = dict(self._stats.per_topic)
+            return snapshot
+
+    @property
+    def topics(self) -> dict[str, dict[str, Any]]:
+        """Registered topics and their schemas."""
+        return dict(self._topics)
+
+    def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
+        """Add a topic (e.g. ``/truth/hookload``) with its JSON Schema; registered once per file."""
+        with self._lock:
+            if topic in self._topics:
+                if self._topics[topic] != dict(schema):
+                    raise RecordError(f"topic {topic} is already registered with another schema")
+                return
+            self._topics[topic] = dict(schema)
+            if self._file is not None:
+                try:
+                    self._file.add_topic(topic, schema)
+                except OSError as exc:
+                    self._fail(exc)
+        self._fire_alarms()
+
+    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+        """Record one message at ``log_time_ns`` [ns since the Unix epoch].
+
+        Never raises for I/O problems: see ``error``/``stats``/``on_alarm``.
+        """
+        try:
+            data, replaced = encode_message(message)
+        except (TypeError, ValueError, RecursionError) as exc:
+            with self._lock:
+                self._stats.unencodable += 1
+                self._stats.lost += 1
+            log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
+            return
+        with self._lock:
+            if self._closed:
+                self._stats.lost += 1
+                return
+            if replaced:
+                self._stats.nonfinite_replaced += 1
+            if topic not in self._topics:
+                self._register_untyped(topic)
+            now = time.monotonic()
+            if self._file is None:
+                self._maybe_resume(now)
+            current = self._file
+            if current is None:
+                self._stats.lost += 1
+            else:
+                try:
+                    if self._rotation_due(current, now):
+                        current = self._rotate()
+                    sequence = self._sequence_numbers.get(topic, 0) + 1
+                    self._sequence_numbers[topic] = sequence
+                    current.add(topic, int(log_time_ns), data, sequence)
+                    self._stats.written += 1
+                    self._stats.per_topic[topic] = self._stats.per_topic.get(topic, 0) + 1
+                    if now - current.last_flush >= self.flush_interval_s:
+                        current.flush()
+                        self._stats.flushes += 1
+                except OSError as exc:
+                    self._fail(exc)
+        if self._pending_alarms:
+            self._fire_alarms()
+
+    def flush(self) -> None:
+        """Flush the current file now (also done automatically every ``flush_interval_s``)."""
+        with self._lock:
+            if self._file is not None:
+                try:
+                    self._file.flush()
+                    self._stats.flushes += 1
+                except OSError as exc:
+                    self._fail(exc)
+        self._fire_alarms()
+
+    def close(self) -> None:
+        """Finish the current file (summary, footer) and stop; safe to call twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._stop.set()
+        if self._flusher is not None:
+            self._flusher.join()
+        with self._lock:
+            current, self._file = self._file, None
+            if current is not None:
+                try:
+                    current.finish()
+                except OSError as exc:
+                    self._file = current
+                    self._fail(exc)
+                    self._file = None
+        self._fire_alarms()
+
+    def __enter__(self) -> McapRecorder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _prepare_folder(self, min_free_bytes: int) -> None:
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise RecordError(
+                f"cannot create output folder {self.folder}: {exc.strerror or exc}"
+            ) from exc
+        if not os.access(self.folder, os.W_OK | os.X_OK):
+            raise RecordError(f"output folder {self.folder} is not writable")
+        try:
+            free = shutil.disk_usage(self.folder).free
+        except OSError as exc:
+            raise RecordError(f"cannot check free space in {self.folder}: {exc}") from exc
+        if free < min_free_bytes:
+            raise RecordError(
+                f"output folder {self.folder} has only {free / MIB:.1f} MiB free "
+                f"(need at least {min_free_bytes / MIB:.1f} MiB)"
+            )
+
+    def _open_next(self) -> _McapFile:
+        if self._fixed_path is not None:
+            path = self._fixed_path
+            if self._stats.files:
+                # A fixed path failed once; never overwrite it: continue beside it.
+                path = path.with_name(f"{path.stem}_{len(self._stats.files):05d}{path.suffix}")
+        else:
+            while True:
+                path = self.folder / file_name(self.prefix, self._next_seq, datetime.now(UTC))
+                self._next_seq += 1
+                if not path.exists():
+                    break
+        metadata = {
+            "library": LIBRARY,
+            "sequence": str(self._next_seq - 1),
+            "started_utc": datetime.now(UTC).isoformat(),
+            "flush_interval_s": repr(self.flush_interval_s),
+        }
+        opened = _McapFile(
+            path, self._topics, self._chunk_size, self._compression, metadata, self._lock
+        )
+        self._stats.files.append(path)
+        return opened
+
+    def _rotation_due(self, current: _McapFile, now: float) -> bool:
+        if self.rotate_s is not None and now - current.opened_at >= self.rotate_s:
+            return True
+        return self.rotate_bytes is not None and current.size() >= self.rotate_bytes
+
+    def _rotate(self) -> _McapFile:
+        current = self._file
+        assert current is not None
+        current.finish()
+        self._file = None
+        self._file = self._open_next()
+        return self._file
+
+    def _register_untyped(self, topic: str) -> None:
+        # Better a message with a permissive schema than a lost one; say so once per topic.
+        log.warning("topic %s has no registered schema; recording it as untyped JSON", topic)
+        self._stats.untyped_topics += 1
+        self._topics[topic] = dict(schemas.UNTYPED)
+        if self._file is not None:
+            try:
+                self._file.add_topic(topic, schemas.UNTYPED)
+            except OSError as exc:
+                self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        """Enter the failure state: count what the file still held, alarm, retry later."""
+        current, self._file = self._file, None
+        where = current.path if current else self.folder
+        if current is not None:
+            self._stats.written -= current.unflushed
+            self._stats.lost += current.unflushed
+            current.abandon()
+        first = self._error is None
+        error = RecordError(
+            f"recording to {where} failed: {exc.strerror or exc}; "
+            f"messages are counted as lost until a new file can be written"
+        )
+        error.__cause__ = exc
+        self._error = error
+        self._stats.failures += 1
+        self._retry_at = time.monotonic() + self.retry_s
+        log.error("%s", error)
+        if first:
+            self._pending_alarms.append(
+                {
+                    "t": time.time(),
+                    "kind": "recorder_failed",
+                    "severity": "critical",
+                    "message": str(error),
+                    "value": float(self._stats.lost),
+                }
+            )
+
+    def _maybe_resume(self, now: float) -> None:
+        if self._closed or now < self._retry_at:
+            return
+        try:
+            self._file = self._open_next()
+        except OSError as exc:
+            self._retry_at = now + self.retry_s
+            log.debug("recorder still failing: %s", exc)
+            return
+        lost = self._stats.lost
+        log.warning("recording resumed in %s after losing %d messages", self._file.path, lost)
+        self._error = None
+        self._pending_alarms.append(
+            {
+                "t": time.time(),
+                "kind": "recorder_resumed",
+                "severity": "info",
+                "message": f"recording resumed in {self._file.path}; {lost} messages lost so far",
+                "value": float(lost),
+            }
+        )
+
+    def _fire_alarms(self) -> None:
+        with self._lock:
+            alarms, self._pending_alarms = self._pending_alarms, []
+        if self.on_alarm is None:
+            return
+        for alarm in alarms:
+            try:
+                self.on_alarm(alarm)
+            except Exception:
+                log.exception("recorder alarm hook failed")
+
+    def _flush_loop(self) -> None:
+        # Wakes several times per interval so that a quiet pipeline is still flushed on time.
+        tick = min(self.flush_interval_s / 4, 0.25)
+        while not self._stop.wait(tick):
+            with self._lock:
+                now = time.monotonic()
+                current = self._file
+                if current is None:
+                    self._maybe_resume(now)
+                elif current.unflushed and now - current.last_flush >= self.flush_interval_s:
+                    try:
+                        current.flush()
+                        self._stats.flushes += 1
+                    except OSError as exc:
+                        self._fail(exc)
+            if self._pending_alarms:
+                self._fire_alarms()
+
+
+__all__ = [
+    "FILE_PATTERN",
+    "McapRecorder",
+    "RecorderStats",
+    "encode_message",
+    "file_name",
+    "next_sequence",
+]

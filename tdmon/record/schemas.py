@@ -1,0 +1,275 @@
+"""JSON Schemas (draft 2020-12) of the daemon's messages, one per recorded topic.
+
+Each schema is registered once per MCAP file (``encoding="jsonschema"``) and its channel carries
+JSON messages, which Foxglove can plot. The shapes are those of docs/architecture.md ("Daemon
+messages"); ``/tdmon/well`` and ``/tdmon/profile`` are extra topics proposed in
+docs/recording.md for the 3D and profile views.
+
+Numbers cannot be NaN or infinite in these messages: JSON has no spelling for them and the
+recorder serialises with ``allow_nan=False`` (it replaces a non-finite value by ``null`` and
+counts it). Fields where a value may honestly be missing (a measurement not yet received, a
+standard deviation from one sample) are therefore typed ``number | null``; everything else that
+feeds a plot or a fit must be a finite number.
+
+Extra properties are allowed everywhere: the estimate message has kind-specific fields, and a
+newer daemon may add fields without breaking older readers.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Mapping
+from typing import Any, Final
+
+JsonSchema = dict[str, Any]
+
+DRAFT: Final = "https://json-schema.org/draft/2020-12/schema"
+
+TOPIC_PREFIX: Final = "/tdmon/"
+
+SOURCES: Final = ("mqtt", "zenoh", "mcap")
+PAYLOAD_ENCODINGS: Final = ("utf-8", "base64")
+RIG_STATES: Final = (
+    "in_slips",
+    "pick_up",
+    "slack_off",
+    "rotating_off_bottom",
+    "reaming",
+    "back_reaming",
+    "drilling",
+    "circulating",
+    "static",
+    "unknown",
+)
+ESTIMATE_KINDS: Final = ("window", "profile", "mu_T")
+SEVERITIES: Final = ("info", "warning", "critical")
+
+_NUMBER: Final[JsonSchema] = {"type": "number"}
+_OPTIONAL_NUMBER: Final[JsonSchema] = {"type": ["number", "null"]}
+_TIME: Final[JsonSchema] = {"type": "number", "minimum": 0, "description": "Unix time [s]"}
+_COUNT: Final[JsonSchema] = {"type": "integer", "minimum": 0}
+_TEXT: Final[JsonSchema] = {"type": "string"}
+_NUMBERS: Final[JsonSchema] = {"type": "array", "items": {"type": "number"}}
+_OPTIONAL_NUMBERS: Final[JsonSchema] = {"type": "array", "items": {"type": ["number", "null"]}}
+
+
+def _object(
+    name: str,
+    title: str,
+    properties: Mapping[str, JsonSchema],
+    required: tuple[str, ...],
+    **extra: Any,
+) -> JsonSchema:
+    schema: JsonSchema = {
+        "$schema": DRAFT,
+        "$id": f"https://tdmon.invalid/schemas/{name}.json",
+        "title": title,
+        "type": "object",
+        "properties": dict(properties),
+        "required": list(required),
+    }
+    schema.update(extra)
+    return schema
+
+
+def _sub(properties: Mapping[str, JsonSchema], required: tuple[str, ...]) -> JsonSchema:
+    return {"type": "object", "properties": dict(properties), "required": list(required)}
+
+
+RAW: Final = _object(
+    "raw",
+    "tdmon raw input, as received",
+    {
+        "source": {"enum": list(SOURCES)},
+        "topic": _TEXT,
+        "receive_time": _TIME,
+        "payload": _TEXT,
+        "payload_encoding": {"enum": list(PAYLOAD_ENCODINGS)},
+    },
+    ("source", "topic", "receive_time", "payload", "payload_encoding"),
+)
+
+SAMPLE: Final = _object(
+    "sample",
+    "tdmon decoded sample (SI)",
+    {
+        "channel": _TEXT,
+        "t": _TIME,
+        "value": _NUMBER,
+        "unit": _TEXT,
+        "source": {"enum": list(SOURCES)},
+        "topic": _TEXT,
+    },
+    ("channel", "t", "value", "unit", "source", "topic"),
+)
+
+REJECTED: Final = _object(
+    "rejected",
+    "tdmon rejected input and the reason",
+    {
+        "reason": _TEXT,
+        "source": {"enum": list(SOURCES)},
+        "topic": _TEXT,
+        "receive_time": _TIME,
+        "payload": _TEXT,
+        "payload_encoding": {"enum": list(PAYLOAD_ENCODINGS)},
+    },
+    ("reason", "source", "topic", "receive_time", "payload", "payload_encoding"),
+)
+
+STATE: Final = _object(
+    "state",
+    "tdmon rig state",
+    {
+        "t": _TIME,
+        "state": {"enum": list(RIG_STATES)},
+        "steady": {"type": "boolean"},
+        # Unknown until the first bit-depth sample arrives.
+        "bit_depth_m": _OPTIONAL_NUMBER,
+    },
+    ("t", "state", "steady", "bit_depth_m"),
+)
+
+MODEL: Final = _object(
+    "model",
+    "tdmon modelled loads at the current bit depth, with the broomstick band",
+    {
+        "t": _TIME,
+        "bit_depth_m": _NUMBER,
+        "hookload_N": _sub(
+            {"pick_up": _NUMBER, "slack_off": _NUMBER, "rotating": _NUMBER},
+            ("pick_up", "slack_off", "rotating"),
+        ),
+        "torque_Nm": _sub({"rotating": _NUMBER}, ("rotating",)),
+        "band": _sub(
+            {"mu": _NUMBERS, "pick_up_N": _NUMBERS, "slack_off_N": _NUMBERS},
+            ("mu", "pick_up_N", "slack_off_N"),
+        ),
+        # A measurement may be missing (channel not received yet): null, never NaN.
+        "measured": _sub(
+            {"hookload_N": _OPTIONAL_NUMBER, "torque_Nm": _OPTIONAL_NUMBER},
+            ("hookload_N", "torque_Nm"),
+        ),
+        "residual": _sub(
+            {"hookload_N": _OPTIONAL_NUMBER, "torque_Nm": _OPTIONAL_NUMBER},
+            ("hookload_N", "torque_Nm"),
+        ),
+    },
+    ("t", "bit_depth_m", "hookload_N", "torque_Nm", "band", "measured", "residual"),
+)
+
+ESTIMATE: Final = _object(
+    "estimate",
+    "tdmon friction estimate (per window, profile along MD, or mu(T) fit)",
+    {
+        "t": _TIME,
+        "kind": {"enum": list(ESTIMATE_KINDS)},
+        "operation": _TEXT,
+        "mu": _NUMBER,
+        # One sample has no spread.
+        "mu_std": _OPTIONAL_NUMBER,
+        # Kind-specific fields read by the views and the report (all optional, see
+        # docs/recording.md): where a window was taken, the profile arrays, the mu(T) fit.
+        "bit_depth_m": _NUMBER,
+        "md_m": _NUMBERS,
+        "mu_profile": _NUMBERS,
+        "mu_profile_std": _OPTIONAL_NUMBERS,
+        "model": _TEXT,
+        "params": {"type": "object", "additionalProperties": {"type": "number"}},
+        "temperature_C": _NUMBERS,
+        "mu_points": _NUMBERS,
+    },
+    ("t", "kind", "operation", "mu", "mu_std"),
+)
+
+ALARM: Final = _object(
+    "alarm",
+    "tdmon alarm",
+    {
+        "t": _TIME,
+        "kind": _TEXT,
+        "severity": {"enum": list(SEVERITIES)},
+        "message": _TEXT,
+        "value": _OPTIONAL_NUMBER,
+        "limit": _OPTIONAL_NUMBER,
+    },
+    ("t", "kind", "severity", "message"),
+)
+
+STATUS: Final = _object(
+    "status",
+    "tdmon daemon status",
+    {
+        "t": _TIME,
+        "samples_in": _COUNT,
+        "rejected": _COUNT,
+        "dropped": _COUNT,
+        "lag_s": _OPTIONAL_NUMBER,
+        "connections": {"type": "object", "additionalProperties": {"type": "string"}},
+    },
+    ("t", "samples_in", "rejected", "dropped", "lag_s", "connections"),
+)
+
+WELL: Final = _object(
+    "well",
+    "tdmon well trajectory (survey stations, minimum curvature) for the 3D view",
+    {
+        "t": _TIME,
+        "name": _TEXT,
+        "md_m": {**_NUMBERS, "minItems": 2},
+        "tvd_m": {**_NUMBERS, "minItems": 2},
+        "north_m": {**_NUMBERS, "minItems": 2},
+        "east_m": {**_NUMBERS, "minItems": 2},
+    },
+    ("t", "md_m", "tvd_m", "north_m", "east_m"),
+)
+
+PROFILE: Final = _object(
+    "profile",
+    "tdmon profiles along MD: temperature and/or local friction",
+    {
+        "t": _TIME,
+        "md_m": {**_NUMBERS, "minItems": 1},
+        "temperature_C": _NUMBERS,
+        "mu": _NUMBERS,
+        "mu_std": _OPTIONAL_NUMBERS,
+    },
+    ("t", "md_m"),
+    anyOf=[{"required": ["temperature_C"]}, {"required": ["mu"]}],
+)
+
+#: Schema of every topic the daemon records, keyed by MCAP topic.
+TOPIC_SCHEMAS: Final[Mapping[str, JsonSchema]] = {
+    TOPIC_PREFIX + name: schema
+    for name, schema in (
+        ("raw", RAW),
+        ("sample", SAMPLE),
+        ("rejected", REJECTED),
+        ("state", STATE),
+        ("model", MODEL),
+        ("estimate", ESTIMATE),
+        ("alarm", ALARM),
+        ("status", STATUS),
+        ("well", WELL),
+        ("profile", PROFILE),
+    )
+}
+
+#: Schema given to a topic nobody registered: any JSON object (so the message is still kept).
+UNTYPED: Final = _object("untyped", "tdmon message on an unregistered topic", {}, ())
+
+
+def schema_name(topic: str) -> str:
+    """Name of a topic's schema in MCAP (Foxglove shows it as the datatype): ``tdmon.model``."""
+    return topic.strip("/").replace("/", ".") or "untyped"
+
+
+def schema_bytes(schema: Mapping[str, Any]) -> bytes:
+    """Serialised schema as stored in the MCAP Schema record."""
+    return json.dumps(schema, separators=(",", ":"), sort_keys=True).encode()
+
+
+def schema_for(topic: str) -> JsonSchema:
+    """A copy of a topic's schema (``UNTYPED`` for topics that have none)."""
+    return copy.deepcopy(dict(TOPIC_SCHEMAS.get(topic, UNTYPED)))

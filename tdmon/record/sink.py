@@ -1,0 +1,23 @@
+"""The sink protocol every recorder and view implements (docs/architecture.md)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, runtime_checkable
+
+#: A message as the daemon produces it: a JSON object (dict) of the shapes in schemas.py.
+Message = Mapping[str, Any]
+
+#: Called with an ``alarm``-shaped dict when a sink changes health (fails, resumes).
+AlarmHook = Callable[[dict[str, Any]], None]
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """Synchronous sink: the daemon calls ``write`` for every message and ``close`` once."""
+
+    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+        """Take one message; must not raise into the caller's pipeline on I/O failure."""
+
+    def close(self) -> None:
+        """Flush and release everything; idempotent."""
