@@ -1,0 +1,317 @@
+"""The daemon's TOML file as pydantic v2 models, and ``load_daemon_config(path)``.
+
+Quantities may be numbers (SI) or strings with a unit ("5 s", "9950 ft", "0.3 kN"). Every
+mistake is raised as :class:`tdmon.errors.ConfigError` naming the file, the dotted key and the
+reason. Paths in the file are relative to the file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from tdmon.errors import ConfigError
+from tdmon.ingest.decode import CHANNEL_UNITS, ChannelSpec
+from tdmon.units import conversion, parse_quantity
+
+
+def _quantity(target: str) -> BeforeValidator:
+    def convert(value: Any) -> Any:
+        if isinstance(value, str | int | float) and not isinstance(value, bool):
+            return parse_quantity(value, target)
+        return value
+
+    return BeforeValidator(convert)
+
+
+Seconds = Annotated[float, _quantity("s")]
+Meters = Annotated[float, _quantity("m")]
+Newtons = Annotated[float, _quantity("N")]
+MetersPerSecond = Annotated[float, _quantity("m/s")]
+RadPerSecond = Annotated[float, _quantity("rad/s")]
+CubicMetersPerSecond = Annotated[float, _quantity("m**3/s")]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+class TlsConfig(_Model):
+    """TLS towards the broker. Paths relative to the config file."""
+
+    ca_file: Path | None = None
+    cert_file: Path | None = None
+    key_file: Path | None = None
+    insecure: bool = Field(default=False, description="skip host name verification (test brokers)")
+
+
+class MqttConfig(_Model):
+    """An MQTT broker connection (aiomqtt)."""
+
+    host: str = "127.0.0.1"
+    port: int = Field(default=1883, ge=1, le=65535)
+    client_id: str = Field(default="tdmon", min_length=1, max_length=200)
+    username: str | None = None
+    password: str | None = None
+    password_env: str | None = None  # read the password from this environment variable
+    tls: TlsConfig | None = None
+    qos: Literal[0, 1, 2] = 1
+    keepalive: int = Field(default=30, ge=5, le=3600)
+    # False keeps the session (subscription, queued QoS 1 messages) over reconnects
+    clean_session: bool = False
+
+    def resolved_password(self) -> str | None:
+        if self.password is not None:
+            return self.password
+        if self.password_env is not None:
+            return os.environ.get(self.password_env)
+        return None
+
+
+class ZenohConfig(_Model):
+    """A Zenoh session. Peer mode on explicit endpoints needs no router."""
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: list[str] = Field(default_factory=list)
+    connect: list[str] = Field(default_factory=list)
+    scouting: bool = False  # multicast and gossip scouting; off: explicit endpoints only
+
+    @field_validator("listen", "connect")
+    @classmethod
+    def _endpoints(cls, value: list[str]) -> list[str]:
+        for endpoint in value:
+            if "/" not in endpoint:
+                raise ValueError(f"'{endpoint}' is not a Zenoh endpoint such as tcp/127.0.0.1:7447")
+        return value
+
+
+class McapSourceConfig(_Model):
+    """Replay of a recording as a source."""
+
+    path: Path
+    speed: float | Literal["max"] = Field(
+        default="max", description="real time x N, or 'max' for as fast as possible"
+    )
+
+    @field_validator("speed")
+    @classmethod
+    def _positive(cls, value: float | str) -> float | str:
+        if not isinstance(value, str) and value <= 0:
+            raise ValueError("speed must be positive or 'max'")
+        return value
+
+
+class SourcesConfig(_Model):
+    mqtt: MqttConfig | None = None
+    zenoh: ZenohConfig | None = None
+    mcap: McapSourceConfig | None = None
+
+    @model_validator(mode="after")
+    def _at_least_one(self) -> SourcesConfig:
+        if self.mqtt is None and self.zenoh is None and self.mcap is None:
+            raise ValueError("configure at least one source: [sources.mqtt], [sources.zenoh] "
+                             "or [sources.mcap]")
+        return self
+
+
+class ChannelConfig(_Model):
+    """How a rig topic feeds a canonical channel; bounds are in the channel's SI unit."""
+
+    topic: str | None = None  # topic after the prefix (default: the channel name)
+    unit: str | None = None  # unit when the payload has none, e.g. "kN"
+    min: float | str | None = None
+    max: float | str | None = None
+
+
+class PublishConfig(_Model):
+    """Publishing results on ``<prefix>/tdmon/<name>``."""
+
+    mqtt: bool | MqttConfig = False
+    zenoh: bool | ZenohConfig = False
+    names: list[str] = Field(default_factory=lambda: ["state", "model", "estimate", "alarm",
+                                                      "status"])
+    qos: Literal[0, 1, 2] = 1
+    status_interval: Seconds = Field(default=1.0, gt=0)
+
+
+class RecorderConfig(_Model):
+    enabled: bool = False
+    output: Path = Path("recordings")
+    rotation: Seconds = Field(default=3600.0, gt=0)
+    flush_interval: Seconds = Field(default=2.0, gt=0)
+
+
+class RerunConfig(_Model):
+    mode: Literal["off", "file", "live"] = "off"
+    path: Path | None = None
+    port: int = Field(default=9876, ge=1, le=65535)
+
+
+class QueuesConfig(_Model):
+    ingest: int = Field(default=10_000, ge=1, description="raw messages waiting for the pipeline")
+    publish: int = Field(default=10_000, ge=1, description="results waiting for a publisher")
+    max_payload_bytes: int = Field(default=4096, ge=16)
+
+
+class AlignConfig(_Model):
+    stale_timeout: Seconds = Field(default=5.0, gt=0, description="older channels are left out")
+    max_wait: Seconds = Field(
+        default=0.25, ge=0, description="how long a hook-load frame waits for the other channels"
+    )
+    wait_for: list[str] = Field(default_factory=lambda: ["bit_depth", "torque"])
+
+
+class RigStateConfig(_Model):
+    in_slips_hookload: Newtons = Field(
+        default=400e3, description="below this hook load the string is in slips"
+    )
+    moving_speed: MetersPerSecond = Field(default=0.05, gt=0)
+    rotating_rpm: RadPerSecond = Field(default=5 * math.pi / 30, ge=0)
+    circulating_flow: CubicMetersPerSecond = Field(default=100 / 60_000, ge=0)
+    on_bottom: Meters = Field(default=0.5, ge=0)
+    steady_frames: int = Field(default=3, ge=1)
+
+
+class MonitorConfig(_Model):
+    mu: float = Field(default=0.25, ge=0, le=2)  # friction factor of the modelled curves
+    band_mu: list[float] = Field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4])
+    method: Literal["aadnoy", "soft-string"] = "aadnoy"
+    grid_step: Meters = Field(default=10.0, gt=0)
+
+    @field_validator("band_mu")
+    @classmethod
+    def _band(cls, value: list[float]) -> list[float]:
+        if any(m < 0 or m > 2 for m in value):
+            raise ValueError("friction factors must be between 0 and 2")
+        return sorted(value)
+
+
+class DaemonConfig(_Model):
+    """The whole daemon file."""
+
+    prefix: str = Field(min_length=1)
+    well: Path | None = None
+    sources: SourcesConfig
+    channels: dict[str, ChannelConfig] = Field(default_factory=dict)
+    publish: PublishConfig = Field(default_factory=PublishConfig)
+    recorder: RecorderConfig = Field(default_factory=RecorderConfig)
+    rerun: RerunConfig = Field(default_factory=RerunConfig)
+    queues: QueuesConfig = Field(default_factory=QueuesConfig)
+    align: AlignConfig = Field(default_factory=AlignConfig)
+    rig_state: RigStateConfig = Field(default_factory=RigStateConfig)
+    monitor: MonitorConfig = Field(default_factory=MonitorConfig)
+    #: the file this was read from (set by load_daemon_config; paths are relative to it)
+    source_file: Path | None = Field(default=None, exclude=True)
+
+    @field_validator("prefix")
+    @classmethod
+    def _prefix(cls, value: str) -> str:
+        value = value.strip("/")
+        if not value or any(c in value for c in "#+*$"):
+            raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
+        return value
+
+    @field_validator("channels")
+    @classmethod
+    def _channels(cls, value: dict[str, ChannelConfig]) -> dict[str, ChannelConfig]:
+        for name in value:
+            if name not in CHANNEL_UNITS:
+                raise ValueError(f"unknown channel '{name}' (known: {', '.join(CHANNEL_UNITS)})")
+        return value
+
+    def channel_specs(self) -> list[ChannelSpec]:
+        """Channel map for the decoder; every canonical channel is accepted on its own name."""
+        specs = []
+        for name, (target, _) in CHANNEL_UNITS.items():
+            cfg = self.channels.get(name, ChannelConfig())
+            specs.append(ChannelSpec(
+                channel=name,
+                topic=cfg.topic or name,
+                unit=cfg.unit,
+                minimum=None if cfg.min is None else parse_quantity(cfg.min, target),
+                maximum=None if cfg.max is None else parse_quantity(cfg.max, target),
+            ))
+        return specs
+
+    def resolve(self, path: Path) -> Path:
+        """A path from the file, made absolute relative to the file's folder."""
+        if path.is_absolute() or self.source_file is None:
+            return path
+        return self.source_file.parent / path
+
+
+def load_daemon_config(path: str | os.PathLike[str]) -> DaemonConfig:
+    """Read and validate a daemon TOML file.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not TOML, or invalid; the message names the key and reason.
+    """
+    file = Path(path)
+    try:
+        data = tomllib.loads(file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(str(file), "", "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(str(file), "", f"cannot read: {exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(str(file), "", f"not valid TOML: {exc}") from exc
+    return parse_daemon_config(data, file)
+
+
+def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
+    """Validate already-parsed TOML data (see :func:`load_daemon_config`)."""
+    try:
+        config = DaemonConfig.model_validate({**data, "source_file": None})
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        key = ".".join(str(part) for part in error["loc"])
+        reason = error["msg"].removeprefix("Value error, ")
+        if error["type"] == "extra_forbidden":
+            reason = "unknown key"
+        raise ConfigError(str(file), key, reason) from exc
+    except ValueError as exc:  # a validator outside pydantic's wrapping
+        raise ConfigError(str(file), "", str(exc)) from exc
+    config = config.model_copy(update={"source_file": file.resolve()})
+    for name, channel_cfg in config.channels.items():
+        # configured units and bounds are checked now, not when the first message arrives
+        target = CHANNEL_UNITS[name][0]
+        for key in ("min", "max"):
+            bound = getattr(channel_cfg, key)
+            if bound is not None:
+                try:
+                    parse_quantity(bound, target)
+                except ValueError as exc:
+                    raise ConfigError(str(file), f"channels.{name}.{key}", str(exc)) from exc
+        if channel_cfg.unit is not None:
+            try:
+                conversion(channel_cfg.unit, target)
+            except ValueError as exc:
+                raise ConfigError(str(file), f"channels.{name}.unit", str(exc)) from exc
+    mqtt = config.sources.mqtt
+    if mqtt is not None and mqtt.password_env and mqtt.resolved_password() is None:
+        raise ConfigError(str(file), "sources.mqtt.password_env",
+                          f"environment variable {mqtt.password_env} is not set")
+    for name in config.publish.names:
+        if not name or "/" in name:
+            raise ConfigError(str(file), "publish.names", f"'{name}' is not a message name")
+    for channel in config.align.wait_for:
+        if channel not in CHANNEL_UNITS:
+            raise ConfigError(str(file), "align.wait_for", f"unknown channel '{channel}'")
+    if config.well is not None and not config.resolve(config.well).exists():
+        raise ConfigError(str(file), "well", f"file not found: {config.resolve(config.well)}")
+    return config

@@ -1,0 +1,160 @@
+"""The monitor step: modelled hook loads and torque at the current bit depth, the broomstick
+band, and residuals of the measured values against the curve for the current operation.
+
+The physics is behind :class:`LoadModel` so the step can be tested with any callable. The
+production model, :class:`GridLoadModel`, evaluates torque and drag once on a bit-depth grid at
+start-up and interpolates linearly on the hot path (a few microseconds per frame, where one
+torque-and-drag evaluation costs milliseconds).
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tdmon.daemon.pipeline import Emit, Frame
+
+#: Which modelled hook-load curve a measured value is compared with, per rig state.
+CURVE_FOR_STATE = {
+    "pick_up": "pick_up",
+    "back_reaming": "pick_up",
+    "slack_off": "slack_off",
+    "reaming": "slack_off",
+    "rotating_off_bottom": "rotating",
+    "drilling": "rotating",
+    "circulating": "rotating",
+    "static": "rotating",
+}
+_ROTATING_STATES = frozenset({"rotating_off_bottom", "reaming", "back_reaming", "drilling"})
+
+
+@dataclass(frozen=True, slots=True)
+class ModelledLoads:
+    """Modelled surface loads at one bit depth: hook loads [N], torque [N m], band [N]."""
+
+    bit_depth: float
+    pick_up: float
+    slack_off: float
+    rotating: float
+    torque_rotating: float
+    band_mu: tuple[float, ...]
+    band_pick_up: tuple[float, ...]
+    band_slack_off: tuple[float, ...]
+
+
+class LoadModel(Protocol):
+    """Modelled loads at a bit depth [m]; None where the model does not reach."""
+
+    def loads(self, bit_depth: float) -> ModelledLoads | None: ...
+
+
+#: f(bit_depths [m], mu) -> (pick_up [N], slack_off [N], rotating [N], torque [N m]) arrays
+CurveFunction = Callable[[NDArray[np.float64], float],
+                         tuple[NDArray[np.float64], NDArray[np.float64],
+                               NDArray[np.float64], NDArray[np.float64]]]
+
+
+class GridLoadModel:
+    """Loads precomputed on a bit-depth grid, linearly interpolated.
+
+    ``curves`` rows: pick-up, slack-off, rotating hook load and rotating torque at the design
+    ``mu``, then pick-up for each band mu, then slack-off for each band mu.
+    """
+
+    def __init__(self, depths: NDArray[np.float64], curves: NDArray[np.float64],
+                 band_mu: Sequence[float]) -> None:
+        if depths.ndim != 1 or depths.size < 2 or np.any(np.diff(depths) <= 0):
+            raise ValueError("grid depths must be increasing, at least two")
+        if curves.shape != (4 + 2 * len(band_mu), depths.size):
+            raise ValueError("curves do not match the grid and band")
+        self.depths = depths
+        self._depth_list = depths.tolist()
+        self.curves = curves
+        self.band_mu = tuple(float(m) for m in band_mu)
+
+    @classmethod
+    def from_function(
+        cls, curve: CurveFunction, depths: NDArray[np.float64] | Sequence[float], mu: float,
+        band_mu: Sequence[float],
+    ) -> GridLoadModel:
+        """Evaluate ``curve`` once per friction factor on the grid."""
+        grid = np.asarray(depths, dtype=np.float64)
+        pick_up, slack_off, rotating, torque = curve(grid, mu)
+        rows = [pick_up, slack_off, rotating, torque]
+        band = [curve(grid, m) for m in band_mu]
+        rows += [b[0] for b in band] + [b[1] for b in band]
+        return cls(grid, np.vstack([np.asarray(r, dtype=np.float64) for r in rows]), band_mu)
+
+    def loads(self, bit_depth: float) -> ModelledLoads | None:
+        depths = self._depth_list
+        if not depths[0] <= bit_depth <= depths[-1]:
+            return None
+        index = min(bisect.bisect_right(depths, bit_depth) - 1, len(depths) - 2)
+        lo, hi = depths[index], depths[index + 1]
+        weight = (bit_depth - lo) / (hi - lo)
+        column = self.curves[:, index] * (1.0 - weight) + self.curves[:, index + 1] * weight
+        values = column.tolist()
+        n = len(self.band_mu)
+        return ModelledLoads(
+            bit_depth=bit_depth,
+            pick_up=values[0],
+            slack_off=values[1],
+            rotating=values[2],
+            torque_rotating=values[3],
+            band_mu=self.band_mu,
+            band_pick_up=tuple(values[4:4 + n]),
+            band_slack_off=tuple(values[4 + n:4 + 2 * n]),
+        )
+
+
+class MonitorStep:
+    """Step: emit ``model`` for every frame with a fresh bit depth inside the model's reach."""
+
+    name = "monitor"
+
+    def __init__(self, model: LoadModel) -> None:
+        self.model = model
+        self.skipped_no_depth = 0
+        self.skipped_out_of_range = 0
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        bit_depth = frame.values.get("bit_depth")
+        if bit_depth is None:
+            self.skipped_no_depth += 1
+            return
+        loads = self.model.loads(bit_depth)
+        if loads is None:
+            self.skipped_out_of_range += 1
+            return
+        emit("model", model_message(frame, loads))
+
+    def close(self, emit: Emit) -> None:
+        """Nothing buffered."""
+
+
+def model_message(frame: Frame, loads: ModelledLoads) -> dict[str, Any]:
+    """The ``model`` daemon message for one frame (docs/architecture.md)."""
+    hookload = frame.values.get("hookload")
+    torque = frame.values.get("torque")
+    curve = CURVE_FOR_STATE.get(frame.state)
+    modelled = {"pick_up": loads.pick_up, "slack_off": loads.slack_off,
+                "rotating": loads.rotating}
+    hookload_residual = (None if hookload is None or curve is None
+                         else hookload - modelled[curve])
+    torque_residual = (torque - loads.torque_rotating
+                       if torque is not None and frame.state in _ROTATING_STATES else None)
+    return {
+        "t": frame.t,
+        "bit_depth_m": loads.bit_depth,
+        "hookload_N": modelled,
+        "torque_Nm": {"rotating": loads.torque_rotating},
+        "band": {"mu": list(loads.band_mu), "pick_up_N": list(loads.band_pick_up),
+                 "slack_off_N": list(loads.band_slack_off)},
+        "measured": {"hookload_N": hookload, "torque_Nm": torque},
+        "residual": {"hookload_N": hookload_residual, "torque_Nm": torque_residual},
+    }

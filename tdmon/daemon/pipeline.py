@@ -1,0 +1,244 @@
+"""The synchronous heart of the daemon: raw message -> sinks -> decoder -> aligner -> steps.
+
+Everything here runs on the event loop thread without awaiting, so a message is fully handled
+(recorded, decoded, aligned, evaluated) before the next one is looked at, and the pipeline can
+be driven by tests without any transport.
+
+Plug-in points for other issues:
+
+* a **sink** (the MCAP recorder, Rerun, publishers) receives every message the daemon produces:
+  ``write(topic: str, log_time_ns: int, message: dict) -> None`` and ``close() -> None``, with
+  ``topic`` = ``/tdmon/<name>``. Raw input, samples and rejections reach every sink before any
+  later step sees the sample (DESIGN.md data flow step 3).
+* a **step** (rig state, monitor, back-calculation, alarms) sees each aligned frame in order:
+  ``on_frame(frame, emit)`` and ``close(emit)``; ``emit(name, message)`` sends a result to all
+  sinks and leaves it in ``frame.results[name]`` for the steps after it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+from tdmon.ingest.decode import Decoder
+from tdmon.ingest.types import (
+    RawMessage,
+    Rejected,
+    Sample,
+    raw_message,
+    rejected_message,
+    sample_message,
+)
+
+log = logging.getLogger(__name__)
+
+Emit = Callable[[str, dict[str, Any]], None]
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """Receives every daemon message; synchronous (a sink doing network I/O queues inside)."""
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None: ...
+
+    def close(self) -> None: ...
+
+
+@dataclass(slots=True)
+class Frame:
+    """The rig's channels aligned on one hook-load sample.
+
+    ``values`` holds, per channel, the newest value at or before ``t`` that is not older than
+    the stale timeout (SI units); ``ages`` how old each is [s]; ``stale`` the channels seen
+    before but left out as too old. Steps annotate ``state``/``steady`` and ``results``.
+    """
+
+    t: float
+    log_time_ns: int
+    values: dict[str, float]
+    ages: dict[str, float]
+    stale: tuple[str, ...] = ()
+    state: str = "unknown"
+    steady: bool = False
+    results: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@runtime_checkable
+class Step(Protocol):
+    """One stage after alignment. Steps run in list order on every frame."""
+
+    name: str
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None: ...
+
+    def close(self, emit: Emit) -> None: ...
+
+
+@dataclass(slots=True)
+class Stats:
+    """Counters reported in the status message; every loss or oddity has one."""
+
+    messages_in: int = 0
+    samples_in: int = 0
+    rejected: int = 0
+    dropped: int = 0
+    duplicates: int = 0
+    out_of_order: int = 0
+    frames: int = 0
+    step_errors: int = 0
+    sink_errors: int = 0
+    last_sample_t: float | None = None
+    last_receive_time: float | None = None
+    max_lag_s: float = 0.0
+    rejected_reasons: dict[str, int] = field(default_factory=dict)
+
+    def count_drop(self, n: int = 1) -> None:
+        self.dropped += n
+
+
+class FrameSource(Protocol):
+    """What the pipeline needs from an aligner (see :class:`tdmon.daemon.aligner.Aligner`)."""
+
+    duplicates: int
+    out_of_order: int
+
+    def push(self, sample: Sample, now: float) -> list[Frame]: ...
+
+    def expire(self, now: float) -> list[Frame]: ...
+
+    def flush(self) -> list[Frame]: ...
+
+
+class Pipeline:
+    """Decode, record, align and run the steps for each raw message."""
+
+    def __init__(
+        self,
+        decoder: Decoder,
+        aligner: FrameSource,
+        steps: Sequence[Step] = (),
+        sinks: Sequence[Sink] = (),
+        stats: Stats | None = None,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.decoder = decoder
+        self.aligner = aligner
+        self.steps = list(steps)
+        self.sinks = list(sinks)
+        self.stats = stats or Stats()
+        self._monotonic = monotonic
+        self._closed = False
+
+    def add_sink(self, sink: Sink) -> None:
+        self.sinks.append(sink)
+
+    def process(self, raw: RawMessage) -> Sample | Rejected:
+        """Handle one message completely; returns what the decoder made of it."""
+        stats = self.stats
+        stats.messages_in += 1
+        log_ns = int(raw.receive_time * 1e9)
+        self._write("/tdmon/raw", log_ns, raw_message(raw))
+        decoded = self.decoder.decode(raw)
+        if isinstance(decoded, Rejected):
+            stats.rejected += 1
+            # group by the reason's first words so a flood of distinct values stays small
+            key = decoded.reason.split(":")[0].split("(")[0].strip()[:60]
+            if key in stats.rejected_reasons or len(stats.rejected_reasons) < 64:
+                stats.rejected_reasons[key] = stats.rejected_reasons.get(key, 0) + 1
+            self._write("/tdmon/rejected", log_ns, rejected_message(decoded))
+            return decoded
+        stats.samples_in += 1
+        stats.last_sample_t = decoded.t
+        stats.last_receive_time = raw.receive_time
+        self._write("/tdmon/sample", log_ns, sample_message(decoded))
+        frames = self.aligner.push(decoded, self._monotonic())
+        self._sync_aligner_counts()
+        for frame in frames:
+            self._run_steps(frame)
+        return decoded
+
+    def tick(self) -> None:
+        """Emit a frame that has waited long enough for its other channels."""
+        for frame in self.aligner.expire(self._monotonic()):
+            self._run_steps(frame)
+
+    def flush(self) -> None:
+        """End of input: emit what the aligner holds and let each step finish (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for frame in self.aligner.flush():
+            self._run_steps(frame)
+        log_ns = time.time_ns()
+        for step in self.steps:
+            try:
+                step.close(self._emitter(log_ns, None))
+            except Exception:
+                self.stats.step_errors += 1
+                log.exception("step %s failed while closing", step.name)
+
+    def close_sinks(self) -> None:
+        for sink in self.sinks:
+            try:
+                sink.close()
+            except Exception:
+                self.stats.sink_errors += 1
+                log.exception("sink %r failed while closing", sink)
+
+    def emit(self, name: str, message: dict[str, Any], log_time_ns: int | None = None) -> None:
+        """Send a message that belongs to no frame (e.g. status) to every sink."""
+        self._write(f"/tdmon/{name}", time.time_ns() if log_time_ns is None else log_time_ns,
+                    message)
+
+    def status_message(self, connections: dict[str, str], now: float | None = None
+                       ) -> dict[str, Any]:
+        """The periodic ``status`` message (docs/architecture.md)."""
+        now = time.time() if now is None else now
+        stats = self.stats
+        lag = 0.0 if stats.last_sample_t is None else max(0.0, now - stats.last_sample_t)
+        return {
+            "t": now,
+            "samples_in": stats.samples_in,
+            "rejected": stats.rejected,
+            "dropped": stats.dropped,
+            "lag_s": lag,
+            "connections": dict(connections),
+            "messages_in": stats.messages_in,
+            "duplicates": stats.duplicates,
+            "out_of_order": stats.out_of_order,
+            "frames": stats.frames,
+        }
+
+    def _sync_aligner_counts(self) -> None:
+        self.stats.duplicates = self.aligner.duplicates
+        self.stats.out_of_order = self.aligner.out_of_order
+
+    def _run_steps(self, frame: Frame) -> None:
+        self.stats.frames += 1
+        emit = self._emitter(frame.log_time_ns, frame)
+        for step in self.steps:
+            try:
+                step.on_frame(frame, emit)
+            except Exception:
+                # one bad frame must not stop monitoring; it is counted and logged loudly
+                self.stats.step_errors += 1
+                log.exception("step %s failed on frame t=%s", step.name, frame.t)
+
+    def _emitter(self, log_time_ns: int, frame: Frame | None) -> Emit:
+        def emit(name: str, message: dict[str, Any]) -> None:
+            if frame is not None:
+                frame.results[name] = message
+            self._write(f"/tdmon/{name}", log_time_ns, message)
+
+        return emit
+
+    def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        for sink in self.sinks:
+            try:
+                sink.write(topic, log_time_ns, message)
+            except Exception:
+                self.stats.sink_errors += 1
+                log.exception("sink %r failed writing %s", sink, topic)

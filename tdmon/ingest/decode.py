@@ -1,0 +1,235 @@
+"""Pure payload decoding: ``bytes -> Sample | Rejected`` for the per-channel JSON contract.
+
+A message on ``<prefix>/<topic>`` carries ``{"t": <Unix s or ISO 8601>, "value": <number>,
+"unit": <optional>}``. The channel map (from the daemon config) says which canonical channel a
+topic feeds and in which unit the rig sends it when the payload does not say. Conversion
+factors to SI are computed once per (channel, unit) and reused, because pint is far too slow to
+call per message.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+
+from tdmon.ingest.types import RawMessage, Rejected, Sample
+from tdmon.units import conversion
+
+#: Canonical channels and their internal unit: (pint expression, display string).
+CHANNEL_UNITS: dict[str, tuple[str, str]] = {
+    "hookload": ("N", "N"),
+    "torque": ("N*m", "N m"),
+    "bit_depth": ("m", "m"),
+    "hole_depth": ("m", "m"),
+    "block_position": ("m", "m"),
+    "rpm": ("rad/s", "rad/s"),
+    "flow_in": ("m**3/s", "m^3/s"),
+    "spp": ("Pa", "Pa"),
+    "wob": ("N", "N"),
+    "mud_temp_in": ("degC", "degC"),
+    "mud_temp_out": ("degC", "degC"),
+    "mud_density": ("kg/m**3", "kg/m^3"),
+}
+
+#: Timestamps outside [1970, 2200) are typos or unit mix-ups (ms instead of s), not data.
+T_MIN = 0.0
+T_MAX = 7_258_118_400.0
+
+#: Anything larger in magnitude is not a measurement, whatever the channel.
+ABS_VALUE_MAX = 1e15
+
+#: How many distinct payload units one channel may introduce before we stop caching them; a
+#: misbehaving publisher must not grow memory without bound.
+_MAX_CACHED_UNITS = 32
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelSpec:
+    """How one topic feeds one canonical channel.
+
+    ``unit`` is the unit assumed when the payload has none (None: the payload must say).
+    ``minimum``/``maximum`` bound the converted SI value (None: unbounded).
+    """
+
+    channel: str
+    topic: str
+    unit: str | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+
+
+class Decoder:
+    """Decode raw messages of one rig (prefix) into Samples, or Rejected with a reason.
+
+    Pure apart from its conversion-factor cache: the same input always gives the same output.
+    """
+
+    def __init__(
+        self,
+        prefix: str,
+        channels: Mapping[str, ChannelSpec] | list[ChannelSpec],
+        max_payload_bytes: int = 4096,
+    ) -> None:
+        specs = list(channels.values()) if isinstance(channels, Mapping) else list(channels)
+        self.prefix = prefix.strip("/")
+        self.max_payload_bytes = max_payload_bytes
+        self._by_topic: dict[str, ChannelSpec] = {}
+        self._factors: dict[str, dict[str, tuple[float, float]]] = {}
+        self._default_factor: dict[str, tuple[float, float] | None] = {}
+        for spec in specs:
+            if spec.channel not in CHANNEL_UNITS:
+                raise ValueError(f"unknown channel '{spec.channel}'")
+            topic = topic_for(self.prefix, spec.topic)
+            self._by_topic[topic] = spec
+            target = CHANNEL_UNITS[spec.channel][0]
+            self._factors[spec.channel] = {}
+            if spec.unit is None:
+                self._default_factor[spec.channel] = None
+            else:
+                # a bad configured unit is a configuration error, raised now and not per message
+                self._default_factor[spec.channel] = conversion(spec.unit, target)
+
+    @property
+    def topics(self) -> list[str]:
+        """Full topics this decoder accepts."""
+        return list(self._by_topic)
+
+    def decode(self, raw: RawMessage) -> Sample | Rejected:
+        """Decode one message (see :func:`parse_payload` for the rules)."""
+        spec = self._by_topic.get(raw.topic)
+        if spec is None:
+            return _reject(raw, f"unknown topic '{_clip(raw.topic)}'")
+        if len(raw.payload) > self.max_payload_bytes:
+            return _reject(
+                raw, f"payload too large ({len(raw.payload)} > {self.max_payload_bytes} bytes)"
+            )
+        parsed = parse_payload(raw.payload)
+        if isinstance(parsed, str):
+            return _reject(raw, parsed)
+        t, value, unit = parsed
+        factor = self._factor(spec.channel, unit)
+        if isinstance(factor, str):
+            return _reject(raw, factor)
+        scale, offset = factor
+        si_value = value * scale + offset
+        if not math.isfinite(si_value) or abs(si_value) > ABS_VALUE_MAX:
+            return _reject(raw, f"value {value!r} out of range after unit conversion")
+        if spec.minimum is not None and si_value < spec.minimum:
+            return _reject(raw, f"value {si_value:g} below the {spec.channel} minimum "
+                                f"{spec.minimum:g} {CHANNEL_UNITS[spec.channel][1]}")
+        if spec.maximum is not None and si_value > spec.maximum:
+            return _reject(raw, f"value {si_value:g} above the {spec.channel} maximum "
+                                f"{spec.maximum:g} {CHANNEL_UNITS[spec.channel][1]}")
+        return Sample(
+            channel=spec.channel,
+            t=t,
+            value=si_value,
+            source=raw.source,
+            topic=raw.topic,
+            unit=CHANNEL_UNITS[spec.channel][1],
+            receive_time=raw.receive_time,
+        )
+
+    def _factor(self, channel: str, unit: str | None) -> tuple[float, float] | str:
+        if unit is None:
+            default = self._default_factor[channel]
+            if default is None:
+                return f"no unit in payload and none configured for channel '{channel}'"
+            return default
+        cache = self._factors[channel]
+        cached = cache.get(unit)
+        if cached is not None:
+            return cached
+        try:
+            factor = conversion(unit, CHANNEL_UNITS[channel][0])
+        except ValueError as exc:
+            # units.conversion is itself LRU-cached, so repeated garbage stays cheap
+            return f"unit '{_clip(unit)}' not usable for {channel}: {_clip(str(exc), 120)}"
+        if len(cache) < _MAX_CACHED_UNITS:
+            cache[unit] = factor
+        return factor
+
+
+def topic_for(prefix: str, topic: str) -> str:
+    """Full topic of a channel: ``<prefix>/<topic>``, or ``topic`` itself if it starts with '/'."""
+    if topic.startswith("/"):
+        return topic.lstrip("/")
+    return f"{prefix.strip('/')}/{topic}" if prefix.strip("/") else topic
+
+
+def parse_payload(payload: bytes) -> tuple[float, float, str | None] | str:
+    """Parse one JSON payload into ``(t, value, unit)``, or return the rejection reason.
+
+    Rules: a JSON object; ``t`` a finite number of Unix seconds or an ISO 8601 string (naive
+    means UTC) between 1970 and 2200; ``value`` a finite JSON number (not a boolean, not a
+    string); ``unit`` absent, null or a non-empty string.
+    """
+    try:
+        obj = json.loads(payload)
+    except UnicodeDecodeError:
+        return "payload is not UTF-8"
+    except (ValueError, RecursionError) as exc:
+        return f"malformed JSON: {_clip(str(exc), 80)}"
+    if not isinstance(obj, dict):
+        return f"payload is a JSON {type(obj).__name__}, not an object"
+    if "t" not in obj:
+        return "missing 't'"
+    if "value" not in obj:
+        return "missing 'value'"
+    t = parse_time(obj["t"])
+    if isinstance(t, str):
+        return t
+    value = obj["value"]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return f"'value' must be a number, got {type(value).__name__}"
+    try:
+        value = float(value)
+    except OverflowError:
+        return "'value' is too large"
+    if not math.isfinite(value):
+        return f"'value' is not finite ({value})"
+    unit = obj.get("unit")
+    if unit is not None and (not isinstance(unit, str) or not unit.strip()):
+        return "'unit' must be a non-empty string"
+    return t, value, unit
+
+
+def parse_time(t: object) -> float | str:
+    """Unix seconds from a number or an ISO 8601 string, or the rejection reason."""
+    if isinstance(t, bool):
+        return "'t' must be Unix seconds or ISO 8601, got bool"
+    if isinstance(t, int | float):
+        try:
+            seconds = float(t)
+        except OverflowError:
+            return "'t' is too large"
+    elif isinstance(t, str):
+        try:
+            stamp = datetime.fromisoformat(t)
+        except ValueError:
+            return f"'t' is not ISO 8601: '{_clip(t)}'"
+        if stamp.tzinfo is None:
+            stamp = stamp.replace(tzinfo=UTC)
+        try:
+            seconds = stamp.timestamp()
+        except (OverflowError, OSError, ValueError):
+            return f"'t' out of range: '{_clip(t)}'"
+    else:
+        return f"'t' must be Unix seconds or ISO 8601, got {type(t).__name__}"
+    if not math.isfinite(seconds):
+        return f"'t' is not finite ({seconds})"
+    if not T_MIN <= seconds < T_MAX:
+        return f"'t' out of range ({seconds:g} s)"
+    return seconds
+
+
+def _reject(raw: RawMessage, reason: str) -> Rejected:
+    return Rejected(reason=reason, raw=raw.payload, source=raw.source, topic=raw.topic,
+                    receive_time=raw.receive_time)
+
+
+def _clip(text: str, limit: int = 60) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -1,0 +1,136 @@
+"""Replay a recording as a source: recorded ``/tdmon/raw`` messages, or input-channel messages.
+
+A flight recording made by the daemon holds every raw input on ``/tdmon/raw`` (JSON with the
+original topic, payload and receive time); a file made elsewhere may instead hold the rig's
+payloads directly on topics such as ``rig/F4/hookload``. Both replay as RawMessages, paced at
+real time x ``speed`` (by log time) or as fast as the pipeline takes them (``speed=None``).
+Footer-less files (a writer that was killed) are read up to their last flushed chunk.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import binascii
+import json
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from types import TracebackType
+from typing import IO
+
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message
+from mcap.stream_reader import StreamReader
+
+from tdmon.errors import IngestError
+from tdmon.ingest.types import RawMessage
+
+RAW_TOPIC = "/tdmon/raw"
+
+
+def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMessage | None:
+    """Turn one MCAP message into the RawMessage it stands for (None: not an input message)."""
+    if channel_topic == RAW_TOPIC:
+        try:
+            record = json.loads(data)
+            text = record["payload"]
+            if record.get("payload_encoding") == "base64":
+                payload = base64.b64decode(text, validate=True)
+            else:
+                payload = text.encode("utf-8")
+            return RawMessage(
+                source=str(record.get("source", "mcap")),
+                topic=str(record["topic"]),
+                payload=payload,
+                receive_time=float(record.get("receive_time", log_time_ns / 1e9)),
+            )
+        except (ValueError, KeyError, TypeError, binascii.Error) as exc:
+            raise IngestError(f"recorded {RAW_TOPIC} message is unreadable: {exc}") from exc
+    if channel_topic.startswith("/tdmon/"):
+        return None  # derived data (samples, results): replay recomputes it
+    return RawMessage("mcap", channel_topic.lstrip("/"), bytes(data), log_time_ns / 1e9)
+
+
+def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
+    """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those."""
+    channels: dict[int, str] = {}
+    has_raw = False
+    try:
+        for record in StreamReader(stream, skip_magic=False).records:
+            if isinstance(record, Channel):
+                channels[record.id] = record.topic
+                has_raw = has_raw or record.topic == RAW_TOPIC
+            elif isinstance(record, Message):
+                topic = channels.get(record.channel_id)
+                if topic is None:
+                    continue
+                if has_raw and topic != RAW_TOPIC:
+                    continue
+                raw = raw_from_record(topic, record.data, record.log_time)
+                if raw is not None:
+                    yield record.log_time, raw
+    except (McapError, EOFError, ValueError) as exc:
+        # a truncated file ends in the middle of a record: what came before is good
+        if "magic" in str(exc).lower() and not channels:
+            raise IngestError(f"not an MCAP file: {exc}") from exc
+
+
+class McapSource:
+    """A recording as an async context manager yielding RawMessages (finite)."""
+
+    name = "mcap"
+
+    def __init__(self, path: str | Path, speed: float | None = None, batch: int = 256) -> None:
+        if speed is not None and speed <= 0:
+            raise ValueError("speed must be positive (or None for as fast as possible)")
+        self.path = Path(path)
+        self.speed = speed
+        self.batch = batch
+        self._file: IO[bytes] | None = None
+        self._records: Iterator[tuple[int, RawMessage]] | None = None
+        self._first_log_ns: int | None = None
+        self._start_wall = 0.0
+        self._count = 0
+
+    async def __aenter__(self) -> McapSource:
+        try:
+            self._file = self.path.open("rb")
+        except OSError as exc:
+            raise IngestError(f"cannot open recording {self.path}: {exc}") from exc
+        self._records = iter_raw(self._file)
+        self._first_log_ns = None
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def __aiter__(self) -> McapSource:
+        return self
+
+    async def __anext__(self) -> RawMessage:
+        assert self._records is not None, "not entered"
+        try:
+            log_ns, raw = next(self._records)
+        except StopIteration:
+            raise StopAsyncIteration from None
+        self._count += 1
+        if self.speed is None:
+            if self._count % self.batch == 0:
+                await asyncio.sleep(0)  # let the rest of the daemon run between batches
+            return raw
+        if self._first_log_ns is None:
+            self._first_log_ns = log_ns
+            self._start_wall = time.monotonic()
+        due = self._start_wall + (log_ns - self._first_log_ns) / 1e9 / self.speed
+        delay = due - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        return raw

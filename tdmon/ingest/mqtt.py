@@ -1,0 +1,276 @@
+"""MQTT transport (aiomqtt): a source of raw messages and a publisher sink for results.
+
+Reconnecting is not done here: a source or publisher connection is an async context manager
+that raises :class:`tdmon.errors.IngestError` when it cannot connect or loses the broker, and
+the daemon's supervisor decides when to try again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import ssl
+import time
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import aiomqtt
+
+from tdmon.config.daemon import MqttConfig
+from tdmon.errors import IngestError
+from tdmon.ingest.types import RawMessage
+
+log = logging.getLogger(__name__)
+
+
+def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext | None:
+    """An SSL context from the config's TLS block (paths relative to ``base``)."""
+    if config.tls is None:
+        return None
+
+    def resolve(path: Path) -> str:
+        return str(path if path.is_absolute() or base is None else base / path)
+
+    try:
+        context = ssl.create_default_context(
+            cafile=resolve(config.tls.ca_file) if config.tls.ca_file else None
+        )
+        if config.tls.cert_file is not None:
+            context.load_cert_chain(
+                resolve(config.tls.cert_file),
+                resolve(config.tls.key_file) if config.tls.key_file else None,
+            )
+    except (OSError, ssl.SSLError) as exc:
+        raise IngestError(f"mqtt TLS files unusable: {exc}") from exc
+    if config.tls.insecure:
+        context.check_hostname = False
+    return context
+
+
+def make_client(config: MqttConfig, client_id: str, base: Path | None = None) -> aiomqtt.Client:
+    """An aiomqtt client for ``config`` (must be called inside the running loop)."""
+    return aiomqtt.Client(
+        config.host,
+        config.port,
+        identifier=client_id,
+        username=config.username,
+        password=config.resolved_password(),
+        clean_session=config.clean_session,
+        keepalive=config.keepalive,
+        tls_context=tls_context(config, base),
+        protocol=aiomqtt.ProtocolVersion.V311,
+        timeout=10.0,
+    )
+
+
+def describe(config: MqttConfig) -> str:
+    return f"mqtt {config.host}:{config.port}"
+
+
+def _translate(config: MqttConfig, what: str, exc: BaseException) -> IngestError:
+    text = str(exc) or type(exc).__name__
+    if "ot authori" in text or "code:5]" in text or "code:135" in text:
+        text += " (check username and password)"
+    return IngestError(f"{describe(config)}: {what}: {text}")
+
+
+class MqttSource:
+    """Subscribe to ``<prefix>/#`` with QoS 1 on a persistent session and yield RawMessages.
+
+    ``async with MqttSource(...) as source: async for raw in source: ...``. A fixed client id
+    and ``clean_session=False`` make the broker keep the subscription and queue QoS 1 messages
+    while the daemon is away, so a reconnect resumes where it left off.
+    """
+
+    name = "mqtt"
+
+    def __init__(
+        self,
+        config: MqttConfig,
+        subscribe: list[str],
+        ignore_prefixes: tuple[str, ...] = (),
+        base: Path | None = None,
+    ) -> None:
+        self.config = config
+        self.subscribe = subscribe
+        self.ignore_prefixes = ignore_prefixes
+        self.base = base
+        self._client: aiomqtt.Client | None = None
+        self._iterator: aiomqtt.MessagesIterator | None = None
+        self._lost: IngestError | None = None
+
+    async def __aenter__(self) -> MqttSource:
+        client = make_client(self.config, self.config.client_id, self.base)
+        try:
+            await client.__aenter__()
+        except aiomqtt.MqttError as exc:
+            raise _translate(self.config, "cannot connect", exc) from exc
+        try:
+            for topic in self.subscribe:
+                await client.subscribe(topic, qos=self.config.qos)
+        except aiomqtt.MqttError as exc:
+            await _quiet_exit(client)
+            raise _translate(self.config, "cannot subscribe", exc) from exc
+        self._client = client
+        self._iterator = client.messages
+        self._lost = None
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._client is not None:
+            await _quiet_exit(self._client)
+            self._client = None
+
+    def __aiter__(self) -> MqttSource:
+        return self
+
+    async def __anext__(self) -> RawMessage:
+        assert self._client is not None and self._iterator is not None, "not entered"
+        while True:
+            if self._lost is not None:
+                # aiomqtt has already acknowledged what sits in its queue; when the connection
+                # drops, its iterator raises at once and would strand those messages, so hand
+                # them out first (the broker will not send them again).
+                pending = self._client._queue
+                if not pending.empty():
+                    message = pending.get_nowait()
+                else:
+                    raise self._lost
+            else:
+                try:
+                    message = await self._iterator.__anext__()
+                except aiomqtt.MqttError as exc:
+                    self._lost = _translate(self.config, "connection lost", exc)
+                    self._lost.__cause__ = exc
+                    continue
+            topic = str(message.topic)
+            if topic.startswith(self.ignore_prefixes):
+                continue  # our own results coming back on the shared prefix
+            payload = message.payload
+            if isinstance(payload, str):
+                payload = payload.encode()
+            elif not isinstance(payload, bytes | bytearray):
+                payload = b"" if payload is None else str(payload).encode()
+            return RawMessage("mqtt", topic, bytes(payload), time.time())
+
+
+async def _quiet_exit(client: aiomqtt.Client) -> None:
+    try:
+        await client.__aexit__(None, None, None)
+    except Exception as exc:  # already disconnected: nothing left to close
+        log.debug("mqtt disconnect: %s", exc)
+
+
+class MqttPublisher:
+    """Sink publishing result messages as JSON on ``<prefix>/tdmon/<name>``.
+
+    ``write`` only queues (the sink protocol is synchronous); the daemon's supervisor keeps a
+    connection open with :meth:`connect` and runs :meth:`pump` on it. When the queue is full
+    the oldest message is dropped and counted through ``on_drop``, never silently.
+    """
+
+    def __init__(
+        self,
+        config: MqttConfig,
+        prefix: str,
+        names: list[str],
+        qos: int = 1,
+        queue_size: int = 10_000,
+        on_drop: Callable[[int], None] | None = None,
+        base: Path | None = None,
+    ) -> None:
+        self.name = "mqtt-publish"
+        self.config = config
+        self.prefix = prefix.strip("/")
+        self.names = frozenset(names)
+        self.qos = qos
+        self.base = base
+        self._queue: deque[tuple[str, bytes]] = deque()
+        self._queue_size = queue_size
+        self._wake = asyncio.Event()
+        self._idle = asyncio.Event()
+        self._idle.set()
+        self._on_drop = on_drop
+        self.dropped = 0
+        self.published = 0
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        name = topic.rsplit("/", 1)[-1]
+        if name not in self.names:
+            return
+        if len(self._queue) >= self._queue_size:
+            self._queue.popleft()
+            self.dropped += 1
+            if self._on_drop is not None:
+                self._on_drop(1)
+        self._queue.append((f"{self.prefix}/tdmon/{name}", json.dumps(message).encode()))
+        self._idle.clear()
+        self._wake.set()
+
+    def close(self) -> None:
+        """Nothing to release here: the supervisor owns the connection."""
+
+    def connect(self) -> _PublisherConnection:
+        return _PublisherConnection(self.config, self.config.client_id + "-pub", self.base)
+
+    async def pump(self, client: aiomqtt.Client) -> None:
+        """Publish queued messages until cancelled; a message is removed only once sent."""
+        client.pending_calls_threshold = 1000
+        while True:
+            if not self._queue:
+                self._idle.set()
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            topic, payload = self._queue[0]
+            try:
+                await client.publish(topic, payload, qos=self.qos)
+            except aiomqtt.MqttError as exc:
+                raise _translate(self.config, "publish failed", exc) from exc
+            self._queue.popleft()
+            self.published += 1
+
+    async def drain(self, timeout: float) -> bool:
+        """Wait until everything queued is published (True) or ``timeout`` passes (False)."""
+        try:
+            await asyncio.wait_for(self._idle.wait(), timeout)
+        except TimeoutError:
+            return False
+        return True
+
+    @property
+    def pending(self) -> int:
+        return len(self._queue)
+
+
+class _PublisherConnection:
+    def __init__(self, config: MqttConfig, client_id: str, base: Path | None) -> None:
+        self.config = config
+        self.client_id = client_id
+        self.base = base
+        self._client: aiomqtt.Client | None = None
+
+    async def __aenter__(self) -> aiomqtt.Client:
+        # results are fire-and-forget for the broker: no persistent session needed
+        client = make_client(self.config.model_copy(update={"clean_session": True}),
+                             self.client_id, self.base)
+        try:
+            await client.__aenter__()
+        except aiomqtt.MqttError as exc:
+            raise _translate(self.config, "cannot connect", exc) from exc
+        self._client = client
+        return client
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._client is not None:
+            await _quiet_exit(self._client)
+            self._client = None
