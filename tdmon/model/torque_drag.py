@@ -1,0 +1,403 @@
+"""Torque and drag: hook load and surface torque of a drill string for each rig operation.
+
+Two methods, named for what they are:
+
+``"soft-string"``
+    The 3D soft-string model of Johancsik et al. (1984): the string is a cable lying on the low
+    or high side of the hole; each element's contact force comes from the bend of the axial
+    force and the element's buoyed weight, with the consistent sign convention (in a build,
+    tension and weight push the pipe to opposite sides). Evaluated piece by piece on the
+    `tdmon.model.well.hole_grid` elements.
+``"aadnoy"``
+    The thesis's method as published: eq 42/45 on straight intervals, the build-section formulas
+    of Tables 20-22 (Aadnoy, Mechanics of Drilling) on planar build arcs, and the Aadnoy,
+    Fazaelizadeh and Hareland (2010) interval formulas on any other arc; each formula is applied
+    to a whole survey interval (split only at section and component boundaries and at the bit),
+    as the thesis does. It reproduces the thesis's Example 7.1 numbers, including the
+    overestimated pick-up and torque that come from adding tension and weight normal forces in
+    the build.
+
+Forces are effective (buoyed) axial forces [N], tension positive; torques [N m]. The hook load is
+the force at the top of the hole plus the travelling-block weight. See docs/torque-drag.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tdmon.errors import ModelError
+from tdmon.model import _kernels
+from tdmon.model.survey import dogleg_angle, interpolate_survey, tangent_vectors
+from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
+
+__all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"]
+
+Method = Literal["soft-string", "aadnoy"]
+METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
+
+# Bit depths this close [m] outside the string or the hole are taken as on the limit.
+_DEPTH_TOLERANCE = 1e-6
+
+
+class Operation(StrEnum):
+    """What the string is doing.
+
+    static: hanging still (no friction); rotating: rotating off bottom (no axial friction);
+    pick_up: pulling out; slack_off: lowering; on_bottom: rotating with weight on the bit.
+    """
+
+    STATIC = "static"
+    ROTATING = "rotating"
+    PICK_UP = "pick_up"
+    SLACK_OFF = "slack_off"
+    ON_BOTTOM = "on_bottom"
+
+
+@dataclass(frozen=True)
+class Loads:
+    """Loads of one bit depth for every operation.
+
+    Attributes
+    ----------
+    bit_depth : [m]
+    method : ``"soft-string"`` or ``"aadnoy"``
+    hookload : per operation name, force at the top plus block weight [N]
+    surface_torque : per operation name [N m] (0 for operations without rotation)
+    md : MD of the string nodes, surface to bit [m]
+    axial_force : per operation, effective axial force at the nodes, tension positive [N]
+    torque : per operation, torque at the nodes [N m]
+    tvd : TVD of the nodes [m]
+    component : index (bit-up) of the string component just below each node
+    """
+
+    bit_depth: float
+    method: str
+    hookload: dict[str, float]
+    surface_torque: dict[str, float]
+    md: NDArray[np.float64]
+    axial_force: dict[str, NDArray[np.float64]]
+    torque: dict[str, NDArray[np.float64]]
+    tvd: NDArray[np.float64]
+    component: NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class _OperationTerms:
+    bit_force: float
+    bit_torque: float
+    axial_factor: float  # multiplies mu in the axial balance: +1 pulling, -1 lowering
+    torque_factor: float  # multiplies mu in the torque balance: 1 rotating, 0 not
+
+
+def operation_terms(
+    operation: Operation | str, *, wob: float = 0.0, bit_torque: float = 0.0,
+    psi: float | None = None,
+) -> tuple[float, float, float, float]:
+    """Bit force [N], bit torque [N m] and the axial/tangential friction multipliers [-].
+
+    With ``psi`` (angle of the pipe's surface velocity from the tangential direction [rad],
+    ``psi = atan(V_axial / V_tangential)``) a moving string that also rotates gets
+    ``mu sin(psi)`` axially and ``mu cos(psi)`` tangentially; without it pick-up and slack-off
+    are pure axial motion. On bottom the bit pushes back with -WOB (compression) and adds its
+    torque.
+    """
+    op = Operation(operation)
+    if op is Operation.STATIC:
+        return 0.0, 0.0, 0.0, 0.0
+    if op is Operation.ROTATING:
+        return 0.0, 0.0, 0.0, 1.0
+    if op is Operation.ON_BOTTOM:
+        return -float(wob), float(bit_torque), 0.0, 1.0
+    sign = 1.0 if op is Operation.PICK_UP else -1.0
+    if psi is None:
+        return 0.0, 0.0, sign, 0.0
+    return 0.0, 0.0, sign * math.sin(psi), math.cos(psi)
+
+
+def _check_method(method: str) -> int:
+    if method == "soft-string":
+        return _kernels.SOFT_STRING
+    if method == "aadnoy":
+        return _kernels.AADNOY
+    raise ModelError(f"unknown torque-and-drag method {method!r}: use one of {', '.join(METHODS)}")
+
+
+def _curve_kinds(well: Well, grid: HoleGrid) -> NDArray[np.int64]:
+    """Curve kind of the survey interval each element lies on (see `_kernels`)."""
+    survey = well.survey
+    interval = np.clip(
+        np.searchsorted(survey.md, grid.element_mid_md, side="right") - 1, 0, survey.md.size - 2
+    )
+    inc_top = survey.inclination[interval]
+    inc_bottom = survey.inclination[interval + 1]
+    d_azi = np.angle(np.exp(1j * (survey.azimuth[interval + 1] - survey.azimuth[interval])))
+    planar = (np.abs(d_azi) < 1e-6) | (inc_top < 1e-7) | (inc_bottom < 1e-7)
+    curved = survey.dogleg[interval + 1] >= 1e-7
+    kinds = np.full(interval.size, _kernels.GENERAL_CURVE, dtype=np.int64)
+    kinds[~curved] = _kernels.STRAIGHT
+    kinds[curved & planar & (inc_bottom > inc_top)] = _kernels.PLANAR_BUILD
+    return kinds
+
+
+def _run_breaks(well: Well, grid: HoleGrid) -> NDArray[np.bool_]:
+    """Nodes where an Aadnoy run must end: survey stations and section boundaries."""
+    marks = np.concatenate([well.survey.md, [s.top for s in well.sections]])
+    distance = np.min(np.abs(grid.md[:, None] - marks[None, :]), axis=1)
+    breaks = distance < 1e-6
+    breaks[0] = True
+    return np.asarray(breaks)
+
+
+class WellModel:
+    """A well prepared for repeated torque-and-drag evaluation.
+
+    The hole grid, the element geometry and the string's per-component arrays are computed
+    once; `evaluate` then costs one compiled march from the bit to surface. This is the form the
+    live back-calculation and the broomstick use.
+
+    Parameters
+    ----------
+    well : the well
+    """
+
+    def __init__(self, well: Well) -> None:
+        self.well = well
+        self.grid = hole_grid(well)
+        grid = self.grid
+        self.node_md = np.ascontiguousarray(grid.md)
+        self.tangents = np.ascontiguousarray(tangent_vectors(grid.inclination, grid.azimuth))
+        self.dogleg = np.ascontiguousarray(
+            dogleg_angle(grid.inclination[:-1], grid.azimuth[:-1], grid.inclination[1:],
+                         grid.azimuth[1:])
+        )
+        self.curve_kind = _curve_kinds(well, grid)
+        self.run_break = _run_breaks(well, grid)
+        string = well.string
+        self.component_top = np.ascontiguousarray(string.component_tops())
+        self.component_weight = np.array(
+            [c.buoyed_weight_in(well.fluid.density, well.fluid.inside_density)
+             for c in string.components], dtype=np.float64)
+        self.component_radius = np.array([c.torque_radius for c in string.components],
+                                         dtype=np.float64)
+        self._section_mu: NDArray[np.float64] | None = None
+        self._max_nodes = grid.n_elements + len(string.components) + 2
+
+    @property
+    def n_elements(self) -> int:
+        """Number of hole-grid elements (the length of a per-element friction array)."""
+        return self.grid.n_elements
+
+    def friction(self, mu: float | ArrayLike | None) -> NDArray[np.float64]:
+        """Per-element friction factors from None (sections), a number or an array [-]."""
+        if mu is None:
+            if self._section_mu is None:
+                self._section_mu = np.ascontiguousarray(section_friction(self.well, self.grid))
+            return self._section_mu
+        values = np.asarray(mu, dtype=np.float64)
+        if values.ndim == 0:
+            if not (math.isfinite(float(values)) and float(values) >= 0.0):
+                raise ModelError(f"friction factor must be a finite number >= 0, got {mu}")
+            return np.full(self.n_elements, float(values))
+        if values.shape != (self.n_elements,):
+            raise ModelError(
+                f"per-element friction must have one value per hole-grid element "
+                f"({self.n_elements}), got shape {values.shape}"
+            )
+        if not (np.isfinite(values).all() and (values >= 0.0).all()):
+            raise ModelError("per-element friction factors must be finite and >= 0")
+        return np.ascontiguousarray(values)
+
+    def check_bit_depth(self, bit_depth: float) -> float:
+        """Validate a bit depth against the string and the hole; returns it as float [m]."""
+        depth = float(bit_depth)
+        string_length = self.well.string.length
+        if not math.isfinite(depth):
+            raise ModelError(f"bit depth must be finite, got {bit_depth}")
+        if depth > string_length + _DEPTH_TOLERANCE:
+            raise ModelError(
+                f"bit depth {depth:.2f} m is deeper than the drill string is long "
+                f"({string_length:.2f} m)"
+            )
+        top, bottom = self.node_md[0], self.node_md[-1]
+        if depth > bottom + _DEPTH_TOLERANCE:
+            raise ModelError(
+                f"bit depth {depth:.2f} m is below the hole (bottom of the hole sections and "
+                f"survey: {bottom:.2f} m)"
+            )
+        if depth <= top + _DEPTH_TOLERANCE:
+            raise ModelError(f"bit depth {depth:.2f} m must lie below the top of the hole "
+                             f"({top:.2f} m)")
+        return min(depth, float(bottom))
+
+    def evaluate(
+        self,
+        operation: Operation | str,
+        bit_depth: float,
+        mu: float | ArrayLike | None = None,
+        *,
+        method: Method | str = "soft-string",
+        wob: float = 0.0,
+        bit_torque: float = 0.0,
+        psi: float | None = None,
+    ) -> tuple[float, float]:
+        """Hook load [N] and surface torque [N m] of one operation at one bit depth.
+
+        Parameters
+        ----------
+        operation : `Operation` or its name
+        bit_depth : [m]
+        mu : friction factor: None (the sections'), a number, or one per hole-grid element [-]
+        method : ``"soft-string"`` or ``"aadnoy"``
+        wob : weight on bit for ``on_bottom`` [N]
+        bit_torque : bit torque for ``on_bottom`` [N m]
+        psi : combined motion angle for pick-up/slack-off while rotating [rad]
+        """
+        kernel_method = _check_method(method)
+        depth = self.check_bit_depth(bit_depth)
+        friction = self.friction(mu)
+        bit_force, torque_at_bit, axial, tangential = operation_terms(
+            operation, wob=wob, bit_torque=bit_torque, psi=psi)
+        _, force, torque = _kernels.march(
+            kernel_method, self.node_md, self.tangents, self.dogleg, self.curve_kind,
+            self.run_break, friction, self.component_top, self.component_weight,
+            self.component_radius, depth, bit_force, torque_at_bit, axial, tangential, False,
+            _EMPTY, _EMPTY, _EMPTY, _EMPTY_INT, _EMPTY_TANGENT,
+        )
+        return float(force) + self.well.block_weight, float(torque)
+
+    def profile(
+        self,
+        operation: Operation | str,
+        bit_depth: float,
+        mu: float | ArrayLike | None = None,
+        *,
+        method: Method | str = "soft-string",
+        wob: float = 0.0,
+        bit_torque: float = 0.0,
+        psi: float | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+        """MD, axial force and torque along the string (surface to bit) and component index."""
+        kernel_method = _check_method(method)
+        depth = self.check_bit_depth(bit_depth)
+        friction = self.friction(mu)
+        bit_force, torque_at_bit, axial, tangential = operation_terms(
+            operation, wob=wob, bit_torque=bit_torque, psi=psi)
+        size = self._max_nodes
+        md = np.empty(size)
+        force = np.empty(size)
+        torque = np.empty(size)
+        component = np.empty(size, dtype=np.int64)
+        tangent = np.empty((size, 3))
+        count, _, _ = _kernels.march(
+            kernel_method, self.node_md, self.tangents, self.dogleg, self.curve_kind,
+            self.run_break, friction, self.component_top, self.component_weight,
+            self.component_radius, depth, bit_force, torque_at_bit, axial, tangential, True,
+            md, force, torque, component, tangent,
+        )
+        return (md[:count][::-1].copy(), force[:count][::-1].copy(),
+                torque[:count][::-1].copy(), component[:count][::-1].copy())
+
+    def loads(
+        self,
+        bit_depth: float,
+        mu: float | ArrayLike | None = None,
+        *,
+        method: Method | str = "soft-string",
+        wob: float = 0.0,
+        bit_torque: float = 0.0,
+        psi: float | None = None,
+    ) -> Loads:
+        """`Loads` (every operation, with profiles) at one bit depth; see `torque_drag`."""
+        friction = self.friction(mu)
+        hookload: dict[str, float] = {}
+        surface_torque: dict[str, float] = {}
+        axial_force: dict[str, NDArray[np.float64]] = {}
+        torque: dict[str, NDArray[np.float64]] = {}
+        md = np.empty(0)
+        component = np.empty(0, dtype=np.int64)
+        for operation in Operation:
+            md, force, op_torque, component = self.profile(
+                operation, bit_depth, friction, method=method, wob=wob, bit_torque=bit_torque,
+                psi=psi)
+            hookload[operation.value] = float(force[0]) + self.well.block_weight
+            surface_torque[operation.value] = float(op_torque[0])
+            axial_force[operation.value] = force
+            torque[operation.value] = op_torque
+        tvd = interpolate_survey(self.well.survey, md).tvd
+        return Loads(
+            bit_depth=float(bit_depth), method=str(method), hookload=hookload,
+            surface_torque=surface_torque, md=md, axial_force=axial_force, torque=torque,
+            tvd=tvd, component=component,
+        )
+
+
+_EMPTY = np.empty(1)
+_EMPTY_INT = np.empty(1, dtype=np.int64)
+_EMPTY_TANGENT = np.empty((1, 3))
+
+
+def torque_drag(
+    well: Well,
+    bit_depth: float,
+    mu: float | ArrayLike | None = None,
+    *,
+    method: Method | str = "soft-string",
+    wob: float = 0.0,
+    bit_torque: float = 0.0,
+    psi: float | None = None,
+) -> Loads:
+    """Hook load, surface torque and load profiles of every operation at one bit depth.
+
+    Parameters
+    ----------
+    well : the well
+    bit_depth : MD of the bit [m]; at most the string's length and the hole's bottom
+    mu : friction factor [-]: None uses each hole section's ``friction``; a number applies
+        everywhere; an array gives one value per element of ``hole_grid(well)``
+    method : ``"soft-string"`` (consistent 3D soft string) or ``"aadnoy"`` (the thesis's
+        formulas as published)
+    wob : weight on bit for the ``on_bottom`` operation [N]
+    bit_torque : torque at the bit for ``on_bottom`` [N m]
+    psi : angle of combined motion for pick-up and slack-off while rotating [rad]; friction
+        splits into ``mu sin(psi)`` axially and ``mu cos(psi)`` tangentially
+
+    Returns
+    -------
+    Loads
+
+    Raises
+    ------
+    ModelError
+        Bit depth deeper than the string or the hole, unknown method, bad friction array, a
+        section without friction when ``mu`` is None.
+
+    Notes
+    -----
+    Soft string, per piece of length dL with buoyed weight W = w dL, unit tangents t_b (bottom)
+    and t_t (top) and mean direction t_m::
+
+        N = | F (t_b - t_t) + W (e_z - (e_z . t_m) t_m) |
+        F_top = F_bottom + w dTVD +/- mu N      (+ pick-up, - slack-off, 0 rotating/static)
+        T_top = T_bottom + mu N r
+
+    which is Johancsik's ``N = sqrt((F dphi sin a)^2 + (F da + W sin a)^2)`` with
+    ``da = a_top - a_bottom`` in vector form. For the straight element this is eq 42 (pick-up
+    and slack-off) and eq 45 (torque) of the thesis. The Aadnoy formulas are listed in
+    docs/torque-drag.md.
+
+    References
+    ----------
+    .. [1] Johancsik, C. A., Friesen, D. B. and Dawson, R. (1984). Torque and drag in
+       directional wells - prediction and measurement. JPT 36(6), 987-992.
+    .. [2] Aadnoy, B. S. (2006). Mechanics of Drilling. Shaker Verlag. Example 7.1.
+    .. [3] Aadnoy, B. S., Fazaelizadeh, M. and Hareland, G. (2010). A 3D analytical model for
+       wellbore friction. J. Can. Pet. Technol. 49(10), 25-36.
+    """
+    return WellModel(well).loads(bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque,
+                                 psi=psi)
