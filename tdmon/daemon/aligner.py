@@ -4,7 +4,9 @@ Each channel keeps a short history of (t, value). A hook-load sample newer than 
 opens a pending frame at its time; the frame is emitted as soon as every channel in
 ``wait_for`` has data at or after that time, when the next hook-load sample arrives, or after
 ``max_wait`` seconds (wall clock, so a silent channel delays results by at most that much).
-Channels never seen, or silent for longer than the stale timeout, are not waited for.
+Channels silent for longer than the stale timeout are not waited for, nor are channels never
+seen once the stream is older than the stale timeout (a rig that sends no torque must not
+delay every frame).
 
 Duplicates (same channel and time as a sample already held) are counted and ignored.
 Out-of-order samples (older than the channel's newest) are counted; they still fill the history
@@ -53,6 +55,7 @@ class Aligner:
         self._values: dict[str, list[float]] = {}
         self._pending: _Pending | None = None
         self._last_frame_t = float("-inf")
+        self._first_t: float | None = None
         self.duplicates = 0
         self.out_of_order = 0
 
@@ -91,6 +94,8 @@ class Aligner:
         return times[-1], self._values[channel][-1]
 
     def _store(self, sample: Sample) -> bool:
+        if self._first_t is None:
+            self._first_t = sample.t
         times = self._times.get(sample.channel)
         if times is None:
             self._times[sample.channel] = [sample.t]
@@ -125,7 +130,9 @@ class Aligner:
         for channel in self.wait_for:
             times = self._times.get(channel)
             if not times:
-                continue  # never seen: do not hold results back for it
+                if self._first_t is not None and t - self._first_t > self.stale_timeout:
+                    continue  # never seen in a while: the rig does not send it
+                return False
             newest = times[-1]
             if newest >= t - _SAME_TIME:
                 continue

@@ -1,0 +1,164 @@
+"""Shared fixtures: a real mosquitto broker on a free loopback port, and free ports for Zenoh.
+
+Broker fixtures are synchronous (a subprocess), so they work with any event loop scope.
+"""
+
+from __future__ import annotations
+
+import os
+import pwd
+import shutil
+import signal
+import socket
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def _chown_to_mosquitto(path: Path) -> None:
+    # mosquitto started as root drops to user "mosquitto" before reading its files
+    if os.geteuid() != 0:
+        return
+    try:
+        entry = pwd.getpwnam("mosquitto")
+    except KeyError:
+        return
+    os.chown(path, entry.pw_uid, entry.pw_gid)
+
+
+class Mosquitto:
+    """A mosquitto process on 127.0.0.1:``port`` with its config in ``workdir``."""
+
+    def __init__(self, workdir: Path, port: int | None = None, extra: str = "",
+                 persistence: bool = False, listener_extra: str = "",
+                 allow_anonymous: bool = True) -> None:
+        self.workdir = workdir
+        self.port = port or free_port()
+        self.process: subprocess.Popen[bytes] | None = None
+        workdir.mkdir(parents=True, exist_ok=True)
+        _chown_to_mosquitto(workdir)
+        lines = [
+            "per_listener_settings true",
+            f"listener {self.port} 127.0.0.1",
+            f"allow_anonymous {'true' if allow_anonymous else 'false'}",
+            listener_extra,
+            "max_queued_messages 1000000",
+            "max_inflight_messages 100",
+            f"log_dest file {workdir / 'mosquitto.log'}",
+            "log_type error",
+            "log_type warning",
+            "log_type notice",
+        ]
+        if persistence:
+            store = workdir / "store"
+            store.mkdir(exist_ok=True)
+            _chown_to_mosquitto(store)
+            lines += ["persistence true", f"persistence_location {store}/",
+                      "autosave_interval 1"]
+        lines.append(extra)
+        self.config = workdir / "mosquitto.conf"
+        self.config.write_text("\n".join(line for line in lines if line) + "\n")
+        (workdir / "mosquitto.log").touch()
+        _chown_to_mosquitto(workdir / "mosquitto.log")
+
+    def start(self) -> None:
+        self.process = subprocess.Popen([MOSQUITTO, "-c", str(self.config)],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                err = self.process.stderr.read().decode() if self.process.stderr else ""
+                log = (self.workdir / "mosquitto.log").read_text()
+                raise RuntimeError(f"mosquitto exited: {err} {log}")
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
+                    return
+            except OSError:
+                time.sleep(0.05)
+        raise RuntimeError(f"mosquitto did not listen on {self.port}")
+
+    def stop(self) -> None:
+        if self.process is None:
+            return
+        # SIGTERM lets mosquitto write its persistence database before exiting
+        self.process.send_signal(signal.SIGTERM)
+        try:
+            self.process.wait(10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        if self.process.stderr:
+            self.process.stderr.close()
+        self.process = None
+
+    def restart(self) -> None:
+        self.stop()
+        self.start()
+
+    @property
+    def log(self) -> str:
+        return (self.workdir / "mosquitto.log").read_text()
+
+
+@pytest.fixture
+def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
+    """An anonymous broker with persistence, started and stopped around the test."""
+    broker = Mosquitto(tmp_path / "broker", persistence=True)
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.stop()
+
+
+@pytest.fixture
+def tls_mosquitto(tmp_path: Path) -> Iterator[tuple[Mosquitto, Path, str, str]]:
+    """A TLS broker with a password file: (broker, CA file, username, password)."""
+    certs = tmp_path / "certs"
+    certs.mkdir()
+    _make_certs(certs)
+    passwords = certs / "passwd"
+    passwords.touch()
+    subprocess.run(["mosquitto_passwd", "-b", str(passwords), "rig", "s3cret"], check=True,
+                   capture_output=True)
+    for path in (certs, *certs.iterdir()):
+        _chown_to_mosquitto(path)
+    os.chmod(passwords, 0o600)
+    listener_extra = "\n".join([
+        f"cafile {certs / 'ca.crt'}",
+        f"certfile {certs / 'server.crt'}",
+        f"keyfile {certs / 'server.key'}",
+        f"password_file {passwords}",
+    ])
+    broker = Mosquitto(tmp_path / "broker", listener_extra=listener_extra, allow_anonymous=False)
+    broker.start()
+    try:
+        yield broker, certs / "ca.crt", "rig", "s3cret"
+    finally:
+        broker.stop()
+
+
+def _make_certs(folder: Path) -> None:
+    """A throw-away CA and a server certificate for 127.0.0.1/localhost (openssl)."""
+    def run(*args: str) -> None:
+        subprocess.run(["openssl", *args], check=True, capture_output=True, cwd=folder)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj", "/CN=tdmon test CA",
+        "-keyout", "ca.key", "-out", "ca.crt")
+    run("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=localhost",
+        "-keyout", "server.key", "-out", "server.csr")
+    (folder / "san.ext").write_text("subjectAltName=IP:127.0.0.1,DNS:localhost\n")
+    run("x509", "-req", "-in", "server.csr", "-CA", "ca.crt", "-CAkey", "ca.key",
+        "-CAcreateserial", "-days", "2", "-out", "server.crt", "-extfile", "san.ext")
