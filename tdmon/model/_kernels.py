@@ -68,34 +68,22 @@ def _inclination(x, y, z):
 
 
 @njit(cache=True)
-def _normal_force(force, kx, ky, kz, gx, gy, gz):
-    """|F dt + W g_perp|: the wall's contact force on a piece (per piece, not per metre)."""
-    nx = force * kx + gx
-    ny = force * ky + gy
-    nz = force * kz + gz
-    return math.sqrt(nx * nx + ny * ny + nz * nz)
+def piece_geometry(tt, tb, length):
+    """Geometry of one piece for the soft-string balance.
 
-
-@njit(cache=True)
-def _soft_string_piece(force, tt, tb, length, weight, axial_mu):
-    """One piece of the 3D soft-string march: returns (force at the top, normal force).
-
-    ``tt``/``tb`` are the unit tangents at the piece's top and bottom. The contact force is
-    ``N = |F (t_b - t_t) + W (e_z - (e_z . t_m) t_m)|`` (t_m the mean direction), the vector form
-    of Johancsik's ``sqrt((F dphi sin a)^2 + (F da + W sin a)^2)`` with ``da = a_top - a_bottom``;
-    the vector form needs no sign convention and no azimuth wrapping. The force entering N is
-    averaged over the piece (Heun's predictor-corrector) rather than taken at the bottom.
+    Returns ``(kk, ke, ee, dtvd)``: with ``k = t_b - t_t`` scaled to the arc's dogleg and
+    ``e = (e_z - (e_z . t_m) t_m) length`` (t_m the mean direction), the contact force of the
+    piece is ``N = |F k + w e| = sqrt(F^2 kk + 2 F w ke + w^2 ee)``; ``dtvd`` is the exact TVD
+    change along the arc.
     """
     dx = tb[0] - tt[0]
     dy = tb[1] - tt[1]
     dz = tb[2] - tt[2]
     chord = math.sqrt(dx * dx + dy * dy + dz * dz)
     if chord > 1e-12:
-        half = 0.5 * chord
-        if half > 1.0:
-            half = 1.0
+        half = min(0.5 * chord, 1.0)
         beta = 2.0 * math.asin(half)
-        arc_over_chord = beta / chord  # curvature x length, not the chord, bends the force
+        arc_over_chord = beta / chord  # the bend of the force is the dogleg, not the chord
     else:
         beta = 0.0
         arc_over_chord = 1.0
@@ -109,15 +97,49 @@ def _soft_string_piece(force, tt, tb, length, weight, axial_mu):
     mx /= mnorm
     my /= mnorm
     mz /= mnorm
-    w_piece = weight * length
-    gx = -mz * mx * w_piece
-    gy = -mz * my * w_piece
-    gz = (1.0 - mz * mz) * w_piece
+    ex = -mz * mx * length
+    ey = -mz * my * length
+    ez = (1.0 - mz * mz) * length
     ratio = 1.0 + beta * beta / 12.0 if beta < 1e-4 else 2.0 / beta * math.tan(0.5 * beta)
-    axial_weight = weight * 0.5 * length * (tt[2] + tb[2]) * ratio  # w x dTVD, exact on the arc
-    n_bottom = _normal_force(force, kx, ky, kz, gx, gy, gz)
+    dtvd = 0.5 * length * (tt[2] + tb[2]) * ratio
+    return (kx * kx + ky * ky + kz * kz, kx * ex + ky * ey + kz * ez,
+            ex * ex + ey * ey + ez * ez, dtvd)
+
+
+@njit(cache=True)
+def element_geometry(node_md, tangents):
+    """`piece_geometry` of every whole grid element: arrays kk, ke, ee, dtvd."""
+    n = node_md.size - 1
+    kk = np.empty(n)
+    ke = np.empty(n)
+    ee = np.empty(n)
+    dtvd = np.empty(n)
+    for j in range(n):
+        tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
+        tb = (tangents[j + 1, 0], tangents[j + 1, 1], tangents[j + 1, 2])
+        kk[j], ke[j], ee[j], dtvd[j] = piece_geometry(tt, tb, node_md[j + 1] - node_md[j])
+    return kk, ke, ee, dtvd
+
+
+@njit(cache=True)
+def _normal_force(force, weight, kk, ke, ee):
+    squared = force * force * kk + 2.0 * force * weight * ke + weight * weight * ee
+    return math.sqrt(squared) if squared > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _soft_string_piece(force, kk, ke, ee, dtvd, weight, axial_mu):
+    """One piece of the 3D soft-string march: returns (force at the top, normal force).
+
+    The contact force is ``N = |F (t_b - t_t) + W (e_z - (e_z . t_m) t_m)|``, the vector form of
+    Johancsik's ``sqrt((F dphi sin a)^2 + (F da + W sin a)^2)`` with ``da = a_top - a_bottom``;
+    the vector form needs no sign convention and no azimuth wrapping. The force entering N is
+    averaged over the piece (Heun's predictor-corrector) rather than taken at the bottom.
+    """
+    axial_weight = weight * dtvd
+    n_bottom = _normal_force(force, weight, kk, ke, ee)
     predicted = force + axial_weight + axial_mu * n_bottom
-    n_top = _normal_force(predicted, kx, ky, kz, gx, gy, gz)
+    n_top = _normal_force(predicted, weight, kk, ke, ee)
     normal = 0.5 * (n_bottom + n_top)
     return force + axial_weight + axial_mu * normal, normal
 
@@ -166,7 +188,8 @@ def _aadnoy_run(force, torque, top_inc, bottom_inc, length, theta, kind, mu, axi
 
 
 @njit(cache=True)
-def march(method, node_md, tangents, dogleg, curve_kind, run_break, mu, comp_top, comp_weight,
+def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
+          mu, comp_top, comp_weight,
           comp_radius, bit_depth, bit_force, bit_torque, axial_factor, torque_factor, record,
           out_md, out_force, out_torque, out_comp, out_tan):
     """March from the bit to the top of the hole; returns (n recorded, top force, top torque).
@@ -220,7 +243,11 @@ def march(method, node_md, tangents, dogleg, curve_kind, run_break, mu, comp_top
         weight = comp_weight[comp]
         radius = comp_radius[comp]
         if method == SOFT_STRING:
-            force, normal = _soft_string_piece(force, tt, tb, length, weight,
+            if at_component_top or lower < node_md[j + 1]:
+                kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
+            else:
+                kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
+            force, normal = _soft_string_piece(force, kk, ke, ee, dtvd, weight,
                                                axial_factor * mu[j])
             torque += torque_factor * mu[j] * normal * radius
             if record:
@@ -284,7 +311,8 @@ def march(method, node_md, tangents, dogleg, curve_kind, run_break, mu, comp_top
 
 
 @njit(cache=True)
-def sweep(method, node_md, tangents, dogleg, curve_kind, run_break, mu_cases, comp_top,
+def sweep(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
+          mu_cases, comp_top,
           comp_weight, comp_radius, bit_depths, bit_forces, bit_torques, axial_factors,
           torque_factors):
     """Surface force and torque for every (case, depth, operation): arrays (n_case, n_depth, n_op).
@@ -303,7 +331,8 @@ def sweep(method, node_md, tangents, dogleg, curve_kind, run_break, mu_cases, co
     for c in range(n_case):
         for d in range(n_depth):
             for o in range(n_op):
-                _, f, t = march(method, node_md, tangents, dogleg, curve_kind, run_break,
+                _, f, t = march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd,
+                                curve_kind, run_break,
                                 mu_cases[c], comp_top, comp_weight, comp_radius, bit_depths[d],
                                 bit_forces[o], bit_torques[o], axial_factors[o],
                                 torque_factors[o], False, dummy, dummy, dummy, dummy_int,

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -40,6 +40,9 @@ __all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"
 
 Method = Literal["soft-string", "aadnoy"]
 METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
+
+# numba dispatchers, typed loosely: mypy cannot see through their signatures
+_march: Any = _kernels.march
 
 # Bit depths this close [m] outside the string or the hole are taken as on the limit.
 _DEPTH_TOLERANCE = 1e-6
@@ -148,8 +151,13 @@ def _curve_kinds(well: Well, grid: HoleGrid) -> NDArray[np.int64]:
 def _run_breaks(well: Well, grid: HoleGrid) -> NDArray[np.bool_]:
     """Nodes where an Aadnoy run must end: survey stations and section boundaries."""
     marks = np.concatenate([well.survey.md, [s.top for s in well.sections]])
-    distance = np.min(np.abs(grid.md[:, None] - marks[None, :]), axis=1)
-    breaks = distance < 1e-6
+    nearest = np.clip(np.searchsorted(grid.md, marks), 1, grid.md.size - 1)
+    nearest = np.where(
+        np.abs(grid.md[nearest - 1] - marks) < np.abs(grid.md[nearest] - marks), nearest - 1,
+        nearest,
+    )
+    breaks = np.zeros(grid.md.size, dtype=bool)
+    breaks[nearest[np.abs(grid.md[nearest] - marks) < 1e-6]] = True
     breaks[0] = True
     return np.asarray(breaks)
 
@@ -176,6 +184,7 @@ class WellModel:
             dogleg_angle(grid.inclination[:-1], grid.azimuth[:-1], grid.inclination[1:],
                          grid.azimuth[1:])
         )
+        self.element_geometry = _kernels.element_geometry(self.node_md, self.tangents)
         self.curve_kind = _curve_kinds(well, grid)
         self.run_break = _run_breaks(well, grid)
         string = well.string
@@ -186,6 +195,10 @@ class WellModel:
         self.component_radius = np.array([c.torque_radius for c in string.components],
                                          dtype=np.float64)
         self._section_mu: NDArray[np.float64] | None = None
+        # argument groups of the compiled kernels, in their order
+        self.kernel_geometry = (self.node_md, self.tangents, self.dogleg, *self.element_geometry,
+                                self.curve_kind, self.run_break)
+        self.kernel_string = (self.component_top, self.component_weight, self.component_radius)
         self._max_nodes = grid.n_elements + len(string.components) + 2
 
     @property
@@ -263,10 +276,9 @@ class WellModel:
         friction = self.friction(mu)
         bit_force, torque_at_bit, axial, tangential = operation_terms(
             operation, wob=wob, bit_torque=bit_torque, psi=psi)
-        _, force, torque = _kernels.march(
-            kernel_method, self.node_md, self.tangents, self.dogleg, self.curve_kind,
-            self.run_break, friction, self.component_top, self.component_weight,
-            self.component_radius, depth, bit_force, torque_at_bit, axial, tangential, False,
+        _, force, torque = _march(
+            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth, bit_force,
+            torque_at_bit, axial, tangential, False,
             _EMPTY, _EMPTY, _EMPTY, _EMPTY_INT, _EMPTY_TANGENT,
         )
         return float(force) + self.well.block_weight, float(torque)
@@ -294,10 +306,9 @@ class WellModel:
         torque = np.empty(size)
         component = np.empty(size, dtype=np.int64)
         tangent = np.empty((size, 3))
-        count, _, _ = _kernels.march(
-            kernel_method, self.node_md, self.tangents, self.dogleg, self.curve_kind,
-            self.run_break, friction, self.component_top, self.component_weight,
-            self.component_radius, depth, bit_force, torque_at_bit, axial, tangential, True,
+        count, _, _ = _march(
+            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth, bit_force,
+            torque_at_bit, axial, tangential, True,
             md, force, torque, component, tangent,
         )
         return (md[:count][::-1].copy(), force[:count][::-1].copy(),
