@@ -20,6 +20,7 @@ from tdmon.daemon.monitor import GridLoadModel, LoadModel
 from tdmon.daemon.supervisor import Backoff
 
 FAST_BACKOFF = Backoff(initial=0.1, maximum=0.5)
+WELL_FILE = Path(__file__).resolve().parents[2] / "config" / "wells" / "aadnoy-example-7-1.toml"
 
 
 class CollectSink:
@@ -81,7 +82,9 @@ async def running(config: DaemonConfig, model: LoadModel | None = None,
                   **kwargs: Any) -> AsyncIterator[tuple[Built, CollectSink]]:
     """Run a daemon in the background; stop it (and wait for its shutdown) on exit."""
     sink = sink or CollectSink()
-    async with build_daemon(config, model=model or linear_model(), extra_sinks=[sink],
+    if model is None and config.well is None:
+        model = linear_model()
+    async with build_daemon(config, model=model, extra_sinks=[sink],
                             backoff=kwargs.pop("backoff", FAST_BACKOFF), **kwargs) as built:
         stop = asyncio.Event()
         task = asyncio.create_task(built.daemon.run(stop))
