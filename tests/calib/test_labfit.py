@@ -26,7 +26,7 @@ TEMPERATURES = np.array([30.0, 40.0, 50.0, 60.0, 70.0])
 PRINTED_AVERAGES = np.array([0.279, 0.287, 0.283, 0.3185, 0.306])
 
 # Table 14 typed in independently of the CSV (None = the failed run, test 1 at 60 degC)
-TABLE_14 = {
+TABLE_14: dict[int, list[float | None]] = {
     30: [0.372, 0.256, 0.132, 0.18, 0.409, 0.314, 0.301],
     40: [0.225, 0.314, 0.291, 0.337, 0.254, 0.327, 0.272],
     50: [0.285, 0.283, 0.245, 0.304, 0.277, 0.271, 0.316],
