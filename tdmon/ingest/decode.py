@@ -168,9 +168,12 @@ def parse_payload(payload: bytes) -> tuple[float, float, str | None] | str:
     string); ``unit`` absent, null or a non-empty string.
     """
     try:
-        obj = json.loads(payload)
+        # decode explicitly: json.loads on bytes would also guess UTF-16/32 from the first bytes
+        text = payload.decode("utf-8")
     except UnicodeDecodeError:
         return "payload is not UTF-8"
+    try:
+        obj = json.loads(text)
     except (ValueError, RecursionError) as exc:
         return f"malformed JSON: {_clip(str(exc), 80)}"
     if not isinstance(obj, dict):

@@ -1,0 +1,157 @@
+"""The pure decoder: the payload contract, unit conversion, and a hypothesis fuzz."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tdmon.ingest.decode import ChannelSpec, Decoder, parse_payload, parse_time
+from tdmon.ingest.types import RawMessage, Rejected, Sample, payload_text
+
+DECODER = Decoder("rig/F4", [
+    ChannelSpec("hookload", "HKLD", unit="kN", minimum=-1e5, maximum=1e7),
+    ChannelSpec("torque", "torque", unit="kN*m"),
+    ChannelSpec("bit_depth", "bit_depth"),  # no configured unit: the payload must say
+    ChannelSpec("mud_temp_in", "mud_temp_in", unit="degF"),
+])
+
+
+def raw(topic: str, body: object | bytes) -> RawMessage:
+    data = body if isinstance(body, bytes) else json.dumps(body).encode()
+    return RawMessage("mqtt", topic, data, 1_700_000_000.0)
+
+
+def test_configured_unit_is_converted_to_si() -> None:
+    sample = DECODER.decode(raw("rig/F4/HKLD", {"t": 1475600400.0, "value": 1436.5}))
+    assert isinstance(sample, Sample)
+    assert sample.channel == "hookload"
+    assert sample.value == pytest.approx(1436.5e3)
+    assert sample.unit == "N"
+    assert sample.t == 1475600400.0
+    assert sample.topic == "rig/F4/HKLD"
+
+
+def test_payload_unit_overrides_the_configured_one() -> None:
+    sample = DECODER.decode(raw("rig/F4/HKLD", {"t": 0.5, "value": 100, "unit": "klbf"}))
+    assert isinstance(sample, Sample)
+    assert sample.value == pytest.approx(444822.16, rel=1e-6)
+    feet = DECODER.decode(raw("rig/F4/bit_depth", {"t": 1, "value": 9950, "unit": "ft"}))
+    assert isinstance(feet, Sample) and feet.value == pytest.approx(3032.76)
+
+
+def test_temperature_offset() -> None:
+    sample = DECODER.decode(raw("rig/F4/mud_temp_in", {"t": 1, "value": 212}))
+    assert isinstance(sample, Sample) and sample.value == pytest.approx(100.0)
+
+
+def test_iso_time() -> None:
+    sample = DECODER.decode(raw("rig/F4/HKLD", {"t": "2016-10-04T17:00:00Z", "value": 1}))
+    assert isinstance(sample, Sample) and sample.t == 1475600400.0
+    naive = DECODER.decode(raw("rig/F4/HKLD", {"t": "2016-10-04T17:00:00", "value": 1}))
+    assert isinstance(naive, Sample) and naive.t == 1475600400.0  # naive means UTC
+
+
+@pytest.mark.parametrize(("topic", "body", "reason"), [
+    ("rig/F4/HKLD", b"{not json", "malformed JSON"),
+    ("rig/F4/HKLD", b"\xff\xfe", "not UTF-8"),
+    ("rig/F4/HKLD", [1, 2], "not an object"),
+    ("rig/F4/HKLD", {"value": 1}, "missing 't'"),
+    ("rig/F4/HKLD", {"t": 1}, "missing 'value'"),
+    ("rig/F4/HKLD", {"t": 1, "value": "12"}, "must be a number"),
+    ("rig/F4/HKLD", {"t": 1, "value": True}, "must be a number"),
+    ("rig/F4/HKLD", {"t": True, "value": 1}, "got bool"),
+    ("rig/F4/HKLD", {"t": "yesterday", "value": 1}, "not ISO 8601"),
+    ("rig/F4/HKLD", {"t": -5, "value": 1}, "out of range"),
+    ("rig/F4/HKLD", {"t": 1.7e12, "value": 1}, "out of range"),  # milliseconds, not seconds
+    ("rig/F4/HKLD", b'{"t": 1, "value": NaN}', "not finite"),
+    ("rig/F4/HKLD", b'{"t": 1, "value": Infinity}', "not finite"),
+    ("rig/F4/HKLD", b'{"t": 1, "value": 1e400}', "not finite"),
+    ("rig/F4/HKLD", {"t": 1, "value": 10**400}, "too large"),
+    ("rig/F4/HKLD", {"t": 1, "value": 1e9}, "above the hookload maximum"),
+    ("rig/F4/HKLD", {"t": 1, "value": -1e9}, "below the hookload minimum"),
+    ("rig/F4/HKLD", {"t": 1, "value": 1, "unit": "furlong"}, "not usable for hookload"),
+    ("rig/F4/HKLD", {"t": 1, "value": 1, "unit": "m"}, "not usable for hookload"),
+    ("rig/F4/HKLD", {"t": 1, "value": 1, "unit": 5}, "'unit' must be"),
+    ("rig/F4/bit_depth", {"t": 1, "value": 1}, "no unit in payload"),
+    ("rig/F4/weather", {"t": 1, "value": 1}, "unknown topic"),
+    ("rig/F4/HKLD", b" " * 5000, "payload too large"),
+])
+def test_rejections_carry_their_reason(topic: str, body: object, reason: str) -> None:
+    result = DECODER.decode(raw(topic, body))
+    assert isinstance(result, Rejected), result
+    assert reason in result.reason
+    assert result.raw == (body if isinstance(body, bytes) else json.dumps(body).encode())
+    assert result.topic == topic and result.source == "mqtt"
+
+
+def test_bad_configured_unit_fails_at_construction() -> None:
+    with pytest.raises(ValueError, match="furlong"):
+        Decoder("p", [ChannelSpec("hookload", "h", unit="furlong")])
+    with pytest.raises(ValueError, match="unknown channel"):
+        Decoder("p", [ChannelSpec("weather", "w")])
+
+
+def test_parse_time_and_payload_text() -> None:
+    assert parse_time(1.5) == 1.5
+    assert isinstance(parse_time(float("nan")), str)
+    assert payload_text(b"abc") == ("abc", "utf-8")
+    assert payload_text(b"\xff") == ("/w==", "base64")
+
+
+# -- fuzz ---------------------------------------------------------------------------------
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True) | st.text(max_size=20),
+    lambda children: st.lists(children, max_size=4)
+    | st.dictionaries(st.text(max_size=8), children, max_size=4),
+    max_leaves=10,
+)
+units = st.sampled_from(["kN", "N", "klbf", "lbf", "tonne_force", "kg", "m", "furlong", "", " ",
+                         "kN*m", "1/0", "degC", "%", "kN kN", "((", "🙂"])
+times = (st.floats(allow_nan=True, allow_infinity=True) | st.integers()
+         | st.text(max_size=30) | st.sampled_from(["2016-10-04T17:00:00Z", "2016-13-45",
+                                                   "9999-12-31T23:59:59+14:00"]))
+values = (st.floats(allow_nan=True, allow_infinity=True) | st.integers()
+          | st.integers(min_value=10**300, max_value=10**320) | json_values)
+payloads = st.one_of(
+    st.binary(max_size=200),
+    st.builds(lambda t, v: {"t": t, "value": v}, times, values),
+    st.builds(lambda t, v, u: {"t": t, "value": v, "unit": u}, times, values, units),
+    json_values,
+    st.builds(lambda n: {"t": 1.0, "value": 1.0, "pad": "x" * n}, st.integers(0, 10_000)),
+)
+topics = st.sampled_from(["rig/F4/HKLD", "rig/F4/torque", "rig/F4/bit_depth", "rig/F4/xyz",
+                          "rig/F4/mud_temp_in", "", "rig/F4/tdmon/model", "#"])
+
+
+def _encode(body: object) -> bytes:
+    if isinstance(body, bytes):
+        return body
+    try:
+        return json.dumps(body).encode()  # NaN/Infinity are written as JSON's non-standard words
+    except (ValueError, TypeError):
+        return repr(body).encode()
+
+
+@settings(max_examples=2500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(topic=topics, body=payloads)
+def test_fuzz_decoder_never_raises_and_only_passes_clean_samples(topic: str, body: object
+                                                                  ) -> None:
+    data = _encode(body)
+    result = DECODER.decode(RawMessage("zenoh", topic, data, 0.0))
+    if isinstance(result, Rejected):
+        assert result.reason and result.raw == data
+        json.dumps({"reason": result.reason, "payload": payload_text(data)[0]})
+        return
+    # a Sample is finite, in range, on a known channel, and came from a well-formed object
+    assert math.isfinite(result.value) and math.isfinite(result.t)
+    assert 0 <= result.t < 7_258_118_400.0
+    assert result.channel in {"hookload", "torque", "bit_depth", "mud_temp_in"}
+    obj = json.loads(data)
+    assert isinstance(obj, dict) and not isinstance(obj["value"], bool)
+    parsed = parse_payload(data)
+    assert not isinstance(parsed, str) and parsed[0] == result.t
