@@ -1,8 +1,10 @@
-"""Wells shared by the model tests."""
+"""Wells shared by the model tests, as fixtures (a helper module named conftest cannot be
+imported safely when several test folders have one)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -47,6 +49,11 @@ def example_71() -> Well:
     return example_71_well()
 
 
+@pytest.fixture(scope="session")
+def make_example_71() -> Callable[..., Well]:
+    return example_71_well
+
+
 def three_d_stations() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A 3D well at 30 m stations: build, hold, turn across north (350 -> 10 deg), drop."""
     md = np.arange(0.0, 3630.0, 30.0)
@@ -77,3 +84,8 @@ def three_d_well(element_length: float = 10.0) -> Well:
 @pytest.fixture(scope="session")
 def three_d() -> Well:
     return three_d_well()
+
+
+@pytest.fixture(scope="session")
+def three_d_survey_stations() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return three_d_stations()

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import END_OF_BUILD, KOP, TOP_OF_BHA, TOTAL_DEPTH, three_d_stations
 
 from tdmon.errors import ModelError
 from tdmon.model.survey import (
@@ -19,6 +18,12 @@ from tdmon.model.survey import (
 )
 
 VOLVE_TRAJECTORY = Path("/work/shared/data/volve-f4/trajectory.csv")
+
+# Example 7.1 (Aadnoy, Mechanics of Drilling): KOP 1500 m, R = 500 m to 60 deg, 2000 m + 200 m
+KOP = 1500.0
+END_OF_BUILD = KOP + 500.0 * math.radians(60.0)
+TOP_OF_BHA = END_OF_BUILD + 2000.0
+TOTAL_DEPTH = TOP_OF_BHA + 200.0
 
 
 def test_single_arc_from_vertical_matches_circle_geometry() -> None:
@@ -91,8 +96,10 @@ def test_dogleg_and_ratio_factor_arrays_match_scalars() -> None:
     assert float(ratio_factor(math.pi / 2)) == pytest.approx(4 / math.pi)  # (2/beta) tan(beta/2)
 
 
-def test_interpolation_reproduces_stations() -> None:
-    md, inc, azi = three_d_stations()
+def test_interpolation_reproduces_stations(
+    three_d_survey_stations: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> None:
+    md, inc, azi = three_d_survey_stations
     survey = minimum_curvature(md, inc, azi)
     again = interpolate_survey(survey, survey.md)
     for name in ("inclination", "tvd", "north", "east"):
