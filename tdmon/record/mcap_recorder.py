@@ -422,6 +422,19 @@ class McapRecorder:
         if self._pending_alarms:
             self._fire_alarms()
 
+    def retry(self) -> bool:
+        """In the failure state, try a new file now (not waiting for ``retry_s``).
+
+        Returns whether the recorder is recording. For an operator who has freed space.
+        """
+        with self._lock:
+            if self._file is None:
+                self._retry_at = 0.0
+                self._maybe_resume(time.monotonic())
+            recording = self._file is not None
+        self._fire_alarms()
+        return recording
+
     def flush(self) -> None:
         """Flush the current file now (also done automatically every ``flush_interval_s``)."""
         with self._lock:

@@ -50,7 +50,8 @@ class JsonDecoderFactory(DecoderFactory):
         return None
 
 
-def _describe(path: Path, exc: OSError) -> str:
+def describe_os_error(path: Path, exc: OSError) -> str:
+    """One line naming the file and what is wrong with it."""
     if isinstance(exc, FileNotFoundError):
         return f"{path}: no such file"
     if isinstance(exc, IsADirectoryError):
@@ -70,12 +71,12 @@ def open_recording(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     try:
         stream = open(file_path, "rb")  # noqa: SIM115 - closed below
     except OSError as exc:
-        raise RecordError(_describe(file_path, exc)) from exc
+        raise RecordError(describe_os_error(file_path, exc)) from exc
     try:
         try:
             head = stream.read(len(MAGIC))
         except OSError as exc:
-            raise RecordError(_describe(file_path, exc)) from exc
+            raise RecordError(describe_os_error(file_path, exc)) from exc
         if not head:
             raise RecordError(
                 f"{file_path}: empty file (a recorder stopped before its first flush?)"

@@ -22,7 +22,13 @@ from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from tdmon.errors import RecordError
-from tdmon.record.reader import MAGIC, TolerantScan, has_footer, open_recording
+from tdmon.record.reader import (
+    MAGIC,
+    TolerantScan,
+    describe_os_error,
+    has_footer,
+    open_recording,
+)
 
 RecoveryStatus = Literal["complete", "recovered", "in_use"]
 
@@ -151,7 +157,7 @@ def recover_file(
     try:
         size = source.stat().st_size
     except OSError as exc:
-        raise RecordError(f"{source}: {exc.strerror or exc}") from exc
+        raise RecordError(describe_os_error(source, exc)) from exc
     result = RecoveryResult(path=source, status="recovered", bytes_read=size)
     if size == 0:
         return _recover_empty(source, target, result)

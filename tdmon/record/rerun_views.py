@@ -1,0 +1,503 @@
+"""Rerun views of the daemon's messages: a sink that builds a recording with a blueprint.
+
+The same :class:`RerunViews` serves the live daemon (optionally streaming to a viewer over
+gRPC bound to 127.0.0.1) and ``tdmon view X.mcap --rrd Z.rrd`` (fed from a flight recording).
+``rerun`` is imported when a :class:`RerunViews` is created, not with this module: it takes
+about half a second and most tdmon commands never need it.
+
+Timelines: ``time`` (timestamp, from each message's ``t``) for everything that evolves, and
+``bit_depth_cm`` (sequence, integer centimetres) for the "against bit depth" entities under
+``vs_depth/``. Those are logged on that timeline only so that each tab of the blueprint shows
+its own abscissa once the matching timeline is selected in the viewer's time panel.
+
+Entities (loads in kN and kN m for reading; the messages stay SI):
+
+* ``hookload_kN/{measured,model/*,band/*}``, ``torque_kNm/{measured,model/rotating}``,
+  ``residual/*``: scalars on ``time``; the same under ``vs_depth/`` on ``bit_depth_cm``.
+* ``friction/<operation>``: window estimates of mu; ``friction_mu_T/<param>``.
+* ``rig_state``: state changes (state timeline view); ``bit_depth_m``.
+* ``profile/friction``, ``profile/temperature_C``: bar charts against MD [m].
+* ``well/trajectory`` (LineStrips3D, east/north/up in metres), ``well/friction`` (the same
+  path coloured by local friction), ``well/string`` and ``well/bit`` (string position).
+* ``alarms`` and ``rejected``: text logs; ``samples/<channel>``, ``status/*``: scalars.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import subprocess
+import sys
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tdmon.errors import RecordError
+from tdmon.record.sink import Message
+
+log = logging.getLogger(__name__)
+
+APPLICATION_ID: Final = "tdmon"
+TIME: Final = "time"
+BIT_DEPTH: Final = "bit_depth_cm"
+_SEVERITY_LEVEL: Final = {"info": "INFO", "warning": "WARN", "critical": "ERROR"}
+# Rebuild the string position only when the bit has moved this much [cm]: a trip logs one
+# message per second, and a new 3D polyline for every centimetre would dominate the file.
+_STRING_STEP_CM: Final = 100
+
+
+def _kilo(value: Any) -> float | None:
+    if isinstance(value, int | float) and math.isfinite(value):
+        return float(value) / 1e3
+    return None
+
+
+def _finite(value: Any) -> float | None:
+    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+        return float(value)
+    return None
+
+
+def _mu_key(mu: float) -> str:
+    return f"mu_{mu:.2f}".replace(".", "_")
+
+
+@dataclass
+class _Series:
+    """Rows of one scalar entity waiting for ``send_columns`` (one timeline each)."""
+
+    timeline: str
+    index: list[int] = field(default_factory=list)
+    values: list[float] = field(default_factory=list)
+
+
+@dataclass
+class ViewStats:
+    """What a :class:`RerunViews` has logged."""
+
+    messages: int = 0
+    scalar_rows: int = 0
+    logged: int = 0
+    skipped: int = 0
+    entities: set[str] = field(default_factory=set)
+
+
+def _colour(mu: float, low: float = 0.1, high: float = 0.4) -> tuple[int, int, int]:
+    # Blue (low friction) to red (high): readable on the viewer's dark background.
+    x = min(1.0, max(0.0, (mu - low) / (high - low)))
+    return (int(40 + 215 * x), int(120 * (1 - abs(2 * x - 1)) + 40), int(255 - 215 * x))
+
+
+class RerunViews:
+    """A :class:`~tdmon.record.sink.Sink` building the tdmon Rerun recording.
+
+    Parameters
+    ----------
+    rrd_path
+        Write the recording (with its default blueprint) to this ``.rrd`` file.
+    live_port
+        Also host a gRPC server on ``127.0.0.1:live_port`` for a viewer
+        (``rerun rerun+http://127.0.0.1:PORT/proxy``); off (None) by default.
+    recording_id
+        Rerun recording id (default: a fresh one).
+    batch_rows
+        Scalars are sent in columns of up to this many rows (per entity) for speed.
+    flush_interval_s
+        With a live viewer, pending scalars are sent at least this often [s].
+    disable_analytics
+        With a live viewer, run ``rerun analytics disable`` once (the viewer collects usage
+        data by default; the SDK writing files does not).
+    """
+
+    def __init__(
+        self,
+        rrd_path: str | Path | None = None,
+        *,
+        live_port: int | None = None,
+        recording_id: str | None = None,
+        batch_rows: int = 5000,
+        flush_interval_s: float = 0.5,
+        disable_analytics: bool = True,
+    ) -> None:
+        if rrd_path is None and live_port is None:
+            raise RecordError("Rerun views need an .rrd path, a live port, or both")
+        import rerun as rr  # lazily: ~0.45 s
+
+        self._rr = rr
+        self.rrd_path = Path(rrd_path) if rrd_path is not None else None
+        self.live_port = live_port
+        self.batch_rows = batch_rows
+        self.flush_interval_s = flush_interval_s
+        self.stats = ViewStats()
+        self._series: dict[str, _Series] = {}
+        self._styled: set[str] = set()
+        self._pending_rows = 0
+        self._last_send = time.monotonic()
+        self._bit_depth_cm: int | None = None
+        self._string_cm: int | None = None
+        self._well: dict[str, NDArray[np.float64]] | None = None
+        self._last_state: str | None = None
+        self._closed = False
+        self.grpc_uri: str | None = None
+
+        self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+        # Data times come from the messages; the wall-clock "log_time"/"log_tick" timelines
+        # would only clutter the time panel.
+        self._rec.set_log_time_enabled(False)
+        self._rec.set_log_tick_enabled(False)
+        sinks: list[Any] = []
+        if self.rrd_path is not None:
+            try:
+                self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
+                self.rrd_path.touch()
+            except OSError as exc:
+                raise RecordError(f"cannot write {self.rrd_path}: {exc.strerror or exc}") from exc
+            sinks.append(rr.FileSink(str(self.rrd_path)))
+        if live_port is not None:
+            if disable_analytics:
+                _disable_viewer_analytics()
+            server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=live_port)
+            self.grpc_uri = server.uri
+            sinks.append(server)
+        self._rec.set_sinks(*sinks, default_blueprint=blueprint())
+
+    # -- the sink protocol ---------------------------------------------------------------
+
+    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+        """Turn one daemon message into Rerun data; a bad message is logged, never raised."""
+        if self._closed:
+            return
+        self.stats.messages += 1
+        handler = _HANDLERS.get(topic.removeprefix("/tdmon/") if topic.startswith("/tdmon/")
+                                else "")
+        if handler is None:
+            self.stats.skipped += 1
+            return
+        t_ns = _time_ns(message, log_time_ns)
+        try:
+            handler(self, t_ns, message)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            # A malformed message must not stop the daemon; the MCAP recording still has it.
+            self.stats.skipped += 1
+            log.warning("Rerun view skipped a %s message: %s", topic, exc)
+        if self.live_port is not None and (
+            time.monotonic() - self._last_send >= self.flush_interval_s
+        ):
+            self._send_scalars()
+
+    def close(self) -> None:
+        """Send what is pending and close the file sink; safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._send_scalars()
+        self._rec.flush()
+        self._rec.disconnect()
+
+    def __enter__(self) -> RerunViews:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- scalars, batched ------------------------------------------------------------------
+
+    def _scalar(self, entity: str, timeline: str, index: int, value: float | None) -> None:
+        if value is None:
+            return
+        series = self._series.get(entity)
+        if series is None:
+            series = self._series[entity] = _Series(timeline)
+        series.index.append(index)
+        series.values.append(value)
+        self._pending_rows += 1
+        if len(series.values) >= self.batch_rows:
+            self._send_series(entity, series)
+
+    def _both(self, entity: str, t_ns: int, value: float | None) -> None:
+        """One scalar against time and, when the bit depth is known, against bit depth."""
+        self._scalar(entity, TIME, t_ns, value)
+        if self._bit_depth_cm is not None:
+            self._scalar(f"vs_depth/{entity}", BIT_DEPTH, self._bit_depth_cm, value)
+
+    def _send_series(self, entity: str, series: _Series) -> None:
+        rr = self._rr
+        if not series.values:
+            return
+        if series.timeline == TIME:
+            index = rr.TimeColumn(TIME, timestamp=np.asarray(series.index, dtype="datetime64[ns]"))
+        else:
+            index = rr.TimeColumn(series.timeline, sequence=np.asarray(series.index, np.int64))
+        self._style(entity)
+        self._rec.send_columns(
+            entity,
+            indexes=[index],
+            columns=rr.Scalars.columns(scalars=np.asarray(series.values, np.float64)),
+        )
+        self.stats.scalar_rows += len(series.values)
+        self.stats.entities.add(entity)
+        self._pending_rows -= len(series.values)
+        series.index.clear()
+        series.values.clear()
+
+    def _send_scalars(self) -> None:
+        for entity, series in self._series.items():
+            self._send_series(entity, series)
+        self._last_send = time.monotonic()
+
+    def _style(self, entity: str) -> None:
+        if entity in self._styled:
+            return
+        self._styled.add(entity)
+        rr = self._rr
+        name = entity.rsplit("/", 1)[-1]
+        if entity.startswith("vs_depth/") and entity.endswith("/measured"):
+            # Measurements against depth are a scatter (pick-up and slack-off overlap).
+            style: Any = rr.SeriesPoints(names=name, marker_sizes=1.5)
+        elif "/band/" in entity:
+            style = rr.SeriesLines(names=name, widths=1.0, colors=[150, 150, 150])
+        else:
+            style = rr.SeriesLines(names=name, widths=1.5)
+        self._rec.log(entity, style, static=True)
+
+    # -- other archetypes ----------------------------------------------------------------
+
+    def _log_at(self, t_ns: int, entity: str, archetype: Any) -> None:
+        self._rec.reset_time()
+        self._rec.set_time(TIME, timestamp=np.datetime64(t_ns, "ns"))
+        self._rec.log(entity, archetype)
+        self.stats.logged += 1
+        self.stats.entities.add(entity)
+
+    def _log_static(self, entity: str, archetype: Any) -> None:
+        self._rec.log(entity, archetype, static=True)
+        self.stats.logged += 1
+        self.stats.entities.add(entity)
+
+    # -- handlers, one per topic ------------------------------------------------------------
+
+    def _on_model(self, t_ns: int, message: Message) -> None:
+        bit_depth = _finite(message.get("bit_depth_m"))
+        if bit_depth is not None:
+            self._bit_depth_cm = round(bit_depth * 100)
+        measured = message.get("measured") or {}
+        self._both("hookload_kN/measured", t_ns, _kilo(measured.get("hookload_N")))
+        self._both("torque_kNm/measured", t_ns, _kilo(measured.get("torque_Nm")))
+        for operation, value in (message.get("hookload_N") or {}).items():
+            self._both(f"hookload_kN/model/{operation}", t_ns, _kilo(value))
+        for operation, value in (message.get("torque_Nm") or {}).items():
+            self._both(f"torque_kNm/model/{operation}", t_ns, _kilo(value))
+        band = message.get("band") or {}
+        for column, label in (("pick_up_N", "pick_up"), ("slack_off_N", "slack_off")):
+            for mu, value in zip(band.get("mu", []), band.get(column, []), strict=False):
+                self._both(f"hookload_kN/band/{label}_{_mu_key(mu)}", t_ns, _kilo(value))
+        residual = message.get("residual") or {}
+        self._scalar("residual/hookload_kN", TIME, t_ns, _kilo(residual.get("hookload_N")))
+        self._scalar("residual/torque_kNm", TIME, t_ns, _kilo(residual.get("torque_Nm")))
+        self._update_string(t_ns)
+
+    def _on_state(self, t_ns: int, message: Message) -> None:
+        bit_depth = _finite(message.get("bit_depth_m"))
+        if bit_depth is not None:
+            self._bit_depth_cm = round(bit_depth * 100)
+            self._scalar("bit_depth_m", TIME, t_ns, bit_depth)
+        state = str(message["state"])
+        if state != self._last_state:
+            self._last_state = state
+            self._log_at(t_ns, "rig_state", self._rr.StateChange(state=state))
+        self._update_string(t_ns)
+
+    def _on_estimate(self, t_ns: int, message: Message) -> None:
+        kind = message["kind"]
+        if kind == "window":
+            operation = str(message.get("operation", "unknown"))
+            depth = _finite(message.get("bit_depth_m"))
+            mu = _finite(message.get("mu"))
+            self._scalar(f"friction/{operation}", TIME, t_ns, mu)
+            cm = round(depth * 100) if depth is not None else self._bit_depth_cm
+            if cm is not None:
+                self._scalar(f"vs_depth/friction/{operation}", BIT_DEPTH, cm, mu)
+        elif kind == "profile" and "md_m" in message and "mu_profile" in message:
+            self._friction_profile(t_ns, message["md_m"], message["mu_profile"])
+        elif kind == "mu_T":
+            for name, value in (message.get("params") or {}).items():
+                self._scalar(f"friction_mu_T/{name}", TIME, t_ns, _finite(value))
+
+    def _on_profile(self, t_ns: int, message: Message) -> None:
+        md = message["md_m"]
+        if "temperature_C" in message:
+            self._log_at(t_ns, "profile/temperature_C", self._rr.BarChart(
+                np.asarray(message["temperature_C"], np.float64),
+                abscissa=np.asarray(md, np.float64)))
+        if "mu" in message:
+            self._friction_profile(t_ns, md, message["mu"])
+
+    def _friction_profile(self, t_ns: int, md: Sequence[float], mu: Sequence[Any]) -> None:
+        md_array = np.asarray(md, np.float64)
+        mu_array = np.asarray([np.nan if v is None else v for v in mu], np.float64)
+        self._log_at(t_ns, "profile/friction", self._rr.BarChart(
+            np.nan_to_num(mu_array), abscissa=md_array))
+        if self._well is None or len(md_array) < 2:
+            return
+        points = self._positions(md_array)
+        colours = [_colour(v) if math.isfinite(v) else (128, 128, 128) for v in mu_array[:-1]]
+        segments = [points[i : i + 2] for i in range(len(points) - 1)]
+        self._log_at(t_ns, "well/friction", self._rr.LineStrips3D(
+            segments, colors=colours, radii=6.0))
+
+    def _on_well(self, t_ns: int, message: Message) -> None:
+        well = {key: np.asarray(message[key], np.float64)
+                for key in ("md_m", "tvd_m", "north_m", "east_m")}
+        self._well = well
+        path = np.column_stack([well["east_m"], well["north_m"], -well["tvd_m"]])
+        self._log_static("well", self._rr.ViewCoordinates.RIGHT_HAND_Z_UP)
+        self._log_static("well/trajectory", self._rr.LineStrips3D(
+            [path], colors=[[200, 200, 200]], radii=2.0, labels=[message.get("name", "well")]))
+        self._string_cm = None
+        self._update_string(t_ns)
+
+    def _on_alarm(self, t_ns: int, message: Message) -> None:
+        level = _SEVERITY_LEVEL.get(str(message.get("severity")), "INFO")
+        self._log_at(t_ns, "alarms", self._rr.TextLog(
+            f"[{message['kind']}] {message['message']}", level=level))
+
+    def _on_rejected(self, t_ns: int, message: Message) -> None:
+        self._log_at(t_ns, "rejected", self._rr.TextLog(
+            f"{message['topic']}: {message['reason']}", level="WARN"))
+
+    def _on_sample(self, t_ns: int, message: Message) -> None:
+        self._scalar(f"samples/{message['channel']}", TIME, t_ns, _finite(message["value"]))
+
+    def _on_status(self, t_ns: int, message: Message) -> None:
+        for key in ("samples_in", "rejected", "dropped", "lag_s"):
+            self._scalar(f"status/{key}", TIME, t_ns, _finite(message.get(key)))
+
+    def _positions(self, md: NDArray[np.float64]) -> NDArray[np.float64]:
+        assert self._well is not None
+        well = self._well
+        return np.column_stack([
+            np.interp(md, well["md_m"], well["east_m"]),
+            np.interp(md, well["md_m"], well["north_m"]),
+            -np.interp(md, well["md_m"], well["tvd_m"]),
+        ])
+
+    def _update_string(self, t_ns: int) -> None:
+        cm = self._bit_depth_cm
+        if self._well is None or cm is None:
+            return
+        if self._string_cm is not None and abs(cm - self._string_cm) < _STRING_STEP_CM:
+            return
+        self._string_cm = cm
+        bit_md = cm / 100.0
+        md = self._well["md_m"]
+        stations = np.concatenate([md[md < bit_md], [bit_md]])
+        points = self._positions(stations)
+        self._log_at(t_ns, "well/string", self._rr.LineStrips3D(
+            [points], colors=[[255, 200, 0]], radii=4.0))
+        self._log_at(t_ns, "well/bit", self._rr.Points3D(
+            points[-1:], colors=[[255, 80, 0]], radii=15.0, labels=[f"bit {bit_md:.1f} m"]))
+
+
+def _time_ns(message: Message, log_time_ns: int) -> int:
+    t = message.get("t", message.get("receive_time"))
+    if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t):
+        return round(t * 1e9)
+    return int(log_time_ns)
+
+
+_HANDLERS: Final = {
+    "model": RerunViews._on_model,
+    "state": RerunViews._on_state,
+    "estimate": RerunViews._on_estimate,
+    "profile": RerunViews._on_profile,
+    "well": RerunViews._on_well,
+    "alarm": RerunViews._on_alarm,
+    "rejected": RerunViews._on_rejected,
+    "sample": RerunViews._on_sample,
+    "status": RerunViews._on_status,
+}
+
+
+def blueprint() -> Any:
+    """The default layout: tabs against time, against bit depth, the well, and the inputs."""
+    import rerun.blueprint as rrb
+
+    against_time = rrb.Vertical(
+        rrb.Horizontal(
+            rrb.TimeSeriesView(origin="/hookload_kN", name="Hook load [kN]"),
+            rrb.TimeSeriesView(origin="/torque_kNm", name="Torque [kN m]"),
+        ),
+        rrb.Horizontal(
+            rrb.TimeSeriesView(origin="/friction", name="Friction factor per operation"),
+            rrb.TimeSeriesView(origin="/residual", name="Residuals"),
+        ),
+        rrb.StateTimelineView(origin="/rig_state", name="Rig state"),
+        rrb.TextLogView(origin="/alarms", name="Alarms"),
+        name="Against time",
+        row_shares=[3, 2, 1, 1],
+    )
+    against_depth = rrb.Vertical(
+        rrb.TimeSeriesView(origin="/vs_depth/hookload_kN", name="Hook load vs bit depth [kN]"),
+        rrb.Horizontal(
+            rrb.TimeSeriesView(origin="/vs_depth/torque_kNm", name="Torque vs bit depth"),
+            rrb.TimeSeriesView(origin="/vs_depth/friction", name="Friction vs bit depth"),
+        ),
+        name="Against bit depth (select timeline bit_depth_cm)",
+    )
+    well = rrb.Horizontal(
+        rrb.Spatial3DView(origin="/well", name="Trajectory, string, local friction"),
+        rrb.Vertical(
+            rrb.BarChartView(origin="/profile/friction", name="Local friction vs MD [m]"),
+            rrb.BarChartView(origin="/profile/temperature_C", name="Temperature [degC] vs MD"),
+        ),
+        name="Well",
+        column_shares=[3, 2],
+    )
+    inputs = rrb.Vertical(
+        rrb.TimeSeriesView(origin="/samples", name="Decoded samples (SI)"),
+        rrb.TimeSeriesView(origin="/status", name="Daemon status"),
+        rrb.TextLogView(origin="/rejected", name="Rejected input"),
+        name="Inputs",
+    )
+    return rrb.Blueprint(
+        rrb.Tabs(against_time, against_depth, well, inputs),
+        rrb.TimePanel(timeline=TIME),
+        collapse_panels=False,
+    )
+
+
+def build_rrd(
+    messages: Iterable[tuple[str, int, Mapping[str, Any]]],
+    rrd_path: str | Path,
+    *,
+    recording_id: str | None = None,
+) -> ViewStats:
+    """Write the views of a message stream (e.g. ``reader.read_messages(path)``) to ``.rrd``."""
+    with RerunViews(rrd_path, recording_id=recording_id) as views:
+        for topic, log_time_ns, message in messages:
+            views.write(topic, log_time_ns, message)
+    return views.stats
+
+
+_analytics_disabled = False
+
+
+def _disable_viewer_analytics() -> None:
+    # The bundled viewer phones home unless told not to; the setting lives in the user's rerun
+    # config, so one call per process is enough. Failure is harmless and only logged.
+    global _analytics_disabled
+    if _analytics_disabled:
+        return
+    _analytics_disabled = True
+    try:
+        subprocess.run(
+            [sys.executable, "-m", "rerun", "analytics", "disable"],
+            check=False, capture_output=True, timeout=30,
+        )
+    except (OSError, subprocess.SubprocessError) as exc:
+        log.warning("could not disable Rerun analytics: %s", exc)

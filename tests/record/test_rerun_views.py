@@ -1,0 +1,121 @@
+"""Rerun views: a real .rrd built from a real MCAP recording, read back with RrdReader."""
+
+from __future__ import annotations
+
+import socket
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+from rerun.chunk import RrdReader
+
+from tdmon.cli import main
+from tdmon.errors import RecordError
+from tdmon.record.mcap_recorder import McapRecorder
+from tdmon.record.reader import RecordedMessage, read_messages
+from tdmon.record.rerun_views import RerunViews, build_rrd
+
+
+def _rows(path: Path) -> tuple[dict[str, int], dict[str, set[str]]]:
+    reader = RrdReader(path)
+    [recording] = reader.recordings()
+    assert recording.application_id == "tdmon"
+    assert len(reader.blueprints()) == 1
+    rows: dict[str, int] = defaultdict(int)
+    timelines: dict[str, set[str]] = defaultdict(set)
+    for chunk in reader.stream().to_chunks():
+        if chunk.is_static:
+            timelines[chunk.entity_path].add("static")
+            continue
+        rows[chunk.entity_path] += chunk.num_rows
+        timelines[chunk.entity_path].update(chunk.timeline_names)
+    return dict(rows), dict(timelines)
+
+
+def _count(stream: list[RecordedMessage], topic: str, **match: object) -> int:
+    return sum(
+        1 for m in stream if m.topic == topic and all(m.message.get(k) == v
+                                                      for k, v in match.items())
+    )
+
+
+def test_views_from_a_flight_recording(tmp_path: Path, stream: list[RecordedMessage]) -> None:
+    with McapRecorder(tmp_path / "rec") as recorder:
+        for item in stream:
+            recorder.write(*item)
+    [mcap] = recorder.stats.files
+    rrd = tmp_path / "views.rrd"
+    assert main(["view", str(mcap), "--rrd", str(rrd), "--no-progress"]) == 0
+    rows, timelines = _rows(rrd)
+
+    models = _count(stream, "/tdmon/model")
+    windows = _count(stream, "/tdmon/estimate", kind="window")
+    pick_up_windows = _count(stream, "/tdmon/estimate", kind="window", operation="pick_up")
+    for entity in ("hookload_kN/measured", "hookload_kN/model/pick_up",
+                   "hookload_kN/band/pick_up_mu_0_20", "torque_kNm/measured",
+                   "torque_kNm/model/rotating"):
+        assert rows[f"/{entity}"] == models, entity
+        assert timelines[f"/{entity}"] == {"time", "static"}
+        assert rows[f"/vs_depth/{entity}"] == models
+        assert timelines[f"/vs_depth/{entity}"] == {"bit_depth_cm", "static"}
+    assert rows["/friction/pick_up"] == pick_up_windows
+    assert rows["/friction/pick_up"] + rows["/friction/slack_off"] == windows
+    assert rows["/alarms"] == _count(stream, "/tdmon/alarm")
+    assert rows["/rejected"] == _count(stream, "/tdmon/rejected")
+    assert rows["/rig_state"] == 2  # one trip out, one trip in: two state changes
+    assert rows["/samples/hookload"] == _count(stream, "/tdmon/sample", channel="hookload")
+    # Profiles: one /tdmon/profile message plus one profile estimate.
+    assert rows["/profile/friction"] == 2
+    assert rows["/profile/temperature_C"] == 1
+    assert timelines["/well/trajectory"] == {"static"}
+    assert rows["/well/friction"] == 2
+    assert rows["/well/string"] >= 1 and rows["/well/bit"] == rows["/well/string"]
+
+
+def test_sink_survives_bad_messages_and_needs_a_target(tmp_path: Path) -> None:
+    with pytest.raises(RecordError):
+        RerunViews()
+    views = RerunViews(tmp_path / "bad.rrd")
+    views.write("/tdmon/model", 1, {"t": 1.0})  # nothing usable but no crash
+    views.write("/tdmon/alarm", 2, {"t": 1.0})  # missing fields: skipped, counted
+    views.write("/tdmon/unknown", 3, {})
+    views.close()
+    views.close()
+    assert views.stats.skipped == 2
+    rows, _ = _rows(tmp_path / "bad.rrd")
+    assert "/alarms" not in rows
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_live_viewer_server_binds_loopback_only(tmp_path: Path) -> None:
+    port = _free_port()
+    stats = build_rrd(
+        [("/tdmon/alarm", 1, {"t": 1.0, "kind": "k", "severity": "info", "message": "m"})],
+        tmp_path / "a.rrd",
+    )
+    assert stats.logged == 1
+    views = RerunViews(live_port=port, disable_analytics=False)
+    try:
+        assert views.grpc_uri is not None and "127.0.0.1" in views.grpc_uri
+        with socket.create_connection(("127.0.0.1", port), timeout=5):
+            pass
+        import psutil
+
+        listening = [c.laddr for c in psutil.net_connections("tcp")
+                     if c.status == psutil.CONN_LISTEN and c.laddr.port == port]
+        assert listening and all(addr.ip == "127.0.0.1" for addr in listening)
+    finally:
+        views.close()
+
+
+def test_reading_back_the_same_messages(tmp_path: Path, stream: list[RecordedMessage]) -> None:
+    with McapRecorder(tmp_path) as recorder:
+        for item in stream[:200]:
+            recorder.write(*item)
+    stats = build_rrd(read_messages(recorder.stats.files[0]), tmp_path / "b.rrd")
+    assert stats.messages == 200
