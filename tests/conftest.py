@@ -11,6 +11,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -113,9 +114,25 @@ class Mosquitto:
 
 
 @pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
+def broker_dir() -> Iterator[Path]:
+    """A folder mosquitto can use after dropping to its own user.
+
+    pytest's tmp_path sits under root-only folders that user "mosquitto" cannot enter, so
+    the broker's files (log, persistence store, certificates) live in their own folder.
+    """
+    folder = Path(tempfile.mkdtemp(prefix="tdmon-mosquitto-"))
+    folder.chmod(0o755)
+    _chown_to_mosquitto(folder)
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
+def mosquitto(broker_dir: Path) -> Iterator[Mosquitto]:
     """An anonymous broker with persistence, started and stopped around the test."""
-    broker = Mosquitto(tmp_path / "broker", persistence=True)
+    broker = Mosquitto(broker_dir / "broker", persistence=True)
     broker.start()
     try:
         yield broker
@@ -124,9 +141,9 @@ def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
 
 
 @pytest.fixture
-def tls_mosquitto(tmp_path: Path) -> Iterator[tuple[Mosquitto, Path, str, str]]:
+def tls_mosquitto(broker_dir: Path) -> Iterator[tuple[Mosquitto, Path, str, str]]:
     """A TLS broker with a password file: (broker, CA file, username, password)."""
-    certs = tmp_path / "certs"
+    certs = broker_dir / "certs"
     certs.mkdir()
     _make_certs(certs)
     passwords = certs / "passwd"
@@ -142,7 +159,7 @@ def tls_mosquitto(tmp_path: Path) -> Iterator[tuple[Mosquitto, Path, str, str]]:
         f"keyfile {certs / 'server.key'}",
         f"password_file {passwords}",
     ])
-    broker = Mosquitto(tmp_path / "broker", listener_extra=listener_extra, allow_anonymous=False)
+    broker = Mosquitto(broker_dir / "broker", listener_extra=listener_extra, allow_anonymous=False)
     broker.start()
     try:
         yield broker, certs / "ca.crt", "rig", "s3cret"

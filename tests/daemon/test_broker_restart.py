@@ -84,7 +84,9 @@ async def test_broker_restart_loses_nothing(mosquitto: Mosquitto, tmp_path: Path
             assert body.decode() in rejected_payloads
         else:
             assert (topic, json.loads(body)["t"]) in seen, f"lost {topic} {body!r}"
-    # the restart really happened and the daemon went through its backoff
+    # the broker really persisted its sessions, and the restart really happened
+    assert (mosquitto.workdir / "store" / "mosquitto.db").exists()
+ and the daemon went through its backoff
     assert any(s.startswith("retrying") for s in states), set(states)
     # a message re-sent over the restart arrives twice at most: counted, not double-processed
     extra_samples = len(sink["sample"]) - (TOTAL - bad)
