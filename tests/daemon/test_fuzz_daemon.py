@@ -13,7 +13,6 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -98,7 +97,7 @@ def messages(draw: st.DrawFn) -> tuple[str, bytes]:
     t: object = T0 + offset
     value: object = draw(st.floats(0, 3000)) if kind in ("good", "iso") else draw(garbage_values)
     if kind == "iso":
-        t = "2023-11-14T22:13:%02dZ" % (int(abs(offset)) % 60) if offset == offset else "bad"
+        t = f"2023-11-14T22:13:{int(abs(offset)) % 60:02d}Z" if offset == offset else "bad"
     body: dict[str, object] = {"t": t, "value": value}
     unit = draw(units)
     if unit is not None:

@@ -41,7 +41,7 @@ async def test_wrong_password_is_a_clear_error_with_backoff(
             return sum(1 for s in set(states) if s.startswith("retrying")) >= 2
 
         await wait_until(retried_twice, 10, "two backoff rounds")
-        assert not built.daemon.queue is None  # still running
+        assert built.daemon.queue is not None  # still running
     failures = [s for s in states if s.startswith("retrying")]
     assert any("not authorised" in s.lower() or "not authorized" in s.lower()
                for s in failures), failures
