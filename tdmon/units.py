@@ -13,7 +13,7 @@ from functools import lru_cache
 
 import pint
 
-ureg = pint.UnitRegistry()
+ureg: pint.UnitRegistry = pint.UnitRegistry()
 ureg.define("ppg = pound / gallon")
 ureg.define("sg = 1000 * kilogram / meter ** 3")
 

@@ -1,10 +1,250 @@
-"""Commands of this area are added by the issue that builds them."""
+"""``tdmon model ...``: modelled loads at one bit depth, broomsticks, temperature profiles."""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import csv
+import importlib
+import json
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tdmon.errors import ConfigError, TdmonError
+
+if TYPE_CHECKING:
+    from tdmon.model.broomstick import Broomstick
+    from tdmon.model.well import Well
+
+METHODS = ("soft-string", "aadnoy")
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
-    """Add this area's commands (none yet)."""
+    model = subparsers.add_parser(
+        "model",
+        help="modelled hook load and torque: loads, broomsticks, temperature",
+        description="Evaluate the torque-and-drag model of a well file.",
+    )
+    commands = model.add_subparsers(dest="model_command", metavar="COMMAND", required=True)
+
+    loads = commands.add_parser(
+        "loads",
+        help="hook load and surface torque at one bit depth",
+        description=(
+            "Hook load (static, rotating off bottom, pick-up, slack-off) and surface torque at one "
+            "bit depth. Hook load includes the well file's block weight. Output in kN and kN m, "
+            "or SI with --json."
+        ),
+    )
+    _add_common(loads)
+    loads.add_argument("--mu", type=_friction, help="friction factor for every section "
+                       "(default: the well file's friction per section)")
+    loads.add_argument("--bit-depth", type=float, metavar="M",
+                       help="bit depth [m MD] (default: the string's length)")
+    loads.add_argument("--wob", type=float, default=0.0, metavar="N",
+                       help="weight on bit [N] for the on-bottom case (default 0: off bottom)")
+    loads.add_argument("--bit-torque", type=float, default=0.0, metavar="NM",
+                       help="torque at the bit [N m] for the on-bottom case")
+    loads.add_argument("--json", action="store_true", help="print JSON (SI units in the keys)")
+    loads.set_defaults(func=_run_loads)
+
+    broom = commands.add_parser(
+        "broomstick",
+        help="hook load and torque against bit depth for several friction factors",
+        description=(
+            "Pick-up, slack-off and rotating hook load and off-bottom torque against bit depth for "
+            "a family of friction factors (the thesis's Figure 6), with the tensile and make-up "
+            "torque limits."
+        ),
+    )
+    _add_common(broom)
+    broom.add_argument("--mu", type=_friction_list,
+                       help="comma-separated friction factors, e.g. 0.1,0.2,0.3 (default: the "
+                       "well file's friction, per section or mu(T), as one case)")
+    broom.add_argument("--step", type=float, default=30.0, metavar="M",
+                       help="bit-depth step [m] (default 30)")
+    out = broom.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="print JSON (SI units in the keys)")
+    out.add_argument("--csv", type=Path, metavar="FILE", help="write a CSV table")
+    out.add_argument("--png", type=Path, metavar="FILE", help="draw hook load and torque "
+                     "against depth")
+    broom.set_defaults(func=_run_broomstick)
+
+    try:  # the temperature commands land with the temperature models' command line
+        temperature = importlib.import_module("tdmon.cli.temperature")
+    except ModuleNotFoundError:
+        return
+    temperature.register_model_commands(commands)
+
+
+def _add_common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--well", type=Path, required=True, metavar="W.toml",
+                        help="well file (survey, hole sections, string, fluid)")
+    parser.add_argument("--method", choices=METHODS, default="soft-string",
+                        help="'soft-string': 3D Johancsik soft string, consistent signs "
+                        "(default); 'aadnoy': the thesis's formulas as published")
+
+
+def _friction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not 0.0 <= value <= 1.0 or value != value:
+        raise argparse.ArgumentTypeError(f"friction factor {text} is outside 0-1")
+    return value
+
+
+def _friction_list(text: str) -> list[float]:
+    values = [_friction(part) for part in text.split(",") if part.strip()]
+    if not values:
+        raise argparse.ArgumentTypeError("give at least one friction factor")
+    return values
+
+
+def _load(path: Path) -> tuple[Well, NDArray[np.float64]]:
+    """The well and its per-element friction from the file (a number or mu(T) per section)."""
+    from tdmon.config.well import load_well_with_friction
+
+    return load_well_with_friction(path)
+
+
+def _check_bit_depth(path: Path, well: Well, bit_depth: float) -> None:
+    if not bit_depth > 0:
+        raise ConfigError(str(path), "--bit-depth", f"{bit_depth:g} m must be positive")
+    if bit_depth > well.string.length + 1e-6:
+        raise ConfigError(
+            str(path), "string",
+            f"the string is {well.string.length:.1f} m long, shorter than the bit depth "
+            f"{bit_depth:.1f} m",
+        )
+    hole_bottom = well.sections[-1].bottom
+    if bit_depth > hole_bottom + 1e-6:
+        raise ConfigError(
+            str(path), "hole",
+            f"bit depth {bit_depth:.1f} m is below the bottom of the hole ({hole_bottom:.1f} m)",
+        )
+
+
+def _run_loads(args: argparse.Namespace) -> int:
+    from tdmon.model.torque_drag import torque_drag
+
+    well, file_friction = _load(args.well)
+    bit_depth = args.bit_depth if args.bit_depth is not None else well.string.length
+    _check_bit_depth(args.well, well, bit_depth)
+    mu = args.mu if args.mu is not None else file_friction
+    loads = torque_drag(well, bit_depth, mu, method=args.method, wob=args.wob,
+                        bit_torque=args.bit_torque)
+    if args.json:
+        document = {
+            "well": well.name,
+            "bit_depth_m": loads.bit_depth,
+            "method": loads.method,
+            "mu": args.mu,
+            "block_weight_N": well.block_weight,
+            "hookload_N": dict(loads.hookload),
+            "torque_Nm": dict(loads.surface_torque),
+        }
+        json.dump(document, sys.stdout, indent=2)
+        print()
+        return 0
+    friction = f"mu {args.mu:g}" if args.mu is not None else "friction from the well file"
+    print(f"{well.name or args.well}: bit at {loads.bit_depth:.1f} m MD, method {loads.method}, "
+          f"{friction}, block weight {well.block_weight / 1e3:.1f} kN")
+    on_bottom = args.wob != 0.0 or args.bit_torque != 0.0
+    shown = ["static", "rotating", "pick_up", "slack_off"] + (["on_bottom"] if on_bottom else [])
+    print(f"  {'hook load':<24}{'kN':>10}")
+    for operation in shown:
+        print(f"  {operation.replace('_', ' '):<24}{loads.hookload[operation] / 1e3:>10.1f}")
+    print(f"  {'surface torque':<24}{'kN m':>10}")
+    for operation in ("rotating", "on_bottom") if on_bottom else ("rotating",):
+        value = loads.surface_torque[operation]
+        print(f"  {operation.replace('_', ' '):<24}{value / 1e3:>10.2f}")
+    return 0
+
+
+def _run_broomstick(args: argparse.Namespace) -> int:
+    from tdmon.model.broomstick import broomstick
+
+    well, file_friction = _load(args.well)
+    mus = args.mu if args.mu is not None else file_friction[np.newaxis, :]
+    if not args.step > 0:
+        raise ConfigError(str(args.well), "--step", "must be positive")
+    deepest = min(well.string.length, well.sections[-1].bottom)
+    bit_depths = np.arange(args.step, deepest + 1e-9, args.step)
+    if bit_depths.size == 0 or bit_depths[-1] < deepest - 1e-6:
+        bit_depths = np.append(bit_depths, deepest)
+    result = broomstick(well, bit_depths, mus, method=args.method)
+    if args.json:
+        json.dump(_broomstick_document(well, result, args.method), sys.stdout)
+        print()
+    elif args.csv is not None:
+        _write_csv(args.csv, result)
+        print(f"wrote {args.csv} ({result.bit_depth.size} bit depths x {result.mu.size} friction "
+              "cases)")
+    elif args.png is not None:
+        from tdmon.cli.plots import plot_broomstick
+
+        plot_broomstick(well, result, args.png, args.method)
+        print(f"wrote {args.png}")
+    else:
+        _print_broomstick(result)
+    return 0
+
+
+def _broomstick_document(well: Well, result: Broomstick, method: str) -> dict[str, Any]:
+    return {
+        "well": well.name,
+        "method": method,
+        "mu": np.asarray(result.mu).tolist(),
+        "bit_depth_m": result.bit_depth.tolist(),
+        "block_weight_N": well.block_weight,
+        "hookload_N": {op: values.tolist() for op, values in result.hookload.items()},
+        "torque_Nm": {op: values.tolist() for op, values in result.surface_torque.items()},
+    }
+
+
+def _columns(result: Broomstick) -> tuple[list[str], list[np.ndarray[Any, Any]]]:
+    names = ["bit_depth_m"]
+    columns = [result.bit_depth]
+    for key, table, unit in (
+        [(op, values, "hookload_N") for op, values in result.hookload.items()]
+        + [(op, values, "torque_Nm") for op, values in result.surface_torque.items()]
+    ):
+        rows = np.atleast_2d(table)
+        for index, mu in enumerate(np.asarray(result.mu)):
+            names.append(f"{key}_{unit}_mu{mu:g}")
+            columns.append(rows[min(index, rows.shape[0] - 1)])
+    return names, columns
+
+
+def _write_csv(path: Path, result: Broomstick) -> None:
+    names, columns = _columns(result)
+    try:
+        with path.open("w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(names)
+            writer.writerows(np.column_stack(columns).tolist())
+    except OSError as exc:
+        raise TdmonError(f"cannot write {path}: {exc.strerror}") from exc
+
+
+def _print_broomstick(result: Broomstick) -> None:
+    mus = np.asarray(result.mu)
+    header = f"{'bit depth m':>12}" + "".join(
+        f"{'PU ' + format(mu, '.3g'):>10}{'SO ' + format(mu, '.3g'):>10}{'T ' + format(mu, '.3g'):>9}"
+        for mu in mus
+    )
+    print("hook load in kN (PU pick-up, SO slack-off), off-bottom torque T in kN m")
+    print(header + f"{'ROT':>10}")
+    rotating = np.atleast_2d(result.hookload["rotating"])[0]
+    for j, depth in enumerate(result.bit_depth):
+        row = f"{depth:>12.1f}"
+        for i in range(mus.size):
+            row += f"{result.hookload['pick_up'][i, j] / 1e3:>10.1f}"
+            row += f"{result.hookload['slack_off'][i, j] / 1e3:>10.1f}"
+            row += f"{result.surface_torque['rotating'][i, j] / 1e3:>9.2f}"
+        print(row + f"{rotating[j] / 1e3:>10.1f}")

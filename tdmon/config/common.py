@@ -1,0 +1,130 @@
+"""Shared pieces of the TOML configuration models: quantity fields, file loading, error mapping."""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
+
+from tdmon.errors import ConfigError
+from tdmon.units import parse_quantity
+
+GRAVITY = 9.80665  # [m/s^2], standard gravity (pound-force per foot is a weight per length)
+
+
+class StrictModel(BaseModel):
+    """Base of every configuration table: unknown keys are errors, models are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _converter(target: str) -> Callable[[Any], float]:
+    """A function reading a number in ``target`` or a string with a unit, to ``target``."""
+
+    def convert(value: Any) -> float:
+        if not isinstance(value, (int, float, str)) or isinstance(value, bool):
+            raise ValueError(f"expected a number in {target} or a string with a unit")
+        number = parse_quantity(value, target)
+        if number != number or number in (float("inf"), float("-inf")):
+            raise ValueError("must be a finite number")
+        return number
+
+    return convert
+
+
+def _quantity(target: str) -> BeforeValidator:
+    return BeforeValidator(_converter(target))
+
+
+def _weight_per_length(value: Any) -> float:
+    """A weight per length in N/m; a mass per length such as "29 lb/ft" is multiplied by g."""
+    try:
+        return _converter("N/m")(value)
+    except ValueError as as_force:
+        try:
+            return _converter("kg/m")(value) * GRAVITY
+        except ValueError:
+            raise as_force from None
+
+
+Length = Annotated[float, _quantity("m")]
+Diameter = Annotated[float, _quantity("m")]
+Force = Annotated[float, _quantity("N")]
+Moment = Annotated[float, _quantity("N*m")]
+Pressure = Annotated[float, _quantity("Pa")]
+Density = Annotated[float, _quantity("kg/m^3")]
+WeightPerLength = Annotated[float, BeforeValidator(_weight_per_length)]
+Dimensionless = Annotated[float, _quantity("dimensionless")]
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+def _dotted(location: tuple[int | str, ...]) -> str:
+    parts: list[str] = []
+    for item in location:
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+        else:
+            parts.append(("." if parts else "") + item)
+    return "".join(parts)
+
+
+def validation_to_config_error(path: Path | str, error: ValidationError) -> ConfigError:
+    """The first validation problem as a ConfigError naming the file, the key and the reason."""
+    first = error.errors()[0]
+    reason = first["msg"]
+    reason = reason.removeprefix("Value error, ")
+    if first["type"] == "missing":
+        reason = "missing key"
+    elif first["type"] == "extra_forbidden":
+        reason = "unknown key"
+    more = len(error.errors()) - 1
+    if more:
+        reason += f" (and {more} more problem{'s' if more > 1 else ''})"
+    return ConfigError(str(path), _dotted(tuple(first["loc"])), reason)
+
+
+def read_toml(path: Path | str) -> dict[str, Any]:
+    """Read a TOML file, translating missing files and syntax errors into ConfigError."""
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            return tomllib.load(handle)
+    except FileNotFoundError as exc:
+        raise ConfigError(str(path), "", "no such file") from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(str(path), "", "is a folder, not a TOML file") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(str(path), "", f"not valid TOML: {exc}") from exc
+    except OSError as exc:
+        raise ConfigError(str(path), "", f"cannot be read: {exc.strerror}") from exc
+
+
+def load_model(
+    model: type[ModelT], path: Path | str, context: dict[str, Any] | None = None
+) -> ModelT:
+    """Validate the TOML file at ``path`` against ``model``; errors name file, key and reason."""
+    data = read_toml(path)
+    try:
+        return model.model_validate(data, context=context)
+    except ValidationError as exc:
+        raise validation_to_config_error(path, exc) from exc
+
+
+__all__ = [
+    "Density",
+    "Diameter",
+    "Dimensionless",
+    "Force",
+    "Length",
+    "Moment",
+    "Pressure",
+    "StrictModel",
+    "WeightPerLength",
+    "load_model",
+    "read_toml",
+    "validation_to_config_error",
+]

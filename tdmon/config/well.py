@@ -1,0 +1,311 @@
+"""The well file: survey, hole sections, drill string, fluid, limits and temperature, as TOML.
+
+A quantity is a number in SI (degC for temperatures) or a string with a unit ("0.3 kN/m",
+"9950 ft", "13 ppg"). ``load_well(path)`` validates the file and ``WellConfig.to_model()`` turns
+it into the model layer's :class:`tdmon.model.well.Well`. Every problem is a
+:class:`tdmon.errors.ConfigError` naming the file, the key and the reason.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from pydantic import Field, ValidationInfo, field_validator, model_validator
+
+from tdmon.config.common import (
+    Density,
+    Diameter,
+    Dimensionless,
+    Force,
+    Length,
+    Moment,
+    Pressure,
+    StrictModel,
+    WeightPerLength,
+    load_model,
+)
+from tdmon.config.thermal import FrictionModelConfig, TemperatureConfig
+from tdmon.errors import ConfigError, ModelError
+from tdmon.model.friction import local_friction
+from tdmon.model.string import DrillString, StringComponent
+from tdmon.model.survey import Survey, minimum_curvature
+from tdmon.model.temperature import WellboreTemperature
+from tdmon.model.well import (
+    Fluid,
+    HoleSection,
+    LimitSettings,
+    Well,
+    hole_grid,
+    section_friction,
+)
+
+
+class WellInfo(StrictModel):
+    name: str = ""
+    element_length: Length = Field(default=10.0, gt=0)
+    block_weight: Force = Field(default=0.0, ge=0)
+
+
+class SurveyConfig(StrictModel):
+    """Survey stations, inline (``stations = [[md, inclination_deg, azimuth_deg], ...]``) or
+    from a CSV file (path relative to the well file)."""
+
+    stations: list[tuple[float, float, float]] | None = None
+    file: Path | None = None
+    md_unit: str = "m"
+    md_column: str = "md_m"
+    inclination_column: str = "incl_deg"
+    azimuth_column: str = "azi_deg"
+
+    @field_validator("stations")
+    @classmethod
+    def _finite(
+        cls, stations: list[tuple[float, float, float]] | None
+    ) -> list[tuple[float, float, float]] | None:
+        for index, station in enumerate(stations or []):
+            if not all(math.isfinite(value) for value in station):
+                raise ValueError(f"station {index} {list(station)} holds a NaN or infinite value")
+        return stations
+
+    @model_validator(mode="after")
+    def _one_source(self) -> SurveyConfig:
+        if (self.stations is None) == (self.file is None):
+            raise ValueError("give either 'stations' or 'file', not both or neither")
+        return self
+
+
+class HoleSectionConfig(StrictModel):
+    name: str = ""
+    kind: Literal["cased", "open"]
+    top: Length = Field(ge=0)
+    bottom: Length
+    diameter: Diameter = Field(gt=0)
+    friction: FrictionModelConfig | None = None
+
+    @model_validator(mode="after")
+    def _ordered(self) -> HoleSectionConfig:
+        if self.bottom <= self.top:
+            raise ValueError(f"bottom ({self.bottom:g} m) must be below top ({self.top:g} m)")
+        return self
+
+
+class StringComponentConfig(StrictModel):
+    name: str = ""
+    length: Length = Field(gt=0)
+    od: Diameter = Field(gt=0)
+    id: Diameter = Field(ge=0)
+    weight: WeightPerLength | None = Field(default=None, gt=0)
+    buoyed_weight: WeightPerLength | None = Field(default=None, gt=0)
+    tool_joint_od: Diameter | None = Field(default=None, gt=0)
+    yield_strength: Pressure | None = Field(default=None, gt=0)
+    makeup_torque: Moment | None = Field(default=None, gt=0)
+    youngs_modulus: Pressure = Field(default=2.06e11, gt=0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> StringComponentConfig:
+        if self.id >= self.od:
+            raise ValueError(f"id ({self.id:g} m) must be smaller than od ({self.od:g} m)")
+        if self.weight is not None and self.buoyed_weight is not None:
+            raise ValueError("give 'weight' (in air) or 'buoyed_weight', not both")
+        return self
+
+
+class FluidConfig(StrictModel):
+    density: Density = Field(gt=0)
+    inside_density: Density | None = Field(default=None, gt=0)
+
+
+class LimitsConfig(StrictModel):
+    safety_factor: Dimensionless = Field(default=1.0, ge=1.0)
+    helical_factor: Dimensionless = Field(default=math.sqrt(2.0), gt=1.0)
+
+
+class WellConfig(StrictModel):
+    """The whole well file."""
+
+    well: WellInfo = WellInfo()
+    survey: SurveyConfig
+    hole: list[HoleSectionConfig] = Field(min_length=1)
+    string: list[StringComponentConfig] = Field(min_length=1)
+    fluid: FluidConfig
+    limits: LimitsConfig = LimitsConfig()
+    temperature: TemperatureConfig | None = None
+
+    @field_validator("hole")
+    @classmethod
+    def _sections_in_order(cls, hole: list[HoleSectionConfig]) -> list[HoleSectionConfig]:
+        for upper, lower in itertools.pairwise(hole):
+            if lower.top < upper.bottom - 1e-6:
+                raise ValueError(
+                    f"sections overlap: '{lower.name or lower.kind}' starts at {lower.top:g} m, "
+                    f"above the bottom of the one before ({upper.bottom:g} m)"
+                )
+        return hole
+
+    @model_validator(mode="after")
+    def _resolve_paths(self, info: ValidationInfo) -> WellConfig:
+        base = (info.context or {}).get("base_dir")
+        if base is not None and self.survey.file is not None and not self.survey.file.is_absolute():
+            object.__setattr__(self.survey, "file", Path(base) / self.survey.file)
+        return self
+
+    # -- adapters to the model layer ------------------------------------------------------
+
+    def to_model(self, source: str | Path = "<well>") -> Well:
+        """The model layer's :class:`Well`; ``source`` names the file in error messages."""
+        survey = self._survey(str(source))
+        sections = tuple(
+            HoleSection(
+                top=section.top,
+                bottom=section.bottom,
+                diameter=section.diameter,
+                kind=section.kind,
+                friction=section.friction.constant_value() if section.friction else None,
+            )
+            for section in self.hole
+        )
+        components = tuple(
+            StringComponent(
+                name=item.name,
+                length=item.length,
+                outer_diameter=item.od,
+                inner_diameter=item.id,
+                weight_in_air=item.weight,
+                buoyed_weight=item.buoyed_weight,
+                tool_joint_diameter=item.tool_joint_od,
+                yield_strength=item.yield_strength,
+                makeup_torque=item.makeup_torque,
+                youngs_modulus=item.youngs_modulus,
+            )
+            for item in self.string
+        )
+        if sections[-1].bottom > survey.md[-1] + 1e-6:
+            raise ConfigError(
+                str(source),
+                f"hole[{len(sections) - 1}].bottom",
+                f"{sections[-1].bottom:g} m is below the last survey station "
+                f"({survey.md[-1]:g} m)",
+            )
+        return Well(
+            survey=survey,
+            string=DrillString(components),
+            sections=sections,
+            fluid=Fluid(density=self.fluid.density, inside_density=self.fluid.inside_density),
+            block_weight=self.well.block_weight,
+            element_length=self.well.element_length,
+            limits=LimitSettings(
+                safety_factor=self.limits.safety_factor,
+                helical_factor=self.limits.helical_factor,
+            ),
+            name=self.well.name,
+        )
+
+    def element_friction(self, well: Well, source: str | Path = "<well>") -> NDArray[np.float64]:
+        """The friction factor of every element of ``hole_grid(well)`` from the sections'
+        friction (a number or a law mu(T)); a law mu(T) is evaluated at the annulus temperature
+        of the ``[temperature]`` model at the element's depth (the thesis's local friction
+        factor, Case 2 and 3), with the mud circulating at the bottom of the hole."""
+        grid = hole_grid(well)
+        if all(section.friction is None or section.friction.constant_value() is not None
+               for section in self.hole):
+            try:
+                return section_friction(well, grid)
+            except ModelError as exc:
+                raise ConfigError(str(source), "hole", str(exc)) from exc
+        missing = [i for i, section in enumerate(self.hole) if section.friction is None]
+        if missing:
+            raise ConfigError(str(source), f"hole[{missing[0]}].friction", "missing key")
+        if self.temperature is None:
+            raise ConfigError(str(source), "temperature",
+                              "a section's friction depends on temperature but the well file "
+                              "has no [temperature] table")
+        profile = self.annulus_temperature(well, grid.element_mid_md, source)
+        laws = [section.friction.friction_model() for section in self.hole if section.friction]
+        try:
+            return local_friction(laws, grid.element_section, profile.annulus)
+        except ModelError as exc:
+            raise ConfigError(str(source), "hole", str(exc)) from exc
+
+    def annulus_temperature(
+        self, well: Well, md: NDArray[np.float64], source: str | Path = "<well>"
+    ) -> WellboreTemperature:
+        """The ``[temperature]`` model at ``md``, circulating at the bottom of the hole."""
+        if self.temperature is None:
+            raise ConfigError(str(source), "temperature", "missing table")
+        try:
+            return self.temperature.profile(md, well.survey.md, well.survey.tvd,
+                                            total_md=well.sections[-1].bottom)
+        except ModelError as exc:
+            raise ConfigError(str(source), "temperature", str(exc)) from exc
+
+    def _survey(self, source: str) -> Survey:
+        config = self.survey
+        if config.stations is not None:
+            table = np.asarray(config.stations, dtype=float)
+            key = "survey.stations"
+        else:
+            assert config.file is not None
+            table = _read_survey_csv(source, config)
+            key = f"survey.file ({config.file})"
+        scale = 1.0 if config.md_unit == "m" else _md_scale(source, config.md_unit)
+        try:
+            return minimum_curvature(table[:, 0] * scale, table[:, 1], table[:, 2])
+        except ModelError as exc:
+            raise ConfigError(source, key, str(exc)) from exc
+
+
+def _md_scale(source: str, unit: str) -> float:
+    from tdmon.units import to_unit
+
+    try:
+        return to_unit(1.0, unit, "m")
+    except ValueError as exc:
+        raise ConfigError(source, "survey.md_unit", str(exc)) from exc
+
+
+def _read_survey_csv(source: str, config: SurveyConfig) -> np.ndarray[Any, np.dtype[np.float64]]:
+    assert config.file is not None
+    columns = [config.md_column, config.inclination_column, config.azimuth_column]
+    try:
+        frame = pd.read_csv(config.file)
+    except FileNotFoundError as exc:
+        raise ConfigError(source, "survey.file", f"no such file: {config.file}") from exc
+    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ConfigError(source, "survey.file", f"cannot read {config.file}: {exc}") from exc
+    missing = [column for column in columns if column not in frame.columns]
+    if missing:
+        raise ConfigError(
+            source,
+            "survey.file",
+            f"{config.file} has no column {', '.join(missing)} "
+            f"(columns: {', '.join(map(str, frame.columns))})",
+        )
+    try:
+        return frame[columns].to_numpy(dtype=float)
+    except ValueError as exc:
+        raise ConfigError(source, "survey.file", f"non-numeric value in {config.file}") from exc
+
+
+def load_well(path: str | Path) -> WellConfig:
+    """Read and validate a well file (paths inside it are relative to the file)."""
+    path = Path(path)
+    return load_model(WellConfig, path, context={"base_dir": path.parent})
+
+
+def load_well_model(path: str | Path) -> Well:
+    """Read a well file and build the model layer's :class:`Well` from it."""
+    return load_well(path).to_model(path)
+
+
+def load_well_with_friction(path: str | Path) -> tuple[Well, NDArray[np.float64]]:
+    """The well and the friction factor of each of its hole-grid elements (see
+    :meth:`WellConfig.element_friction`)."""
+    config = load_well(path)
+    well = config.to_model(path)
+    return well, config.element_friction(well, path)
