@@ -235,8 +235,8 @@ def _write_csv(path: Path, result: Broomstick) -> None:
 def _print_broomstick(result: Broomstick) -> None:
     mus = np.asarray(result.mu)
     header = f"{'bit depth m':>12}" + "".join(
-        f"{'PU ' + format(mu, '.3g'):>10}{'SO ' + format(mu, '.3g'):>10}{'T ' + format(mu, '.3g'):>9}"
-        for mu in mus
+        f"{'PU ' + label:>10}{'SO ' + label:>10}{'T ' + label:>9}"
+        for label in (format(mu, ".3g") for mu in mus)
     )
     print("hook load in kN (PU pick-up, SO slack-off), off-bottom torque T in kN m")
     print(header + f"{'ROT':>10}")
