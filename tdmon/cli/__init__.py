@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from tdmon import __version__
 from tdmon.errors import TdmonError
 
-_COMMAND_MODULES = ("model", "lab", "run", "record")
+_COMMAND_MODULES = ("model", "lab", "run", "record", "replay")
 
 
 def build_parser() -> argparse.ArgumentParser:

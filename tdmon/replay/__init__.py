@@ -1,0 +1,1 @@
+"""Rig sessions for replay: the simulator, real-data import and the replay driver."""
