@@ -248,3 +248,56 @@ def _err_of(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
 
 
 
+
+
+AUTOMATIC_RETRY = """
+import json, os, resource, signal, sys, time
+from tdmon.record.mcap_recorder import McapRecorder
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+alarms = []
+recorder = McapRecorder(sys.argv[1], flush_interval_s=0.001, retry_s=0.0,
+                        background_flush=False, on_alarm=alarms.append)
+resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, resource.RLIM_INFINITY))
+for seq in range(3000):
+    recorder.write("/tdmon/raw", time.time_ns(), {"source": "mqtt", "topic": "rig/hl",
+                   "receive_time": time.time(), "payload": os.urandom(100).hex(),
+                   "payload_encoding": "utf-8"})
+    if seq % 20 == 0:
+        time.sleep(0.002)
+stats = recorder.stats
+recorder.close()
+print(json.dumps({"kinds": [a["kind"] for a in alarms], "files": len(stats.files),
+                  "written": stats.written, "lost": stats.lost}))
+"""
+
+
+def test_recorder_retries_by_itself_after_a_failure(
+    tmp_path: Path, run_child: ChildRunner
+) -> None:
+    result = run_child(AUTOMATIC_RETRY, str(tmp_path / "rec"))
+    assert result["kinds"][:2] == ["recorder_failed", "recorder_resumed"]
+    assert result["files"] >= 2
+    assert result["written"] + result["lost"] == 3000
+
+
+def test_quiet_pipeline_is_flushed_by_the_background_thread(tmp_path: Path) -> None:
+    recorder = McapRecorder(tmp_path, flush_interval_s=0.05)
+    try:
+        for i in range(10):
+            recorder.write("/tdmon/alarm", i, {"t": 1.0, "kind": "k", "severity": "info",
+                                               "message": str(i)})
+        path = recorder.path
+        assert path is not None
+        # No more writes: only the flusher thread can put the messages on disk.
+        deadline = time.monotonic() + 30
+        copy = tmp_path / "snapshot.mcap"
+        recovered = 0
+        while time.monotonic() < deadline:
+            copy.write_bytes(path.read_bytes())
+            recovered = recover_file(copy).messages
+            if recovered == 10:
+                break
+            time.sleep(0.05)
+        assert recovered == 10
+    finally:
+        recorder.close()

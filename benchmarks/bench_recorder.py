@@ -1,0 +1,171 @@
+"""Benchmark of the MCAP flight recorder (and, for scale, the Rerun views).
+
+Run: ``.venv/bin/python benchmarks/bench_recorder.py [--seconds 3600] [--repeat 3]``
+
+Measures, on the synthetic stream of tdmon.record.synthetic (every topic, ~8 messages per
+second of data, of which 3 raw + 3 sample per second of input):
+
+1. the recorder alone: messages/s written, file bytes per message and per input sample, both
+   with the flush of a replay at full speed (one flush per wall-clock second) and with the
+   flush a live rig gives (one flush per second of *data*, i.e. a chunk of ~8 messages);
+2. the recorder's cost inside a pipeline: a stand-in loop (JSON decode of each raw payload,
+   latest-value alignment, a small numpy "model" evaluation per frame, building the output
+   messages) timed without a sink and with the recorder as its sink. The daemon's replay is
+   not written yet: this stand-in is NOT the daemon, and the figure must be redone against it;
+3. the Rerun views built from the same stream (messages/s), for scale.
+
+Best of ``--repeat`` runs; the machine is shared, so expect noise of 10-20 %.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tdmon.record.mcap_recorder import McapRecorder
+from tdmon.record.reader import RecordedMessage
+from tdmon.record.synthetic import synthetic_messages
+
+Sink = Callable[[str, int, dict[str, Any]], None]
+
+
+def best_of(repeat: int, run: Callable[[], float]) -> float:
+    return min(run() for _ in range(repeat))
+
+
+def recorder_alone(stream: list[RecordedMessage], live_flush: bool) -> tuple[float, int]:
+    """Seconds to write the stream, and the file size [bytes]."""
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        with McapRecorder(folder, recover=False) as recorder:
+            last_second = stream[0].log_time_ns // 10**9
+            for topic, log_time_ns, message in stream:
+                if live_flush and log_time_ns // 10**9 != last_second:
+                    # At a rig's pace the 1 s flush cuts a chunk per second of data.
+                    recorder.flush()
+                    last_second = log_time_ns // 10**9
+                recorder.write(topic, log_time_ns, message)
+        elapsed = time.perf_counter() - start
+        size = sum(path.stat().st_size for path in recorder.stats.files)
+    return elapsed, size
+
+
+class StandIn:
+    """A stand-in for the daemon's per-message work (not the daemon: see module docstring)."""
+
+    def __init__(self) -> None:
+        self.latest: dict[str, float] = {}
+        # A 1000-element string on a J well: enough numpy per frame to resemble a soft-string
+        # evaluation of the band (five friction factors), which the daemon does per frame.
+        self.md = np.linspace(0.0, 3000.0, 1000)
+        inclination = np.radians(np.clip((self.md - 500.0) / 10.0, 0.0, 60.0))
+        self.axial = 250.0 * np.gradient(self.md) * np.cos(inclination)
+        self.normal = 250.0 * np.gradient(self.md) * np.sin(inclination)
+
+    def run(self, stream: list[RecordedMessage], sink: Sink | None) -> float:
+        start = time.perf_counter()
+        for topic, log_time_ns, message in stream:
+            if topic != "/tdmon/raw":
+                continue
+            if sink is not None:
+                sink("/tdmon/raw", log_time_ns, message)
+            decoded = json.loads(message["payload"])
+            channel = message["topic"].rsplit("/", 1)[-1]
+            value = float(decoded["value"])
+            self.latest[channel] = value
+            sample = {"channel": channel, "t": decoded["t"], "value": value,
+                      "unit": decoded["unit"], "source": "mqtt", "topic": message["topic"]}
+            if sink is not None:
+                sink("/tdmon/sample", log_time_ns, sample)
+            if channel == "bit_depth":
+                self._frame(decoded["t"], log_time_ns, value, sink)
+        return time.perf_counter() - start
+
+    def _frame(self, t: float, log_time_ns: int, bit_depth: float, sink: Sink | None) -> None:
+        inside = self.md <= bit_depth
+        axial, normal = self.axial[inside][::-1], self.normal[inside][::-1]
+        band = [300e3 + float(np.cumsum(axial + mu * normal)[-1]) for mu in (0.1, 0.2, 0.3, 0.4)]
+        buoyed = float(np.cumsum(axial)[-1])
+        measured = self.latest.get("hookload", float("nan"))
+        model = {
+            "t": t, "bit_depth_m": bit_depth,
+            "hookload_N": {"pick_up": band[1], "slack_off": 2 * buoyed - band[1],
+                           "rotating": 300e3 + buoyed},
+            "torque_Nm": {"rotating": 6e3 + bit_depth},
+            "band": {"mu": [0.1, 0.2, 0.3, 0.4], "pick_up_N": band, "slack_off_N": band},
+            "measured": {"hookload_N": measured, "torque_Nm": self.latest.get("torque")},
+            "residual": {"hookload_N": measured - band[1], "torque_Nm": 0.0},
+        }
+        state = {"t": t, "state": "pick_up", "steady": True, "bit_depth_m": bit_depth}
+        if sink is not None:
+            sink("/tdmon/state", log_time_ns, state)
+            sink("/tdmon/model", log_time_ns, model)
+
+
+def pipeline_cost(stream: list[RecordedMessage], repeat: int) -> tuple[float, float, int]:
+    """Seconds of the stand-in without a sink, with the recorder, and inputs processed."""
+    inputs = sum(1 for m in stream if m.topic == "/tdmon/raw")
+    bare = best_of(repeat, lambda: StandIn().run(stream, None))
+
+    def with_recorder() -> float:
+        with tempfile.TemporaryDirectory() as folder:
+            recorder = McapRecorder(folder, recover=False)
+            try:
+                return StandIn().run(stream, recorder.write)
+            finally:
+                recorder.close()
+
+    recorded = best_of(repeat, with_recorder)
+    return bare, recorded, inputs
+
+
+def rerun_views(stream: list[RecordedMessage]) -> float:
+    from tdmon.record.rerun_views import build_rrd
+
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        build_rrd(stream, Path(folder) / "views.rrd")
+        return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=int, default=3600, help="seconds of synthetic data")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--no-rerun", action="store_true")
+    args = parser.parse_args()
+
+    stream = list(synthetic_messages(duration_s=args.seconds))
+    messages = len(stream)
+    samples = sum(1 for m in stream if m.topic == "/tdmon/sample")
+    print(f"stream: {messages} messages ({samples} input samples), {args.seconds} s of data")
+
+    modes = (("replay-pace flush (1 s wall)", False), ("rig-pace flush (1 s data)", True))
+    for label, live in modes:
+        runs = [recorder_alone(stream, live) for _ in range(args.repeat)]
+        elapsed = min(r[0] for r in runs)
+        size = runs[0][1]
+        print(f"recorder alone, {label}: {messages / elapsed:,.0f} msg/s, "
+              f"{size / messages:.1f} B/message, {size / samples:.1f} B/input sample "
+              f"(all topics), {size / args.seconds / 1e3:.2f} kB per second of data")
+
+    bare, recorded, inputs = pipeline_cost(stream, args.repeat)
+    print(f"stand-in pipeline (NOT the daemon): {inputs / bare:,.0f} inputs/s bare, "
+          f"{inputs / recorded:,.0f} inputs/s with the recorder; recorder cost "
+          f"{(recorded - bare) / bare * 100:.0f} % of the stand-in's time, "
+          f"{(recorded - bare) / inputs * 1e6:.1f} us per input")
+
+    if not args.no_rerun:
+        elapsed = rerun_views(stream)
+        print(f"Rerun views (.rrd): {messages / elapsed:,.0f} msg/s")
+
+
+if __name__ == "__main__":
+    main()
