@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from mcap.writer import CompressionType, Writer
 
@@ -43,6 +43,9 @@ from tdmon import __version__
 from tdmon.errors import RecordError
 from tdmon.record import schemas
 from tdmon.record.sink import AlarmHook, Message
+
+if TYPE_CHECKING:
+    from tdmon.record.recover import RecoveryResult
 
 log = logging.getLogger(__name__)
 
@@ -316,7 +319,7 @@ class McapRecorder:
         self._next_seq = 0
 
         self._prepare_folder(min_free_bytes)
-        self.recovered: list[Any] = []
+        self.recovered: list[RecoveryResult] = []
         if recover and self._fixed_path is None:
             from tdmon.record.recover import recover_folder
 

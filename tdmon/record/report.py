@@ -129,9 +129,9 @@ def _state_at(states: Sequence[dict[str, Any]], times: np.ndarray) -> list[str]:
     return [names[i] if i >= 0 else "unknown" for i in index]
 
 
-def _depth_axis(axes: Any, title: str, xlabel: str) -> None:
+def _depth_axis(axes: Any, title: str, xlabel: str, ylabel: str = "Bit depth [m MD]") -> None:
     axes.invert_yaxis()
-    axes.set_ylabel("Bit depth [m MD]")
+    axes.set_ylabel(ylabel)
     axes.set_xlabel(xlabel)
     axes.set_title(title)
     axes.grid(True, alpha=0.3)
@@ -210,7 +210,8 @@ def friction_figure(data: ReportData, path: Path) -> Path | None:
         axes.errorbar([_num(e["mu"]) for e in chosen], [_num(e["bit_depth_m"]) for e in chosen],
                       xerr=[_num(e.get("mu_std")) for e in chosen], fmt="o", ms=4,
                       color=f"C{i}", capsize=2, label=f"window, {operation}")
-    _depth_axis(axes, "Friction factor against depth", "Friction factor mu [-]")
+    _depth_axis(axes, "Friction factor against depth", "Friction factor mu [-]",
+                "Depth [m MD] (bit depth for windows)")
     axes.legend(fontsize=8)
     return _save(figure, path)
 

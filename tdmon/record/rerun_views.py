@@ -158,13 +158,17 @@ class RerunViews:
             except OSError as exc:
                 raise RecordError(f"cannot write {self.rrd_path}: {exc.strerror or exc}") from exc
             sinks.append(rr.FileSink(str(self.rrd_path)))
-        if live_port is not None:
-            if disable_analytics:
-                _disable_viewer_analytics()
-            server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=live_port)
-            self.grpc_uri = server.uri
-            sinks.append(server)
-        self._rec.set_sinks(*sinks, default_blueprint=blueprint())
+        if live_port is not None and disable_analytics:
+            _disable_viewer_analytics()
+        try:
+            if live_port is not None:
+                # Never rerun's default 0.0.0.0: a rig network is not a place for an open port.
+                server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=live_port)
+                self.grpc_uri = server.uri
+                sinks.append(server)
+            self._rec.set_sinks(*sinks, default_blueprint=blueprint())
+        except Exception as exc:  # the bindings raise plain RuntimeError/ValueError
+            raise RecordError(f"cannot start the Rerun sinks: {exc}") from exc
 
     # -- the sink protocol ---------------------------------------------------------------
 

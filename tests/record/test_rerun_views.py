@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import socket
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -119,3 +120,13 @@ def test_reading_back_the_same_messages(tmp_path: Path, stream: list[RecordedMes
             recorder.write(*item)
     stats = build_rrd(read_messages(recorder.stats.files[0]), tmp_path / "b.rrd")
     assert stats.messages == 200
+
+
+def test_rerun_is_imported_lazily(run_child: Callable[..., dict[str, object]]) -> None:
+    result = run_child(
+        "import json, sys\n"
+        "import tdmon.cli, tdmon.record.rerun_views, tdmon.record.mcap_recorder\n"
+        "tdmon.cli.build_parser()\n"
+        "print(json.dumps({'rerun': 'rerun' in sys.modules}))\n"
+    )
+    assert result == {"rerun": False}
