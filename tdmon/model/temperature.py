@@ -266,6 +266,37 @@ class WellboreTemperature:
     coefficients: KabirCoefficients | None = None
     maximum_temperature: float | None = None
 
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready dict in SI with units in the keys (lists, no NaN).
+
+        Keys: ``model``, ``md_m``, ``tvd_m``, ``pipe_C``, ``annulus_C``, ``formation_C``,
+        ``inlet_temperature_C``, ``maximum_temperature_C`` and ``coefficients`` (A_per_m,
+        B_per_m, theta1_per_m, theta2_per_m, C1_K, C2_K, U_p_W_m2K, U_a_W_m2K, t_D, T_D and,
+        when computed, h_p_W_m2K, h_a_W_m2K, Re_p, Re_a, Pr) or None.
+        """
+        coefficients: dict[str, float | None] | None = None
+        if self.coefficients is not None:
+            k, ht = self.coefficients, self.coefficients.heat_transfer
+            coefficients = {
+                "A_per_m": k.A, "B_per_m": k.B, "theta1_per_m": k.theta1,
+                "theta2_per_m": k.theta2, "C1_K": k.C1, "C2_K": k.C2,
+                "U_p_W_m2K": ht.pipe, "U_a_W_m2K": ht.annulus, "t_D": ht.dimensionless_time,
+                "T_D": ht.dimensionless_temperature, "h_p_W_m2K": ht.h_pipe,
+                "h_a_W_m2K": ht.h_annulus, "Re_p": ht.reynolds_pipe, "Re_a": ht.reynolds_annulus,
+                "Pr": ht.prandtl,
+            }
+        return {
+            "model": self.model,
+            "md_m": np.atleast_1d(self.md).tolist(),
+            "tvd_m": np.atleast_1d(self.tvd).tolist(),
+            "pipe_C": np.atleast_1d(self.pipe).tolist(),
+            "annulus_C": np.atleast_1d(self.annulus).tolist(),
+            "formation_C": np.atleast_1d(self.formation).tolist(),
+            "inlet_temperature_C": self.inlet_temperature,
+            "maximum_temperature_C": self.maximum_temperature,
+            "coefficients": coefficients,
+        }
+
 
 def _require_finite(name: str, value: float) -> None:
     if not math.isfinite(value):
@@ -517,7 +548,7 @@ def numerical_temperature(md: ArrayLike, survey_md: ArrayLike, survey_tvd: Array
                           geotherm: Geotherm, circulation: CirculationParameters, *,
                           total_md: float | None = None,
                           inlet_temperature: float | None = None,
-                          tolerance: float = 1e-8) -> WellboreTemperature:
+                          tolerance: float = 1e-6) -> WellboreTemperature:
     """Pipe and annulus mud temperatures from the energy balances integrated along MD.
 
     Parameters

@@ -5,6 +5,7 @@ Reference case: the thesis's Tables 10-12 (US units), converted to SI with tdmon
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -246,6 +247,29 @@ def test_numerical_equals_analytic_on_vertical_well(circulation: CirculationPara
     assert numeric.annulus == pytest.approx(analytic.annulus, abs=0.1)
     assert numeric.pipe == pytest.approx(analytic.pipe, abs=0.1)
     assert np.max(np.abs(numeric.annulus - analytic.annulus)) < 1e-5
+
+
+def test_numerical_handles_stiff_wells() -> None:
+    # theta1 H ~ 800 (see the overflow test): boundary layers of ~40 m at both ends of 30 km
+    slow = CirculationParameters(**(si(TABLE_10 | TABLE_11_U) | {"flow_rate": 0.0005}))
+    depth = 30000.0
+    x = np.linspace(0.0, depth, 301)
+    numeric = numerical_temperature(x, [0.0, depth], [0.0, depth], GEOTHERM, slow)
+    analytic = apak_temperature(x, depth, GEOTHERM, slow)
+    assert numeric.annulus == pytest.approx(analytic.annulus, abs=1e-3)
+    assert numeric.pipe == pytest.approx(analytic.pipe, abs=1e-3)
+
+
+def test_to_dict_is_json_ready() -> None:
+    result = apak_temperature([0.0, H], H, GEOTHERM, FROM_SCRATCH)
+    data = result.to_dict()
+    text = json.dumps(data, allow_nan=False)
+    assert '"annulus_C"' in text and '"md_m"' in text
+    coefficients = data["coefficients"]
+    assert isinstance(coefficients, dict)
+    assert coefficients["Pr"] == pytest.approx(18.4)
+    geothermal = temperature_profile("geothermal", [0.0], [0.0, H], [0.0, H], GEOTHERM)
+    assert geothermal.to_dict()["coefficients"] is None
 
 
 def test_numerical_on_deviated_well_differs_from_analytic_in_tvd() -> None:
