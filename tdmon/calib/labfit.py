@@ -449,6 +449,8 @@ def fit_friction(temperature: ArrayLike, friction: ArrayLike, model: str = "line
         raise FitError(f"{model} has {p} coefficients but only {n} points are given")
     if np.unique(t).size < 2:
         raise FitError("friction versus temperature needs at least two distinct temperatures")
+    if family == "power" and np.any(t <= 0.0):
+        raise FitError("the power law mu = a T^b needs temperatures above 0 degC")
     estimate = _estimate(model, t, mu, max_evaluations)
     fitted = estimate.predict(t)
     residual = mu - fitted

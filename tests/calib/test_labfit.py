@@ -256,5 +256,7 @@ def test_too_few_points_and_bad_models() -> None:
         fit_friction(TEMPERATURES, PRINTED_AVERAGES[:4])
     with pytest.raises(FitError, match="all friction values are equal"):
         fit_friction(TEMPERATURES, np.full(5, 0.3))
+    with pytest.raises(FitError, match="above 0 degC"):
+        fit_friction([0.0, 20.0, 40.0], [0.2, 0.25, 0.3], "power")
     with pytest.raises(FitError, match="none of the models"):
         fit_friction_models([30.0, 40.0], [0.2, 0.3], models=["poly-3"])
