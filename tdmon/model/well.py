@@ -86,7 +86,7 @@ class LimitSettings:
     ----------
     safety_factor : divides the tensile limits (eq 28) [-]
     helical_factor : helical buckling load over sinusoidal (eq 31 uses sqrt 2; full helical
-        buckling after Chen and Cheatham is 2(2 sqrt 2 - 1) ~ 1.83) [-]
+        buckling after Chen and Cheatham is 2 sqrt 2 - 1 ~ 1.83 times the sinusoidal load) [-]
     """
 
     safety_factor: float = 1.0
