@@ -9,6 +9,7 @@ import pytest
 
 from tdmon.model.limits import (
     Limit,
+    LimitFlag,
     check_limits,
     combined_tensile_limit,
     helical_buckling_load,
@@ -85,7 +86,7 @@ def test_true_force_of_a_hanging_string_end() -> None:
 
 def _all_drill_pipe(example_71: Well, *, safety_factor: float = 1.0, **pipe: float) -> Well:
     string = DrillString((StringComponent("drill pipe", TOTAL_DEPTH, OD, ID, buoyed_weight=300.0,
-                                          **pipe),))  # type: ignore[arg-type]
+                                          **pipe),))
     return Well(example_71.survey, string, example_71.sections, example_71.fluid,
                 limits=LimitSettings(safety_factor=safety_factor))
 
@@ -94,13 +95,14 @@ def _with_bha(example_71: Well, *, safety_factor: float = 1.0, **pipe: float) ->
     """Example 7.1 exactly (3 kN/m BHA, 0.3 kN/m pipe), the pipe given yield/make-up data."""
     bha = example_71.string.components[0]
     string = DrillString((bha, StringComponent("drill pipe", TOTAL_DEPTH - 200.0, OD, ID,
-                                               buoyed_weight=300.0, **pipe)))  # type: ignore[arg-type]
+                                               buoyed_weight=300.0, **pipe)))
     return Well(example_71.survey, string, example_71.sections, example_71.fluid,
                 limits=LimitSettings(safety_factor=safety_factor))
 
 
-def _flags(well: Well, **kwargs: float) -> dict[tuple[str, str], object]:
-    loads = torque_drag(well, TOTAL_DEPTH, 0.15, **kwargs)
+def _flags(well: Well, *, wob: float = 0.0,
+           bit_torque: float = 0.0) -> dict[tuple[str, str], LimitFlag]:
+    loads = torque_drag(well, TOTAL_DEPTH, 0.15, wob=wob, bit_torque=bit_torque)
     return {(flag.limit.value, flag.operation): flag for flag in check_limits(well, loads)}
 
 
@@ -109,9 +111,9 @@ def test_tensile_limit_crossed_by_pick_up_only(example_71: Well) -> None:
     well = _with_bha(example_71, safety_factor=1.25, yield_strength=E75)
     flags = _flags(well)
     flag = flags[("tensile", "pick_up")]
-    assert flag.md == 0.0  # type: ignore[attr-defined]
-    assert flag.limit_value == pytest.approx(1408.20e3, rel=1e-5)  # type: ignore[attr-defined]
-    assert flag.excess == pytest.approx(  # type: ignore[attr-defined]
+    assert flag.md == 0.0
+    assert flag.limit_value == pytest.approx(1408.20e3, rel=1e-5)
+    assert flag.excess == pytest.approx(
         torque_drag(well, TOTAL_DEPTH, 0.15).hookload["pick_up"] - 1408.20e3, rel=1e-4)
     assert not any(limit == "tensile" and op != "pick_up" for limit, op in flags)
 
@@ -135,8 +137,8 @@ def test_makeup_torque_crossed(example_71: Well) -> None:
     well = _with_bha(example_71, makeup_torque=15e3, tool_joint_diameter=0.16)
     flags = _flags(well, wob=50e3, bit_torque=3e3)
     flag = flags[("makeup_torque", "rotating")]
-    assert flag.load == pytest.approx(19.84e3, rel=3e-3)  # type: ignore[attr-defined]
-    assert flag.md_top == 0.0  # type: ignore[attr-defined]
+    assert flag.load == pytest.approx(19.84e3, rel=3e-3)
+    assert flag.md_top == 0.0
     assert ("makeup_torque", "on_bottom") in flags
     assert ("makeup_torque", "pick_up") not in flags  # no rotation, no torque
 
@@ -146,9 +148,9 @@ def test_buckling_sinusoidal_then_helical_on_bottom(example_71: Well) -> None:
     # F_sin = 169.2 kN, F_hel = 239.3 kN at 60 deg: 200 kN WOB buckles sinusoidally only
     flags = _flags(well, wob=200e3)
     flag = flags[("sinusoidal_buckling", "on_bottom")]
-    assert flag.md == pytest.approx(TOTAL_DEPTH)  # type: ignore[attr-defined]
-    assert flag.load == pytest.approx(200e3)  # type: ignore[attr-defined]
-    assert flag.limit_value == pytest.approx(169.2e3, rel=1e-3)  # type: ignore[attr-defined]
+    assert flag.md == pytest.approx(TOTAL_DEPTH)
+    assert flag.load == pytest.approx(200e3)
+    assert flag.limit_value == pytest.approx(169.2e3, rel=1e-3)
     assert ("helical_buckling", "on_bottom") not in flags
     flags = _flags(well, wob=300e3)
     assert ("helical_buckling", "on_bottom") in flags
@@ -167,7 +169,7 @@ def test_compressive_yield_uses_the_true_force(example_71: Well) -> None:
     flag = flags[("compressive_yield", "on_bottom")]
     tvd_bit = 1500 + 500 * math.sin(math.radians(60)) + 2200 * 0.5
     expected = 300e3 + 1560.0 * GRAVITY * tvd_bit * AREA
-    assert flag.load == pytest.approx(expected, rel=1e-6)  # type: ignore[attr-defined]
+    assert flag.load == pytest.approx(expected, rel=1e-6)
     assert ("compressive_yield", "rotating") not in flags
 
 

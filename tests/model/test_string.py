@@ -110,6 +110,6 @@ def test_invalid_components_are_rejected(kwargs: dict[str, float], reason: str) 
     values: dict[str, float] = {"length": 10.0, "outer_diameter": 0.127, "inner_diameter": 0.1}
     values.update(kwargs)
     with pytest.raises(ModelError, match=reason):
-        StringComponent("pipe", **values)  # type: ignore[arg-type]
+        StringComponent("pipe", **values)
     with pytest.raises(ModelError, match="at least one"):
         DrillString(())
