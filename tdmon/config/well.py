@@ -238,8 +238,11 @@ class WellConfig(StrictModel):
         """The ``[temperature]`` model at ``md``, circulating at the bottom of the hole."""
         if self.temperature is None:
             raise ConfigError(str(source), "temperature", "missing table")
+        # the hole grid, not the survey stations, as the path: the temperature models
+        # interpolate TVD linearly between the points they are given
+        grid = hole_grid(well)
         try:
-            return self.temperature.profile(md, well.survey.md, well.survey.tvd,
+            return self.temperature.profile(md, grid.md, grid.tvd,
                                             total_md=well.sections[-1].bottom)
         except ModelError as exc:
             raise ConfigError(str(source), "temperature", str(exc)) from exc
