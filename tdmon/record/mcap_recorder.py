@@ -252,8 +252,10 @@ class McapRecorder:
         Topics beyond ``schemas.TOPIC_SCHEMAS`` (e.g. ``/truth/...``), with their JSON Schema.
     on_alarm
         Called with an ``alarm`` message (``kind`` ``recorder_failed`` / ``recorder_resumed``)
-        when recording fails or resumes. Called without the recorder's lock held, so it may
-        write to the recorder.
+        when recording fails or resumes. Always called from ``write``/``flush``/``retry``/
+        ``close``, i.e. on the caller's thread (a failure the background flusher finds is
+        reported on the next call), and without the recorder's lock held, so it may write
+        the alarm back into the recorder.
     retry_s
         After a failure, try a new file at most this often [s].
     min_free_bytes
@@ -615,19 +617,22 @@ class McapRecorder:
         # Wakes several times per interval so that a quiet pipeline is still flushed on time.
         tick = min(self.flush_interval_s / 4, 0.25)
         while not self._stop.wait(tick):
-            with self._lock:
-                now = time.monotonic()
-                current = self._file
-                if current is None:
-                    self._maybe_resume(now)
-                elif current.unflushed and now - current.last_flush >= self.flush_interval_s:
-                    try:
-                        current.flush()
-                        self._stats.flushes += 1
-                    except OSError as exc:
-                        self._fail(exc)
-            if self._pending_alarms:
-                self._fire_alarms()
+            self._background_tick()
+
+    def _background_tick(self) -> None:
+        with self._lock:
+            now = time.monotonic()
+            current = self._file
+            if current is None:
+                self._maybe_resume(now)
+            elif current.unflushed and now - current.last_flush >= self.flush_interval_s:
+                try:
+                    current.flush()
+                    self._stats.flushes += 1
+                except OSError as exc:
+                    self._fail(exc)
+        # Alarms found here stay pending until the next write/flush/retry/close: the hook then
+        # runs on the caller's thread (the daemon's event loop), never on the flusher's.
 
 
 __all__ = [

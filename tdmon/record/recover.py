@@ -216,6 +216,10 @@ def recover_folder(folder: str | os.PathLike[str]) -> list[RecoveryResult]:
     directory = Path(folder)
     if not directory.is_dir():
         return results
+    for stale in directory.glob("*.mcap.recovering"):
+        # A recovery interrupted before its atomic rename: the original is still there.
+        with contextlib.suppress(OSError):
+            stale.unlink()
     for candidate in sorted(directory.glob("*.mcap")):
         try:
             with open(candidate, "rb") as stream:

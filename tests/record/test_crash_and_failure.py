@@ -131,7 +131,10 @@ def test_recover_is_idempotent_and_cli_reports(
 def test_empty_file_left_before_first_flush_is_recovered(tmp_path: Path) -> None:
     empty = tmp_path / "tdmon_00000_20260101T000000Z.mcap"
     empty.write_bytes(b"")
+    stale = tmp_path / "tdmon_00000_20260101T000000Z.mcap.recovering"
+    stale.write_bytes(b"half a rewrite")
     [result] = recover_folder(tmp_path)
+    assert not stale.exists()
     assert result.messages == 0 and is_finished(empty)
 
 
@@ -299,5 +302,39 @@ def test_quiet_pipeline_is_flushed_by_the_background_thread(tmp_path: Path) -> N
                 break
             time.sleep(0.05)
         assert recovered == 10
+    finally:
+        recorder.close()
+
+
+def test_alarm_hook_runs_on_the_writing_thread(tmp_path: Path) -> None:
+    import threading
+
+    seen: list[tuple[str, str]] = []
+    recorder = McapRecorder(
+        tmp_path, flush_interval_s=3600.0, background_flush=False,
+        on_alarm=lambda alarm: seen.append((alarm["kind"], threading.current_thread().name)),
+    )
+    try:
+        recorder.write("/tdmon/alarm", 1, {"t": 1.0, "kind": "k", "severity": "info",
+                                           "message": "m"})
+        current = recorder._file
+        assert current is not None
+
+        def broken_flush() -> None:
+            raise OSError(28, "No space left on device")
+
+        current.flush = broken_flush  # type: ignore[method-assign]
+        recorder.flush_interval_s = 1e-6
+        # The flusher's periodic work, on another thread, meets the failure...
+        flusher = threading.Thread(target=recorder._background_tick, name="flusher")
+        flusher.start()
+        flusher.join()
+        assert recorder.error is not None and "No space left" in str(recorder.error)
+        # ... but the hook only runs on the next call from the pipeline's thread.
+        assert seen == []
+        recorder.write("/tdmon/alarm", 3, {"t": 1.0, "kind": "k", "severity": "info",
+                                           "message": "m"})
+        assert seen == [("recorder_failed", threading.current_thread().name)]
+        assert recorder.stats.lost == 2
     finally:
         recorder.close()
