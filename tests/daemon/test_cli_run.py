@@ -1,0 +1,159 @@
+"""``tdmon run`` and ``tdmon publish`` as a user runs them: real processes, real signals."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import Mosquitto, free_port
+
+from tdmon.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+VOLVE = Path("/work/shared/data/volve-f4/trip-out-2016-10-04.csv")
+TDMON = [sys.executable, "-m", "tdmon"]
+
+
+def _zenoh_config(folder: Path, port: int, extra: str = "") -> Path:
+    path = folder / "daemon.toml"
+    path.write_text(f"""
+prefix = "rig/F4"
+well = "{ROOT / 'config/wells/volve-f4.toml'}"
+[sources.zenoh]
+listen = ["tcp/127.0.0.1:{port}"]
+[channels.hookload]
+unit = "kN"
+[publish]
+zenoh = true
+[rig_state]
+in_slips_hookload = "800 kN"
+{extra}
+""")
+    return path
+
+
+def _wait_for(path: Path, text: str, timeout: float = 20) -> None:
+    deadline = time.monotonic() + timeout
+    while text not in path.read_text():
+        assert time.monotonic() < deadline, f"'{text}' never appeared: {path.read_text()}"
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_run_publish_and_stop_with_a_signal(tmp_path: Path, sig: signal.Signals) -> None:
+    port = free_port()
+    config = _zenoh_config(tmp_path, port, f"""
+[recorder]
+enabled = true
+output = "{tmp_path / 'rec'}"
+""")
+    log = tmp_path / "daemon.log"
+    with log.open("w") as err:
+        daemon = subprocess.Popen([*TDMON, "run", "--config", str(config)],
+                                  stderr=err, stdout=subprocess.DEVNULL)
+        try:
+            _wait_for(log, "daemon running")
+            published = subprocess.run(
+                [*TDMON, "publish", str(VOLVE), "--config", str(config), "--limit", "900"],
+                capture_output=True, text=True, timeout=60)
+            assert published.returncode == 0, published.stderr
+            assert "published 900 messages" in published.stderr
+            time.sleep(0.5)
+            daemon.send_signal(sig)
+            assert daemon.wait(30) == 0, log.read_text()
+        finally:
+            if daemon.poll() is None:
+                daemon.kill()
+    text = log.read_text()
+    assert "stopped: 900 samples, 0 rejected, 0 dropped" in text
+    assert "Traceback" not in text
+    recordings = list((tmp_path / "rec").glob("*.mcap"))
+    assert recordings, "the recorder wrote nothing"
+    from tdmon.record.reader import read_messages
+
+    samples = [m for path in recordings for m in read_messages(path)
+               if m.topic == "/tdmon/sample"]
+    assert len(samples) == 900  # finished and flushed on the signal
+
+
+def test_publish_over_mqtt_to_the_daemon(mosquitto: Mosquitto, tmp_path: Path) -> None:
+    config = tmp_path / "mqtt.toml"
+    config.write_text(f"""
+prefix = "rig/F4"
+[sources.mqtt]
+port = {mosquitto.port}
+client_id = "tdmon-cli"
+[publish]
+mqtt = true
+""")
+    log = tmp_path / "daemon.log"
+    with log.open("w") as err:
+        daemon = subprocess.Popen([*TDMON, "run", "--config", str(config)], stderr=err)
+        try:
+            _wait_for(log, "daemon running")
+            time.sleep(0.5)
+            published = subprocess.run(
+                [*TDMON, "publish", str(VOLVE), "--mqtt", f"127.0.0.1:{mosquitto.port}",
+                 "--prefix", "rig/F4", "--limit", "500", "--speed", "max"],
+                capture_output=True, text=True, timeout=60)
+            assert published.returncode == 0, published.stderr
+            time.sleep(1.0)
+            daemon.send_signal(signal.SIGTERM)
+            assert daemon.wait(30) == 0
+        finally:
+            if daemon.poll() is None:
+                daemon.kill()
+    assert "stopped: 500 samples, 0 rejected, 0 dropped" in log.read_text()
+
+
+@pytest.mark.parametrize(("body", "expected"), [
+    ('prefix = "rig/F4"\n[sources.zenoh]\nlisten = ["tcp/127.0.0.1:1"]\nbogus = 1\n',
+     "bogus: unknown key"),
+    ('prefix = "rig/F4"\n[sources.mqtt]\nport = 99999\n', "sources.mqtt.port"),
+    ('prefix = "rig/F4"\n[sources.mqtt]\n[channels.hookload]\nunit = "blorp"\n',
+     "channels.hookload.unit: unknown unit 'blorp'"),
+    ('prefix = "rig/F4"\n[sources.mqtt]\n[align]\nstale_timeout = "5 kg"\n',
+     "align.stale_timeout"),
+    ('prefix = "rig/F4"\nwell = "nowhere.toml"\n[sources.mqtt]\n', "well: file not found"),
+    ('prefix = "rig/F4"\n[sources]\n', "sources: configure at least one source"),
+    ('prefix = "rig/F4"\n[sources.mqtt\n', "not valid TOML"),
+    ('prefix = "rig/F4"\n[sources.mqtt]\n[channels.weather]\n', "unknown channel 'weather'"),
+])
+def test_config_mistakes_are_one_line_and_exit_2(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], body: str, expected: str) -> None:
+    config = tmp_path / "bad.toml"
+    config.write_text(body)
+    assert main(["run", "--config", str(config)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert str(config) in err and expected in err, err
+
+
+def test_missing_config_file(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "--config", "/nonexistent/d.toml"]) == 2
+    assert "file not found" in capsys.readouterr().err
+
+
+def test_publish_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["publish", str(VOLVE)]) == 2
+    assert "say where to publish" in capsys.readouterr().err
+    assert main(["publish", str(VOLVE), "--mqtt", "127.0.0.1:1", "--columns", "x=y:kN"]) == 2
+    assert "unknown channel 'x'" in capsys.readouterr().err
+    port = free_port()  # nothing listens there
+    assert main(["publish", str(VOLVE), "--mqtt", f"127.0.0.1:{port}", "--limit", "1"]) == 2
+    assert "cannot connect" in capsys.readouterr().err
+
+
+def test_shipped_configs_are_valid() -> None:
+    from tdmon.config.daemon import load_daemon_config
+
+    for name in ("zenoh-local.toml", "mqtt-local.toml"):
+        config = load_daemon_config(ROOT / "config" / "daemon" / name)
+        assert config.well is not None and config.resolve(config.well).exists()
+    zenoh = load_daemon_config(ROOT / "config/daemon/zenoh-local.toml").sources.zenoh
+    assert zenoh is not None and zenoh.mode == "peer" and not zenoh.scouting
+    assert all("127.0.0.1" in endpoint for endpoint in zenoh.listen)
