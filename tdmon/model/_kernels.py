@@ -189,15 +189,19 @@ def _aadnoy_run(force, torque, top_inc, bottom_inc, length, theta, kind, mu, axi
 
 @njit(cache=True)
 def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
-          mu, comp_top, comp_weight,
-          comp_radius, bit_depth, bit_force, bit_torque, axial_factor, torque_factor, record,
-          out_md, out_force, out_torque, out_comp, out_tan):
-    """March from the bit to the top of the hole; returns (n recorded, top force, top torque).
+          mu, comp_top, comp_weight, comp_radius, bit_depth, bit_forces, bit_torques,
+          axial_factors, torque_factors, record, out_md, out_force, out_torque, out_comp,
+          out_tan):
+    """March from the bit to the top of the hole for several operations at once.
 
-    With ``record`` the node MD, axial force, torque, component index (of the piece below the
-    node) and tangent are written bit first into the ``out_*`` arrays (size >= n elements +
-    n components + 2).
+    An operation is a (bit force, bit torque, axial friction factor, torque friction factor)
+    quadruple; the pieces and their geometry are shared by all. Returns (n recorded, top
+    forces, top torques). With ``record`` the node MD, component index (of the piece below the
+    node) and tangent, and per operation the axial force and torque, are written bit first into
+    the ``out_*`` arrays (length >= n elements + n components + 2; out_force and out_torque are
+    (n_op, length)).
     """
+    n_op = bit_forces.size
     n_comp = comp_top.size
     j = np.searchsorted(node_md, bit_depth) - 1
     if j < 0:
@@ -207,21 +211,22 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
     comp = 0
     lower = bit_depth
     tb = _tangent_at(node_md, tangents, dogleg, j, lower)
-    force = bit_force
-    torque = bit_torque
+    force = bit_forces.copy()
+    torque = bit_torques.copy()
     k = 0
     if record:
         out_md[0] = lower
-        out_force[0] = force
-        out_torque[0] = torque
+        for o in range(n_op):
+            out_force[o, 0] = force[o]
+            out_torque[o, 0] = torque[o]
         out_comp[0] = 0
         out_tan[0, 0] = tb[0]
         out_tan[0, 1] = tb[1]
         out_tan[0, 2] = tb[2]
         k = 1
     # Aadnoy runs: the state at the run's bottom and its length-weighted friction
-    run_force = force
-    run_torque = torque
+    run_force = force.copy()
+    run_torque = torque.copy()
     run_md = lower
     run_tan = tb
     run_mu_length = 0.0
@@ -247,13 +252,15 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
                 kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
             else:
                 kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
-            force, normal = _soft_string_piece(force, kk, ke, ee, dtvd, weight,
-                                               axial_factor * mu[j])
-            torque += torque_factor * mu[j] * normal * radius
+            for o in range(n_op):
+                force[o], normal = _soft_string_piece(force[o], kk, ke, ee, dtvd, weight,
+                                                      axial_factors[o] * mu[j])
+                torque[o] += torque_factors[o] * mu[j] * normal * radius
             if record:
                 out_md[k] = upper
-                out_force[k] = force
-                out_torque[k] = torque
+                for o in range(n_op):
+                    out_force[o, k] = force[o]
+                    out_torque[o, k] = torque[o]
                 out_comp[k] = comp
                 k += 1
         else:
@@ -279,22 +286,25 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
                         sub_theta = _angle_between(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2],
                                                    run_tan[0], run_tan[1], run_tan[2])
                         sub_inc = _inclination(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2])
-                        f_i, t_i = _aadnoy_run(run_force, run_torque, sub_inc, bottom_inc,
-                                               run_md - out_md[i], sub_theta, kind, run_mu,
-                                               axial_factor, torque_factor, weight, radius)
-                        out_force[i] = f_i
-                        out_torque[i] = t_i
-                    force = out_force[k - 1]
-                    torque = out_torque[k - 1]
+                        for o in range(n_op):
+                            out_force[o, i], out_torque[o, i] = _aadnoy_run(
+                                run_force[o], run_torque[o], sub_inc, bottom_inc,
+                                run_md - out_md[i], sub_theta, kind, run_mu, axial_factors[o],
+                                torque_factors[o], weight, radius)
+                    for o in range(n_op):
+                        force[o] = out_force[o, k - 1]
+                        torque[o] = out_torque[o, k - 1]
                 else:
                     theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1],
                                            run_tan[2])
                     top_inc = _inclination(tt[0], tt[1], tt[2])
-                    force, torque = _aadnoy_run(run_force, run_torque, top_inc, bottom_inc,
-                                                run_length, theta, kind, run_mu, axial_factor,
-                                                torque_factor, weight, radius)
-                run_force = force
-                run_torque = torque
+                    for o in range(n_op):
+                        force[o], torque[o] = _aadnoy_run(
+                            run_force[o], run_torque[o], top_inc, bottom_inc, run_length, theta,
+                            kind, run_mu, axial_factors[o], torque_factors[o], weight, radius)
+                for o in range(n_op):
+                    run_force[o] = force[o]
+                    run_torque[o] = torque[o]
                 run_md = upper
                 run_tan = tt
                 run_mu_length = 0.0
@@ -312,13 +322,11 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
 
 @njit(cache=True)
 def sweep(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
-          mu_cases, comp_top,
-          comp_weight, comp_radius, bit_depths, bit_forces, bit_torques, axial_factors,
-          torque_factors):
+          mu_cases, comp_top, comp_weight, comp_radius, bit_depths, bit_forces, bit_torques,
+          axial_factors, torque_factors):
     """Surface force and torque for every (case, depth, operation): arrays (n_case, n_depth, n_op).
 
-    ``mu_cases`` is (n_case, n_element); an operation is a (bit force, bit torque, axial
-    friction factor, torque friction factor) quadruple.
+    ``mu_cases`` is (n_case, n_element); the operations are marched together (see `march`).
     """
     n_case = mu_cases.shape[0]
     n_depth = bit_depths.size
@@ -326,17 +334,16 @@ def sweep(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
     forces = np.empty((n_case, n_depth, n_op))
     torques = np.empty((n_case, n_depth, n_op))
     dummy = np.empty(1)
+    dummy_2d = np.empty((1, 1))
     dummy_int = np.empty(1, dtype=np.int64)
     dummy_tan = np.empty((1, 3))
     for c in range(n_case):
         for d in range(n_depth):
-            for o in range(n_op):
-                _, f, t = march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd,
-                                curve_kind, run_break,
-                                mu_cases[c], comp_top, comp_weight, comp_radius, bit_depths[d],
-                                bit_forces[o], bit_torques[o], axial_factors[o],
-                                torque_factors[o], False, dummy, dummy, dummy, dummy_int,
-                                dummy_tan)
-                forces[c, d, o] = f
-                torques[c, d, o] = t
+            _, f, t = march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd,
+                            curve_kind, run_break, mu_cases[c], comp_top, comp_weight,
+                            comp_radius, bit_depths[d], bit_forces, bit_torques, axial_factors,
+                            torque_factors, False, dummy, dummy_2d, dummy_2d, dummy_int,
+                            dummy_tan)
+            forces[c, d, :] = f
+            torques[c, d, :] = t
     return forces, torques

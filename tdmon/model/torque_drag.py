@@ -24,6 +24,7 @@ the force at the top of the hole plus the travelling-block weight. See docs/torq
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Literal
@@ -274,18 +275,17 @@ class WellModel:
         kernel_method = _check_method(method)
         depth = self.check_bit_depth(bit_depth)
         friction = self.friction(mu)
-        bit_force, torque_at_bit, axial, tangential = operation_terms(
-            operation, wob=wob, bit_torque=bit_torque, psi=psi)
+        terms = np.array(operation_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi))
         _, force, torque = _march(
-            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth, bit_force,
-            torque_at_bit, axial, tangential, False,
-            _EMPTY, _EMPTY, _EMPTY, _EMPTY_INT, _EMPTY_TANGENT,
+            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth,
+            terms[0:1], terms[1:2], terms[2:3], terms[3:4], False,
+            _EMPTY, _EMPTY_2D, _EMPTY_2D, _EMPTY_INT, _EMPTY_TANGENT,
         )
-        return float(force) + self.well.block_weight, float(torque)
+        return float(force[0]) + self.well.block_weight, float(torque[0])
 
-    def profile(
+    def profiles(
         self,
-        operation: Operation | str,
+        operations: Sequence[Operation | str],
         bit_depth: float,
         mu: float | ArrayLike | None = None,
         *,
@@ -294,25 +294,33 @@ class WellModel:
         bit_torque: float = 0.0,
         psi: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
-        """MD, axial force and torque along the string (surface to bit) and component index."""
+        """Loads along the string for several operations in one march.
+
+        Returns
+        -------
+        md : node MD, surface to bit [m]
+        axial_force : (n_operations, n_nodes) [N]
+        torque : (n_operations, n_nodes) [N m]
+        component : index (bit-up) of the string component just below each node
+        """
         kernel_method = _check_method(method)
         depth = self.check_bit_depth(bit_depth)
         friction = self.friction(mu)
-        bit_force, torque_at_bit, axial, tangential = operation_terms(
-            operation, wob=wob, bit_torque=bit_torque, psi=psi)
+        terms = np.array([operation_terms(op, wob=wob, bit_torque=bit_torque, psi=psi)
+                          for op in operations]).reshape(-1, 4)
         size = self._max_nodes
         md = np.empty(size)
-        force = np.empty(size)
-        torque = np.empty(size)
+        force = np.empty((terms.shape[0], size))
+        torque = np.empty((terms.shape[0], size))
         component = np.empty(size, dtype=np.int64)
         tangent = np.empty((size, 3))
         count, _, _ = _march(
-            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth, bit_force,
-            torque_at_bit, axial, tangential, True,
+            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth,
+            *(np.ascontiguousarray(terms[:, i]) for i in range(4)), True,
             md, force, torque, component, tangent,
         )
-        return (md[:count][::-1].copy(), force[:count][::-1].copy(),
-                torque[:count][::-1].copy(), component[:count][::-1].copy())
+        return (md[:count][::-1].copy(), force[:, :count][:, ::-1].copy(),
+                torque[:, :count][:, ::-1].copy(), component[:count][::-1].copy())
 
     def loads(
         self,
@@ -325,30 +333,25 @@ class WellModel:
         psi: float | None = None,
     ) -> Loads:
         """`Loads` (every operation, with profiles) at one bit depth; see `torque_drag`."""
-        friction = self.friction(mu)
-        hookload: dict[str, float] = {}
-        surface_torque: dict[str, float] = {}
-        axial_force: dict[str, NDArray[np.float64]] = {}
-        torque: dict[str, NDArray[np.float64]] = {}
-        md = np.empty(0)
-        component = np.empty(0, dtype=np.int64)
-        for operation in Operation:
-            md, force, op_torque, component = self.profile(
-                operation, bit_depth, friction, method=method, wob=wob, bit_torque=bit_torque,
-                psi=psi)
-            hookload[operation.value] = float(force[0]) + self.well.block_weight
-            surface_torque[operation.value] = float(op_torque[0])
-            axial_force[operation.value] = force
-            torque[operation.value] = op_torque
-        tvd = interpolate_survey(self.well.survey, md).tvd
+        operations = list(Operation)
+        md, force, torque, component = self.profiles(
+            operations, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi)
+        names = [op.value for op in operations]
         return Loads(
-            bit_depth=float(bit_depth), method=str(method), hookload=hookload,
-            surface_torque=surface_torque, md=md, axial_force=axial_force, torque=torque,
-            tvd=tvd, component=component,
+            bit_depth=float(bit_depth), method=str(method),
+            hookload={name: float(force[i, 0]) + self.well.block_weight
+                      for i, name in enumerate(names)},
+            surface_torque={name: float(torque[i, 0]) for i, name in enumerate(names)},
+            md=md,
+            axial_force={name: force[i] for i, name in enumerate(names)},
+            torque={name: torque[i] for i, name in enumerate(names)},
+            tvd=interpolate_survey(self.well.survey, md).tvd,
+            component=component,
         )
 
 
 _EMPTY = np.empty(1)
+_EMPTY_2D = np.empty((1, 1))
 _EMPTY_INT = np.empty(1, dtype=np.int64)
 _EMPTY_TANGENT = np.empty((1, 3))
 
