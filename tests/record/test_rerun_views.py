@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import socket
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -15,6 +15,16 @@ from tdmon.errors import RecordError
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import RecordedMessage, read_messages
 from tdmon.record.rerun_views import RerunViews, build_rrd
+
+
+@pytest.fixture(autouse=True)
+def strict_rerun() -> Iterator[None]:
+    """Invalid archetype arguments raise instead of only warning."""
+    import rerun as rr
+
+    rr.set_strict_mode(True)
+    yield
+    rr.set_strict_mode(False)
 
 
 def _rows(path: Path) -> tuple[dict[str, int], dict[str, set[str]]]:
