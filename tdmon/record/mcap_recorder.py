@@ -268,6 +268,8 @@ class McapRecorder:
     path
         Write exactly this file instead (no rotation, no sequence); ``folder``/``prefix`` are
         then taken from it. Used for replays with ``--out Y.mcap``.
+    overwrite
+        With ``path``: replace an existing file (otherwise that is a start-up error).
     """
 
     def __init__(
@@ -287,6 +289,7 @@ class McapRecorder:
         recover: bool = True,
         background_flush: bool = True,
         path: str | os.PathLike[str] | None = None,
+        overwrite: bool = False,
     ) -> None:
         if (folder is None) == (path is None):
             raise RecordError("give the recorder either an output folder or a file path")
@@ -328,6 +331,8 @@ class McapRecorder:
             self.recovered = recover_folder(self.folder)
         self._next_seq = 0 if self._fixed_path else next_sequence(self.folder, prefix)
         try:
+            if self._fixed_path is not None and overwrite:
+                self._fixed_path.unlink(missing_ok=True)
             self._file = self._open_next()
         except OSError as exc:
             raise RecordError(

@@ -157,6 +157,11 @@ def test_single_file_mode(tmp_path: Path) -> None:
                                            "message": "m"})
     assert recorder.stats.files == [target]
     assert topic_counts(target)["/tdmon/alarm"] == 1
+    with pytest.raises(RecordError, match="File exists"):
+        McapRecorder(path=target)
+    with McapRecorder(path=target, overwrite=True):
+        pass
+    assert topic_counts(target)["/tdmon/alarm"] == 0
 
 
 def test_register_topic_twice_with_another_schema_is_an_error(tmp_path: Path) -> None:
