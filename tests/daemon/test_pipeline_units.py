@@ -1,0 +1,187 @@
+"""Aligner, rig state, monitor and pipeline without any transport."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+from daemon_support import CollectSink, linear_model
+
+from tdmon.daemon.aligner import Aligner
+from tdmon.daemon.monitor import GridLoadModel, MonitorStep
+from tdmon.daemon.pipeline import Emit, Frame, Pipeline, Sink, Step
+from tdmon.daemon.rigstate import RigStateThresholds, SimpleRigState, classify
+from tdmon.ingest.decode import ChannelSpec, Decoder
+from tdmon.ingest.types import RawMessage, Sample
+
+
+def s(channel: str, t: float, value: float) -> Sample:
+    return Sample(channel, t, value, "mqtt", f"rig/{channel}", "N", t)
+
+
+class TestAligner:
+    def test_frame_waits_for_bit_depth_of_the_same_instant(self) -> None:
+        aligner = Aligner(wait_for=("bit_depth",))
+        assert aligner.push(s("bit_depth", 0.0, 100.0), 0.0) == []
+        assert [f.t for f in aligner.push(s("hookload", 0.0, 1e6), 0.0)] == [0.0]
+        assert aligner.push(s("hookload", 1.0, 2e6), 0.0) == []  # waits for bit depth at 1.0
+        frames = aligner.push(s("bit_depth", 1.0, 101.0), 0.01)
+        assert len(frames) == 1 and frames[0].values == {"hookload": 2e6, "bit_depth": 101.0}
+
+    def test_expiry_and_flush(self) -> None:
+        aligner = Aligner(wait_for=("bit_depth",), max_wait=0.25)
+        aligner.push(s("bit_depth", 0.0, 100.0), 0.0)
+        aligner.push(s("hookload", 0.0, 1e6), 0.0)
+        aligner.push(s("hookload", 1.0, 1e6), 10.0)
+        assert aligner.expire(10.1) == []
+        [frame] = aligner.expire(10.3)
+        assert frame.t == 1.0 and frame.ages["bit_depth"] == 1.0
+        aligner.push(s("hookload", 2.0, 1e6), 11.0)
+        assert [f.t for f in aligner.flush()] == [2.0]
+
+    def test_stale_channel_is_left_out_and_not_waited_for(self) -> None:
+        aligner = Aligner(wait_for=("bit_depth",), stale_timeout=5.0)
+        aligner.push(s("bit_depth", 0.0, 100.0), 0.0)
+        aligner.push(s("hookload", 0.0, 1e6), 0.0)
+        [frame] = aligner.push(s("hookload", 10.0, 1e6), 0.0)
+        assert "bit_depth" not in frame.values and frame.stale == ("bit_depth",)
+
+    def test_duplicates_and_out_of_order(self) -> None:
+        aligner = Aligner(wait_for=())
+        frames = []
+        for t in (1.0, 2.0, 2.0, 3.0, 1.5, 2.5, 2.5, -1.0):
+            frames += aligner.push(s("hookload", t, t), 0.0)
+        assert [f.t for f in frames] == [1.0, 2.0, 3.0]  # never backwards
+        assert aligner.duplicates == 2
+        assert aligner.out_of_order == 3  # 1.5, 2.5 (kept in history) and -1.0 (too old)
+
+    def test_late_bit_depth_completes_the_pending_frame(self) -> None:
+        aligner = Aligner(wait_for=("bit_depth",))
+        aligner.push(s("bit_depth", 0.0, 100.0), 0.0)
+        aligner.push(s("bit_depth", 2.0, 102.0), 0.0)
+        aligner.push(s("hookload", 0.0, 1.0), 0.0)
+        [frame] = aligner.push(s("hookload", 1.0, 1.0), 0.0)  # bit depth already past 1.0
+        assert frame.values["bit_depth"] == 100.0  # the value at or before t, not after
+
+
+class TestRigState:
+    limits = RigStateThresholds()
+
+    @pytest.mark.parametrize(("args", "state"), [
+        ((None, 0.0, 0.0, 0.0, 10.0), "unknown"),
+        ((1e5, 0.0, 0.0, 0.0, 10.0), "in_slips"),
+        ((1e6, -0.5, 0.0, 0.0, 10.0), "pick_up"),
+        ((1e6, 0.5, 0.0, 0.0, 10.0), "slack_off"),
+        ((1e6, 0.0, 10.0, 0.0, 10.0), "rotating_off_bottom"),
+        ((1e6, 0.5, 10.0, 0.0, 10.0), "reaming"),
+        ((1e6, -0.5, 10.0, 0.0, 10.0), "back_reaming"),
+        ((1e6, 0.01, 10.0, 0.0, 0.1), "drilling"),
+        ((1e6, 0.0, 0.0, 0.05, 10.0), "circulating"),
+        ((1e6, 0.0, 0.0, 0.0, 10.0), "static"),
+    ])
+    def test_classify(self, args: tuple[Any, ...], state: str) -> None:
+        assert classify(*args, self.limits) == state
+
+    def test_step_emits_on_change_and_marks_steady(self) -> None:
+        step = SimpleRigState(RigStateThresholds(steady_frames=2), every=100.0)
+        sent: list[dict[str, Any]] = []
+        frames = [Frame(t, 0, {"hookload": 1e6, "bit_depth": 1000 - t}, {}) for t in range(5)]
+        for frame in frames:
+            step.on_frame(frame, lambda name, m: sent.append(m))
+        assert [f.state for f in frames] == ["static", "pick_up", "pick_up", "pick_up",
+                                             "pick_up"]
+        assert [f.steady for f in frames] == [False, False, True, True, True]
+        assert [(m["state"], m["steady"]) for m in sent] == [
+            ("static", False), ("pick_up", False), ("pick_up", True)]
+
+
+class TestMonitor:
+    def test_grid_interpolation_matches_closed_form(self) -> None:
+        model = linear_model()
+        loads = model.loads(1234.5)
+        assert loads is not None
+        weight = 300 * 1234.5 + 500e3
+        assert loads.pick_up == pytest.approx(weight * 1.25)
+        assert loads.band_slack_off == pytest.approx(tuple(weight * (1 - m)
+                                                           for m in (0.1, 0.2, 0.3)))
+        assert model.loads(-1.0) is None and model.loads(6000.0) is None
+
+    def test_grid_rejects_bad_shapes(self) -> None:
+        with pytest.raises(ValueError):
+            GridLoadModel(np.array([0.0, 0.0]), np.zeros((4, 2)), [])
+        with pytest.raises(ValueError):
+            GridLoadModel(np.array([0.0, 1.0]), np.zeros((5, 2)), [])
+
+    def test_message_shape_and_residuals(self) -> None:
+        step = MonitorStep(linear_model())
+        sent: dict[str, Any] = {}
+        frame = Frame(5.0, 0, {"hookload": 1e6, "bit_depth": 1000.0, "torque": 9000.0}, {},
+                      state="reaming")
+        step.on_frame(frame, lambda name, m: sent.update({name: m}))
+        model = sent["model"]
+        assert set(model) == {"t", "bit_depth_m", "hookload_N", "torque_Nm", "band",
+                              "measured", "residual"}
+        assert model["residual"]["hookload_N"] == pytest.approx(1e6 - 800e3 * 0.75)
+        assert model["residual"]["torque_Nm"] == pytest.approx(9000 - 20 * 1000 * 0.25)
+        json.dumps(model, allow_nan=False)
+        step.on_frame(Frame(6.0, 0, {"hookload": 1e6}, {}), lambda n, m: None)
+        assert step.skipped_no_depth == 1
+
+
+class OrderCheck:
+    """A step asserting that the sinks already hold the sample that made the frame."""
+
+    name = "order-check"
+
+    def __init__(self, sink: CollectSink) -> None:
+        self.sink = sink
+        self.frames = 0
+        self.closed = False
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        assert any(m["t"] == frame.t and m["channel"] == "hookload"
+                   for m in self.sink["sample"])
+        assert any(json.loads(m["payload"])["t"] == frame.t for m in self.sink["raw"])
+        assert "model" in frame.results  # an earlier step's result is visible
+        self.frames += 1
+
+    def close(self, emit: Emit) -> None:
+        self.closed = True
+
+
+class Exploding:
+    name = "exploding"
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        raise RuntimeError("bug in a step")
+
+    def close(self, emit: Emit) -> None:
+        pass
+
+
+def test_pipeline_records_before_steps_and_survives_a_failing_step() -> None:
+    sink = CollectSink()
+    check = OrderCheck(sink)
+    steps: list[Step] = [SimpleRigState(), MonitorStep(linear_model()), Exploding(), check]
+    decoder = Decoder("rig", [ChannelSpec("hookload", "hookload", "N"),
+                              ChannelSpec("bit_depth", "bit_depth", "m")])
+    sinks: list[Sink] = [sink]
+    pipeline = Pipeline(decoder, Aligner(wait_for=("bit_depth",)), steps, sinks)
+    for i in range(5):
+        for channel, value in (("bit_depth", 1000.0 + i), ("hookload", 1e6)):
+            body = json.dumps({"t": float(i), "value": value}).encode()
+            pipeline.process(RawMessage("mqtt", f"rig/{channel}", body, 100.0 + i))
+    pipeline.process(RawMessage("mqtt", "rig/hookload", b"nope", 200.0))
+    pipeline.flush()
+    pipeline.close_sinks()
+    assert check.frames == 5 and check.closed and sink.closed
+    assert pipeline.stats.step_errors == 5
+    assert pipeline.stats.rejected == 1 and pipeline.stats.rejected_reasons == {
+        "malformed JSON": 1}
+    # raw first, then the decoded sample: for every message, in arrival order
+    assert sink.order[:2] == ["/tdmon/raw", "/tdmon/sample"]
+    assert sink.order.count("/tdmon/raw") == 11
+    status = pipeline.status_message({"mqtt": "connected"}, now=10.0)
+    assert status["samples_in"] == 10 and status["rejected"] == 1 and status["lag_s"] == 6.0

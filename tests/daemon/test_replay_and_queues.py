@@ -1,0 +1,75 @@
+"""Replaying a recording through the daemon; bounded queues: backpressure and counted drops."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from daemon_support import CollectSink, linear_model, make_config
+from mcap.writer import Writer
+
+from tdmon.config.daemon import MqttConfig
+from tdmon.daemon.pipeline import Emit, Frame, Stats
+from tdmon.daemon.runner import run_daemon
+from tdmon.ingest.mqtt import MqttPublisher
+
+
+def _recording(path: Path, rows: int) -> None:
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema("any", "jsonschema", b"{}")
+        channels = {name: writer.register_channel(f"rig/T1/{name}", "json", schema)
+                    for name in ("hookload", "bit_depth", "torque")}
+        for i in range(rows):
+            t = 1_700_000_000.0 + i
+            for name, value in (("bit_depth", 1000.0 + i), ("torque", 5.0),
+                                ("hookload", 900.0)):
+                body = json.dumps({"t": t, "value": value}).encode()
+                writer.add_message(channels[name], int(t * 1e9), body, int(t * 1e9))
+        writer.finish()
+
+
+class SlowStep:
+    """Makes the pipeline slower than the source, so the ingest queue fills up."""
+
+    name = "slow"
+
+    def __init__(self) -> None:
+        self.frames = 0
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        time.sleep(0.0005)
+        self.frames += 1
+
+    def close(self, emit: Emit) -> None:
+        pass
+
+
+async def test_replay_runs_to_the_end_with_a_tiny_queue(tmp_path: Path) -> None:
+    path = tmp_path / "in.mcap"
+    rows = 400
+    _recording(path, rows)
+    config = make_config({"sources": {"mcap": {"path": str(path)}},
+                          "queues": {"ingest": 4}}, tmp_path)
+    sink = CollectSink()
+    slow = SlowStep()
+    stats = await run_daemon(config, model=linear_model(), extra_sinks=[sink],
+                             extra_steps=[slow])
+    assert stats.samples_in == 3 * rows and stats.dropped == 0 and stats.rejected == 0
+    assert slow.frames == rows == len(sink["model"])
+    assert sink["status"][-1]["connections"]["mcap"] == "finished"
+    assert sink["status"][-1]["samples_in"] == 3 * rows  # the last status is complete
+    assert sink.closed
+
+
+async def test_publisher_queue_drops_oldest_and_counts() -> None:
+    stats = Stats()
+    publisher = MqttPublisher(MqttConfig(), "rig/T1", ["model"], queue_size=3,
+                              on_drop=stats.count_drop)
+    for i in range(10):
+        publisher.write("/tdmon/model", 0, {"i": i})
+        publisher.write("/tdmon/sample", 0, {"i": i})  # not a published name: ignored
+    assert publisher.pending == 3 and publisher.dropped == 7 and stats.dropped == 7
+    assert not await publisher.drain(0.05)  # no broker: still pending
