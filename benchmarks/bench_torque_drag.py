@@ -19,7 +19,6 @@ import argparse
 import json
 import math
 import platform
-import statistics
 import sys
 import time
 import warnings
@@ -217,6 +216,16 @@ def report(step: float, results: dict[str, Any]) -> str:
             f"| {name} | {result['time_s'] * 1e3:.1f} ms | {speedup} | "
             f"{result['pick_up_N'][-1] / 1e3:.1f} | {result['slack_off_N'][-1] / 1e3:.1f} | "
             f"{result['rotating_N'][-1] / 1e3:.1f} | {result['torque_Nm'][-1] / 1e3:.2f} |")
+    lines.append("")
+    for name, result in results.items():
+        if name == "tdmon" or "error" in result:
+            continue
+        worst = {key: max(abs(p / t - 1.0) for p, t in zip(result[key], tdmon[key], strict=True)
+                          if t != 0.0)
+                 for key in ("pick_up_N", "slack_off_N", "rotating_N", "torque_Nm")}
+        lines.append(f"{name} vs tdmon, largest relative difference over the 20 depths: "
+                     + ", ".join(f"{key.rsplit('_', 1)[0]} {value:.2%}"
+                                 for key, value in worst.items()) + ".")
     lines.append("")
     if peer_times:
         fastest = min(peer_times)
