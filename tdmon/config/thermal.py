@@ -20,13 +20,13 @@ A hole section's ``friction`` is a plain number, a published fit by name
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 from numpy.typing import ArrayLike
 from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
 
+from tdmon.config.common import _converter
 from tdmon.errors import ModelError
 from tdmon.model.friction import FAMILIES, PUBLISHED_FRICTION_MODELS, FrictionModel
 from tdmon.model.temperature import (
@@ -35,18 +35,17 @@ from tdmon.model.temperature import (
     WellboreTemperature,
     temperature_profile,
 )
-from tdmon.units import parse_quantity
 
 __all__ = ["FrictionModelConfig", "TemperatureConfig"]
 
 
 def _reader(target: str, *, positive: bool) -> Callable[[Any], float]:
+    """common's quantity reader (number in ``target`` or string with a unit, finite), plus an
+    optional positivity check: radii, rates, times and properties must be above zero."""
+    convert = _converter(target)
+
     def read(value: Any) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-            raise ValueError(f"expected a number in {target} or a string with a unit")
-        number = parse_quantity(value, target)  # raises ValueError with the reason
-        if not math.isfinite(number):
-            raise ValueError("must be a finite number")
+        number = convert(value)  # raises ValueError with the reason
         if positive and number <= 0.0:
             raise ValueError(f"must be positive, got {number:g} {target}")
         return number
