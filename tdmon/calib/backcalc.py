@@ -1,0 +1,229 @@
+"""Back-calculated friction factor of one steady window.
+
+The torque-and-drag model is iterated on the friction factor until it matches the measured
+value (section 4.2.6 of the seed thesis; REFERENCE.md section 5): pick-up hook load rises with
+mu, slack-off hook load falls, off-bottom torque rises, so a bracketed root solve
+(`scipy.optimize.brentq`) finds the one mu that fits. Its standard deviation propagates the
+window's standard error through the model's slope, ``sigma_mu = sigma_measured / |dF/dmu|``.
+
+Cased hole first, open hole after: while the string is inside casing the solve sets one mu on
+the cased elements; once the bit is far enough below the shoe, the cased value is held fixed and
+the solve sets the open-hole elements only (per-element friction arrays of
+`tdmon.model.torque_drag.WellModel`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import brentq
+
+from tdmon.calib.windows import Window
+from tdmon.errors import FitError, ModelError
+from tdmon.model.torque_drag import WellModel
+
+__all__ = [
+    "OPERATION_FOR_STATE",
+    "FrictionEstimate",
+    "back_calculate",
+    "back_calculate_window",
+    "shoe_depth",
+]
+
+Quantity = Literal["hookload", "torque"]
+
+OPERATION_FOR_STATE: dict[str, tuple[str, Quantity]] = {
+    "pick_up": ("pick_up", "hookload"),
+    "slack_off": ("slack_off", "hookload"),
+    "rotating_off_bottom": ("rotating", "torque"),
+}
+"""Which model operation and measured quantity a window of a rig state calibrates."""
+
+_DERIVATIVE_STEP = 1e-3
+
+
+@dataclass(frozen=True)
+class FrictionEstimate:
+    """Friction factor that reproduces one measurement.
+
+    Attributes
+    ----------
+    operation : model operation (``pick_up``, ``slack_off``, ``rotating``)
+    quantity : ``"hookload"`` [N] or ``"torque"`` [N m]
+    bit_depth : [m]
+    mu : back-calculated friction factor [-]
+    mu_std : its standard deviation from the measurement's standard error [-]
+    measured : the measured value [N or N m]
+    measured_se : its standard error [N or N m]
+    sensitivity : d(quantity)/d(mu) at the solution [N or N m]
+    section : which elements the solve set: ``"cased"``, ``"open"`` or ``"all"``
+    evaluations : torque-and-drag evaluations used [-]
+    """
+
+    operation: str
+    quantity: str
+    bit_depth: float
+    mu: float
+    mu_std: float
+    measured: float
+    measured_se: float
+    sensitivity: float
+    section: str
+    evaluations: int
+
+
+def shoe_depth(model: WellModel) -> float:
+    """MD of the deepest cased element's bottom [m] (0 when the hole has no casing)."""
+    cased = np.flatnonzero(model.grid.element_kind == "cased")
+    return float(model.grid.md[cased[-1] + 1]) if cased.size else 0.0
+
+
+def back_calculate(
+    model: WellModel,
+    operation: str,
+    bit_depth: float,
+    measured: float,
+    measured_se: float,
+    *,
+    quantity: Quantity = "hookload",
+    base_mu: float | NDArray[np.float64] = 0.0,
+    free: NDArray[np.bool_] | None = None,
+    bracket: tuple[float, float] = (0.0, 1.0),
+    method: str = "soft-string",
+    section: str = "all",
+    xtol: float = 1e-6,
+) -> FrictionEstimate:
+    """Friction factor on the ``free`` elements that reproduces ``measured``.
+
+    Parameters
+    ----------
+    model : prepared well
+    operation : ``"pick_up"``, ``"slack_off"`` or ``"rotating"``
+    bit_depth : [m]
+    measured : hook load [N] (block weight included) or surface torque [N m]
+    measured_se : standard error of ``measured`` [N or N m]
+    quantity : ``"hookload"`` or ``"torque"``
+    base_mu : friction of the elements that are not free [-], a number or one per element
+    free : elements whose friction is solved for (all when None)
+    bracket : friction factors between which the root must lie [-]
+    method : torque-and-drag method
+    section : label of the free elements for the result
+    xtol : absolute tolerance on mu [-]
+
+    Returns
+    -------
+    FrictionEstimate
+
+    Raises
+    ------
+    FitError
+        Non-finite input, a bit depth the model refuses, or a measurement outside what the
+        bracket can reproduce (the message gives the modelled range).
+    """
+    if not (math.isfinite(measured) and math.isfinite(measured_se) and measured_se >= 0.0
+            and math.isfinite(bit_depth)):
+        raise FitError(f"measured {quantity} {measured!r} +/- {measured_se!r} at bit depth "
+                       f"{bit_depth!r} m is not finite")
+    n = model.n_elements
+    base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
+    mask = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    index = 1 if quantity == "torque" else 0
+    calls = 0
+
+    def modelled(mu: float) -> float:
+        nonlocal calls
+        calls += 1
+        friction = np.where(mask, mu, base)
+        return model.evaluate(operation, bit_depth, friction, method=method)[index]
+
+    low, high = bracket
+    try:
+        f_low, f_high = modelled(low) - measured, modelled(high) - measured
+    except ModelError as exc:
+        raise FitError(f"cannot model {operation} at bit depth {bit_depth:.1f} m: {exc}") from exc
+    if f_low * f_high > 0.0:
+        unit = "kN m" if quantity == "torque" else "kN"
+        raise FitError(
+            f"{operation} {quantity} {measured / 1e3:.1f} {unit} at {bit_depth:.1f} m is outside "
+            f"the modelled range {min(f_low, f_high) / 1e3 + measured / 1e3:.1f}.."
+            f"{max(f_low, f_high) / 1e3 + measured / 1e3:.1f} {unit} for mu in "
+            f"[{low:g}, {high:g}]: root not bracketed")
+    if f_low == 0.0 or f_high == 0.0:
+        mu = low if f_low == 0.0 else high
+    else:
+        try:
+            mu = float(brentq(lambda m: modelled(m) - measured, low, high, xtol=xtol))
+        except (RuntimeError, ValueError) as exc:
+            raise FitError(f"root solve for {operation} failed: {exc}") from exc
+    step_low, step_high = max(low, mu - _DERIVATIVE_STEP), min(high, mu + _DERIVATIVE_STEP)
+    slope = (modelled(step_high) - modelled(step_low)) / (step_high - step_low)
+    if not (math.isfinite(slope) and slope != 0.0):
+        raise FitError(f"{operation} {quantity} does not depend on friction at "
+                       f"{bit_depth:.1f} m (vertical string or no free element)")
+    return FrictionEstimate(
+        operation=operation, quantity=quantity, bit_depth=float(bit_depth), mu=mu,
+        mu_std=float(measured_se / abs(slope)), measured=float(measured),
+        measured_se=float(measured_se), sensitivity=float(slope), section=section,
+        evaluations=calls,
+    )
+
+
+def back_calculate_window(
+    model: WellModel,
+    window: Window,
+    *,
+    mu_cased: float | None = None,
+    min_open_length: float = 30.0,
+    bracket: tuple[float, float] = (0.0, 1.0),
+    method: str = "soft-string",
+) -> FrictionEstimate:
+    """Back-calculate the friction factor of one window, cased hole first.
+
+    Parameters
+    ----------
+    model : prepared well
+    window : a usable window of state ``pick_up``, ``slack_off`` or ``rotating_off_bottom``
+    mu_cased : cased-hole friction found so far; with the bit more than ``min_open_length``
+        below the shoe it is held on the cased elements and the open-hole mu is solved
+    min_open_length : string length below the shoe needed for an open-hole solve [m]
+    bracket : [-]
+    method : torque-and-drag method
+
+    Returns
+    -------
+    FrictionEstimate
+
+    Raises
+    ------
+    FitError
+        The window is rejected, of a state without a friction solve, lacks its quantity, or
+        the root is not bracketed.
+    """
+    if window.rejected is not None:
+        raise FitError(f"window rejected: {window.rejected}")
+    if window.state not in OPERATION_FOR_STATE:
+        raise FitError(f"no friction solve for rig state {window.state!r}")
+    operation, quantity = OPERATION_FOR_STATE[window.state]
+    if quantity == "torque":
+        if window.torque is None or window.torque_se is None:
+            raise FitError("rotating window without surface torque")
+        measured, se = window.torque, window.torque_se
+    else:
+        measured, se = window.hookload, window.hookload_se
+    kind = model.grid.element_kind
+    shoe = shoe_depth(model)
+    below_shoe = window.bit_depth - shoe
+    if mu_cased is not None and below_shoe > min_open_length and (kind == "open").any():
+        return back_calculate(model, operation, window.bit_depth, measured, se,
+                              quantity=quantity, base_mu=np.where(kind == "cased", mu_cased, 0.0),
+                              free=np.asarray(kind == "open"), bracket=bracket, method=method,
+                              section="open")
+    if below_shoe <= 0.0 and shoe > 0.0:
+        return back_calculate(model, operation, window.bit_depth, measured, se,
+                              quantity=quantity, bracket=bracket, method=method, section="cased")
+    return back_calculate(model, operation, window.bit_depth, measured, se, quantity=quantity,
+                          bracket=bracket, method=method, section="all")

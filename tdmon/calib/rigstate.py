@@ -1,0 +1,281 @@
+"""Rig-state detection from surface channels, one sample at a time.
+
+The state of a sample comes from (REFERENCE.md section 5): hook load against the block weight
+(in slips when the string hangs in the slips and the hook carries only the travelling
+equipment), the axial velocity of the string (from the block position when the rig sends it,
+otherwise from the bit depth), rotation, flow or standpipe pressure, and bit depth against hole
+depth. A sample is *steady* when its state has lasted a settling time, the string does not
+accelerate and the hook load did not jump since the previous sample: this keeps break-over peaks
+at the start of a pull, accelerations and the last sample before the slips out of every
+estimate.
+
+Pure functions on a frozen :class:`DetectorState`; :func:`detect_series` runs them over arrays.
+State names are those of the daemon's ``state`` message (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "MOVING_STATES",
+    "STATES",
+    "Detection",
+    "DetectorState",
+    "RigSample",
+    "RigStateThresholds",
+    "classify",
+    "detect",
+    "detect_series",
+]
+
+STATES: tuple[str, ...] = ("in_slips", "pick_up", "slack_off", "rotating_off_bottom", "reaming",
+                           "back_reaming", "drilling", "circulating", "static", "unknown")
+"""Rig states, as in the ``state`` message of docs/architecture.md."""
+
+MOVING_STATES = frozenset({"pick_up", "slack_off", "reaming", "back_reaming"})
+
+_RPM = 2.0 * math.pi / 60.0  # rad/s per rev/min
+
+
+@dataclass(frozen=True)
+class RigStateThresholds:
+    """Thresholds of the detector, SI.
+
+    Attributes
+    ----------
+    block_weight : travelling-equipment weight the hook load includes [N]
+    in_slips_margin : hook load up to ``block_weight + in_slips_margin`` means in slips [N]
+    moving_speed : axial speed above which the string moves [m/s]
+    rotating_speed : surface rotation above which the string rotates [rad/s]
+        (Volve reports a 0.23 rev/min offset on a still string)
+    circulating_flow : flow in above which mud circulates [m3/s]
+    circulating_pressure : standpipe pressure above which mud circulates, used without flow [Pa]
+    on_bottom : bit within this of the hole depth is on bottom [m]
+    settle_time : a state must have lasted this long before its samples are steady [s]
+    max_acceleration : steady samples accelerate less than this [m/s2]
+    max_hookload_step : steady samples differ from the previous one by less than
+        ``max(max_hookload_step, max_hookload_step_fraction * hook load)`` [N]
+    max_hookload_step_fraction : see above [-]
+    max_gap : a longer gap between samples restarts the state (no steady sample across it) [s]
+    """
+
+    block_weight: float = 0.0
+    in_slips_margin: float = 150e3
+    moving_speed: float = 0.05
+    rotating_speed: float = 5.0 * _RPM
+    circulating_flow: float = 100.0 / 60_000.0
+    circulating_pressure: float = 10e5
+    on_bottom: float = 0.5
+    settle_time: float = 5.0
+    max_acceleration: float = 0.05
+    max_hookload_step: float = 20e3
+    max_hookload_step_fraction: float = 0.05
+    max_gap: float = 60.0
+
+
+@dataclass(frozen=True)
+class RigSample:
+    """One aligned sample of the rig's channels, SI; None where a channel is missing.
+
+    Attributes
+    ----------
+    t : [s]
+    hookload : [N], including the travelling equipment
+    bit_depth : MD of the bit [m]
+    block_position : height of the block above its lowest point [m]
+    rpm : surface rotation [rad/s]
+    flow : flow in [m3/s]
+    spp : standpipe pressure [Pa]
+    hole_depth : [m]
+    torque : surface torque [N m]
+    """
+
+    t: float
+    hookload: float | None
+    bit_depth: float | None
+    block_position: float | None = None
+    rpm: float | None = None
+    flow: float | None = None
+    spp: float | None = None
+    hole_depth: float | None = None
+    torque: float | None = None
+
+
+@dataclass(frozen=True)
+class DetectorState:
+    """What the detector remembers between samples."""
+
+    t: float = -math.inf
+    bit_depth: float | None = None
+    block_position: float | None = None
+    velocity: float | None = None
+    hookload: float | None = None
+    state: str = "unknown"
+    state_since: float = -math.inf
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Result for one sample: ``state``, ``steady``, axial ``velocity`` [m/s] (> 0 deeper)."""
+
+    state: str
+    steady: bool
+    velocity: float | None
+
+
+def _finite(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None
+
+
+def classify(hookload: float | None, velocity: float | None, rpm: float | None,
+             circulating: bool, off_bottom: float | None,
+             thresholds: RigStateThresholds) -> str:
+    """Rig state of one sample.
+
+    Parameters
+    ----------
+    hookload : [N]; None gives ``unknown``
+    velocity : axial velocity of the string, > 0 going deeper [m/s]
+    rpm : surface rotation [rad/s]
+    circulating : mud is being pumped
+    off_bottom : hole depth minus bit depth [m]
+    thresholds : the detector's settings
+
+    Returns
+    -------
+    str, one of :data:`STATES`
+
+    Notes
+    -----
+    In slips wins over everything: when the hook carries only the block, the string's motion
+    and the bit depth say nothing about the string (the Volve trip-in log shows the bit depth
+    advancing while the block moves empty, a depth-tracking artefact).
+    """
+    if hookload is None:
+        return "unknown"
+    if hookload < thresholds.block_weight + thresholds.in_slips_margin:
+        return "in_slips"
+    moving_down = velocity is not None and velocity > thresholds.moving_speed
+    moving_up = velocity is not None and velocity < -thresholds.moving_speed
+    rotating = rpm is not None and rpm > thresholds.rotating_speed
+    on_bottom = off_bottom is not None and off_bottom <= thresholds.on_bottom
+    if rotating:
+        if on_bottom:
+            return "drilling"
+        if moving_up:
+            return "back_reaming"
+        return "reaming" if moving_down else "rotating_off_bottom"
+    if moving_up:
+        return "pick_up"
+    if moving_down:
+        return "slack_off"
+    return "circulating" if circulating else "static"
+
+
+def _velocity(prior: DetectorState, sample: RigSample, dt: float) -> float | None:
+    # The block position moves with the string only when the string hangs on the hook, but it
+    # does not jump with depth-tracking resets, so it is preferred when the rig sends it.
+    block, bit = _finite(sample.block_position), _finite(sample.bit_depth)
+    if block is not None and prior.block_position is not None:
+        return -(block - prior.block_position) / dt
+    if bit is not None and prior.bit_depth is not None:
+        return (bit - prior.bit_depth) / dt
+    return None
+
+
+def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThresholds
+           ) -> tuple[DetectorState, Detection]:
+    """Classify one sample and say whether it is steady.
+
+    Parameters
+    ----------
+    prior : the state after the previous sample (``DetectorState()`` at the start)
+    sample : this sample
+    thresholds : settings
+
+    Returns
+    -------
+    (DetectorState, Detection)
+    """
+    hookload = _finite(sample.hookload)
+    dt = sample.t - prior.t
+    fresh = not (math.isfinite(dt) and 0.0 < dt <= thresholds.max_gap)
+    velocity = None if fresh else _velocity(prior, sample, dt)
+    rpm = _finite(sample.rpm)
+    flow, spp = _finite(sample.flow), _finite(sample.spp)
+    circulating = ((flow is not None and flow > thresholds.circulating_flow)
+                   or (flow is None and spp is not None and spp > thresholds.circulating_pressure))
+    bit, hole = _finite(sample.bit_depth), _finite(sample.hole_depth)
+    off_bottom = None if bit is None or hole is None else hole - bit
+    state = classify(hookload, velocity, rpm, circulating, off_bottom, thresholds)
+    since = prior.state_since if (state == prior.state and not fresh) else sample.t
+    steady = (state != "unknown" and not fresh and sample.t - since >= thresholds.settle_time
+              and hookload is not None and prior.hookload is not None)
+    if steady and velocity is not None and prior.velocity is not None:
+        steady = abs(velocity - prior.velocity) / dt <= thresholds.max_acceleration
+    if steady and hookload is not None and prior.hookload is not None:
+        step = max(thresholds.max_hookload_step,
+                   thresholds.max_hookload_step_fraction * abs(hookload))
+        steady = abs(hookload - prior.hookload) <= step
+    if steady and state in MOVING_STATES and velocity is None:
+        steady = False
+    new = DetectorState(
+        t=sample.t if math.isfinite(sample.t) else prior.t,
+        bit_depth=bit if bit is not None else prior.bit_depth,
+        block_position=_finite(sample.block_position),
+        velocity=velocity,
+        hookload=hookload,
+        state=state,
+        state_since=since,
+    )
+    if not math.isfinite(sample.t):
+        new = replace(prior, state="unknown")
+        return new, Detection("unknown", False, None)
+    return new, Detection(state, steady, velocity)
+
+
+def _optional(values: ArrayLike | None, n: int) -> NDArray[np.float64]:
+    if values is None:
+        return np.full(n, np.nan)
+    return np.asarray(values, dtype=np.float64)
+
+
+def detect_series(
+    t: ArrayLike,
+    hookload: ArrayLike,
+    bit_depth: ArrayLike,
+    thresholds: RigStateThresholds,
+    *,
+    block_position: ArrayLike | None = None,
+    rpm: ArrayLike | None = None,
+    flow: ArrayLike | None = None,
+    spp: ArrayLike | None = None,
+    hole_depth: ArrayLike | None = None,
+) -> tuple[NDArray[np.str_], NDArray[np.bool_]]:
+    """Run :func:`detect` over a whole record (NaN = missing).
+
+    Returns
+    -------
+    states : state name per sample
+    steady : steady flag per sample
+    """
+    times = np.asarray(t, dtype=np.float64)
+    n = times.size
+    columns = [np.asarray(hookload, dtype=np.float64), np.asarray(bit_depth, dtype=np.float64),
+               _optional(block_position, n), _optional(rpm, n), _optional(flow, n),
+               _optional(spp, n), _optional(hole_depth, n)]
+    states = np.empty(n, dtype="<U20")
+    steady = np.zeros(n, dtype=bool)
+    prior = DetectorState()
+    for i in range(n):
+        values = [float(column[i]) for column in columns]
+        sample = RigSample(float(times[i]), *(v if math.isfinite(v) else None for v in values))
+        prior, result = detect(prior, sample, thresholds)
+        states[i] = result.state
+        steady[i] = result.steady
+    return states, steady

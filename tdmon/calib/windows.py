@@ -1,0 +1,213 @@
+"""Steady windows: runs of steady samples of one rig state, summarised for estimation.
+
+A window collects consecutive steady samples of one state; it closes when the state changes,
+a sample is not steady, a gap appears, or it has grown to ``max_samples`` or ``max_travel`` (so
+that each window stays local in bit depth for the friction profile). On closing it is checked:
+spikes are dropped (median absolute deviation), a stuck hook load (every sample identical)
+rejects it, a bit depth that does not follow the block flags it low-confidence. The standard
+error of its mean hook load carries a floor from the sensor's noise, so a one-sample window at
+15 s sampling still has an honest uncertainty.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from tdmon.calib.rigstate import MOVING_STATES, Detection, RigSample
+
+__all__ = ["Window", "WindowAccumulator", "WindowSettings", "add_sample", "close", "summarise"]
+
+
+@dataclass(frozen=True)
+class WindowSettings:
+    """Settings of window building and checking.
+
+    Attributes
+    ----------
+    min_samples : fewer steady samples (after spike removal) reject the window [-]
+    max_samples : a window closes when it holds this many samples [-]
+    max_travel : a window closes when the bit has moved this far [m]
+    noise_floor : hook-load sensor noise, absolute [N] ...
+    noise_floor_fraction : ... and relative to the hook load [-]; the larger is used
+    torque_noise_floor : surface-torque sensor noise [N m]
+    spike_mads : samples further than this many scaled MADs from the median are spikes [-]
+    max_gap : a longer gap between samples closes the window [s]
+    """
+
+    min_samples: int = 1
+    max_samples: int = 120
+    max_travel: float = 30.0
+    noise_floor: float = 2e3
+    noise_floor_fraction: float = 0.005
+    torque_noise_floor: float = 200.0
+    spike_mads: float = 5.0
+    max_gap: float = 60.0
+
+
+@dataclass(frozen=True)
+class Window:
+    """A closed window.
+
+    Attributes
+    ----------
+    state : rig state of its samples
+    t_start, t_end : [s]
+    n : samples used [-]
+    bit_depth : mean bit depth [m]
+    bit_depth_start, bit_depth_end : [m]
+    hookload : mean hook load [N]
+    hookload_se : standard error of the mean hook load, with the sensor-noise floor [N]
+    torque : mean surface torque [N m] (None when not measured)
+    torque_se : its standard error [N m]
+    rpm : mean rotation [rad/s] (None when not measured)
+    velocity : mean axial velocity [m/s] (> 0 deeper; None when unknown)
+    flags : quality remarks, e.g. ``"spikes_removed:2"``, ``"depth_not_following_block"``
+    rejected : why the window must not be used (None when usable)
+    """
+
+    state: str
+    t_start: float
+    t_end: float
+    n: int
+    bit_depth: float
+    bit_depth_start: float
+    bit_depth_end: float
+    hookload: float
+    hookload_se: float
+    torque: float | None = None
+    torque_se: float | None = None
+    rpm: float | None = None
+    velocity: float | None = None
+    flags: tuple[str, ...] = ()
+    rejected: str | None = None
+
+    @property
+    def low_confidence(self) -> bool:
+        """Usable but with a quality remark."""
+        return self.rejected is None and bool(self.flags)
+
+
+@dataclass(frozen=True)
+class WindowAccumulator:
+    """Samples of the window being built (tuples: the accumulator is immutable)."""
+
+    state: str = ""
+    samples: tuple[RigSample, ...] = ()
+    velocities: tuple[float | None, ...] = ()
+
+
+def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
+    median = np.median(values)
+    mad = 1.4826 * np.median(np.abs(values - median))
+    tolerance = max(spike_mads * mad, spike_mads * floor)
+    return np.asarray(np.abs(values - median) <= tolerance)
+
+
+def _mean_se(values: np.ndarray, floor: float) -> tuple[float, float]:
+    n = values.size
+    spread = float(np.std(values, ddof=1)) if n > 1 else 0.0
+    return float(np.mean(values)), max(spread, floor) / math.sqrt(n)
+
+
+def summarise(state: str, samples: tuple[RigSample, ...],
+              velocities: tuple[float | None, ...], settings: WindowSettings) -> Window | None:
+    """Check and summarise the samples of one window (None when there are none usable).
+
+    Parameters
+    ----------
+    state : their rig state
+    samples : the steady samples, in time order
+    velocities : the detector's axial velocity of each sample [m/s]
+    settings : window settings
+
+    Returns
+    -------
+    Window or None
+    """
+    rows = [(s, v) for s, v in zip(samples, velocities, strict=True)
+            if s.hookload is not None and s.bit_depth is not None
+            and math.isfinite(s.hookload) and math.isfinite(s.bit_depth)]
+    if not rows:
+        return None
+    hookload = np.array([s.hookload for s, _ in rows], dtype=np.float64)
+    depth = np.array([s.bit_depth for s, _ in rows], dtype=np.float64)
+    flags: list[str] = []
+    rejected: str | None = None
+    floor = max(settings.noise_floor,
+                settings.noise_floor_fraction * float(np.median(np.abs(hookload))))
+    if hookload.size >= 3 and float(np.ptp(hookload)) == 0.0:
+        # a real load cell always shows some noise: identical readings mean a frozen value
+        rejected = "hookload_stuck"
+    keep = _robust_keep(hookload, settings.spike_mads, floor)
+    if not keep.all():
+        flags.append(f"spikes_removed:{int((~keep).sum())}")
+    kept = [row for row, k in zip(rows, keep, strict=True) if k]
+    if len(kept) < settings.min_samples:
+        rejected = rejected or f"too_few_samples:{len(kept)}"
+    hookload, depth = hookload[keep], depth[keep]
+    mean, se = _mean_se(hookload, floor)
+    torque_values = np.array([s.torque for s, _ in kept if s.torque is not None
+                              and math.isfinite(s.torque)], dtype=np.float64)
+    torque = torque_se = None
+    if torque_values.size == len(kept) and torque_values.size:
+        torque, torque_se = _mean_se(torque_values, settings.torque_noise_floor)
+        if torque_values.size >= 3 and float(np.ptp(torque_values)) == 0.0 and torque != 0.0:
+            flags.append("torque_stuck")
+    rpm_values = [s.rpm for s, _ in kept if s.rpm is not None and math.isfinite(s.rpm)]
+    rpm = float(np.mean(rpm_values)) if len(rpm_values) == len(kept) else None
+    speeds = [v for _, v in kept if v is not None and math.isfinite(v)]
+    velocity = float(np.mean(speeds)) if speeds else None
+    if state in MOVING_STATES and len(kept) >= 2 and velocity is not None:
+        travel = float(depth[-1] - depth[0])
+        expected = velocity * (kept[-1][0].t - kept[0][0].t)
+        if abs(travel - expected) > max(1.0, 0.5 * abs(expected)):
+            # bit depth and block disagree: depth tracking reset or a stuck depth channel
+            flags.append("depth_not_following_block")
+    return Window(
+        state=state, t_start=kept[0][0].t if kept else rows[0][0].t,
+        t_end=kept[-1][0].t if kept else rows[-1][0].t, n=len(kept),
+        bit_depth=float(np.mean(depth)) if depth.size else float(rows[0][0].bit_depth or 0.0),
+        bit_depth_start=float(depth[0]) if depth.size else 0.0,
+        bit_depth_end=float(depth[-1]) if depth.size else 0.0,
+        hookload=mean if hookload.size else 0.0, hookload_se=se if hookload.size else 0.0,
+        torque=torque, torque_se=torque_se, rpm=rpm, velocity=velocity, flags=tuple(flags),
+        rejected=rejected,
+    )
+
+
+def close(acc: WindowAccumulator, settings: WindowSettings
+          ) -> tuple[WindowAccumulator, Window | None]:
+    """Close the window being built (end of input, or forced)."""
+    if not acc.samples:
+        return WindowAccumulator(), None
+    return WindowAccumulator(), summarise(acc.state, acc.samples, acc.velocities, settings)
+
+
+def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
+               settings: WindowSettings) -> tuple[WindowAccumulator, Window | None]:
+    """Add one detected sample; returns the new accumulator and a window if one closed.
+
+    A non-steady sample closes the current window; a steady sample of another state, or after
+    a gap, closes it and starts a new one; a full window closes after taking the sample.
+    """
+    closed: Window | None = None
+    if acc.samples:
+        last = acc.samples[-1]
+        gap = sample.t - last.t
+        moved = (abs((sample.bit_depth or 0.0) - (acc.samples[0].bit_depth or 0.0))
+                 if sample.bit_depth is not None and acc.samples[0].bit_depth is not None
+                 else 0.0)
+        if (not detection.steady or detection.state != acc.state
+                or not (0.0 < gap <= settings.max_gap) or moved > settings.max_travel):
+            acc, closed = close(acc, settings)
+    if not detection.steady:
+        return acc, closed
+    acc = WindowAccumulator(detection.state, (*acc.samples, sample),
+                            (*acc.velocities, detection.velocity))
+    if len(acc.samples) >= settings.max_samples:
+        acc, full = close(acc, settings)
+        return acc, full if closed is None else closed
+    return acc, closed
