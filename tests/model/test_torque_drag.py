@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 from tdmon.errors import ModelError
 from tdmon.model.string import DrillString, StringComponent
-from tdmon.model.survey import minimum_curvature
+from tdmon.model.survey import interpolate_survey, minimum_curvature
 from tdmon.model.torque_drag import Operation, WellModel, torque_drag
 from tdmon.model.well import Fluid, HoleSection, Well, hole_grid
 
@@ -326,3 +326,25 @@ def test_bad_inputs_are_errors(example_71: Well) -> None:
                        (HoleSection(0.0, TOTAL_DEPTH, 0.2159, "open"),), example_71.fluid)
     with pytest.raises(ModelError, match="no friction factor"):
         torque_drag(no_friction, 3000.0)
+
+
+def test_case_2_geothermal_local_friction(example_71: Well) -> None:
+    # REFERENCE.md 3, Case 2 geothermal: Glydril mu = 0.23 + 0.0013 T with T linear in TVD from
+    # 15.3 C at surface to 85.5 C at 3033 m, each element at its own temperature. Consistent
+    # soft string: 1868 / 768 kN, 42.4 kN m; element-wise thesis-style normal forces: pick-up
+    # 1924 kN, slack-off 768 kN.
+    grid = hole_grid(example_71)
+    tvd = interpolate_survey(example_71.survey, grid.element_mid_md).tvd
+    mu = 0.23 + 0.0013 * (15.3 + (85.5 - 15.3) * tvd / 3033.0)
+    soft = torque_drag(example_71, TOTAL_DEPTH, mu, method="soft-string")
+    assert soft.hookload["pick_up"] == pytest.approx(1868 * KN, rel=1e-3)
+    assert soft.hookload["slack_off"] == pytest.approx(768 * KN, rel=1e-3)
+    assert soft.surface_torque["rotating"] == pytest.approx(42.4 * KN, rel=2e-3)
+    thesis = torque_drag(example_71, TOTAL_DEPTH, mu, method="aadnoy")
+    assert thesis.hookload["pick_up"] == pytest.approx(1924 * KN, rel=1e-3)
+    assert thesis.hookload["slack_off"] == pytest.approx(768 * KN, rel=1e-3)
+    # Table 9's closed-form build torque (what "aadnoy" applies) exceeds the element-wise
+    # added-normal-force integral (46.0 kN m) in the same ratio as at constant friction
+    # (23.45 / 21.64 kN m)
+    assert thesis.surface_torque["rotating"] / (46.0 * KN) == pytest.approx(23.45 / 21.64,
+                                                                            rel=5e-3)
