@@ -188,6 +188,46 @@ def _aadnoy_run(force, torque, top_inc, bottom_inc, length, theta, kind, mu, axi
 
 
 @njit(cache=True)
+def _soft_string_step(force, torque, kk, ke, ee, dtvd, weight, radius, mu, axial_factors,
+                      torque_factors):
+    """Advance every operation's force and torque over one piece (in place)."""
+    for o in range(force.size):
+        force[o], normal = _soft_string_piece(force[o], kk, ke, ee, dtvd, weight,
+                                              axial_factors[o] * mu)
+        torque[o] += torque_factors[o] * mu * normal * radius
+
+
+@njit(cache=True)
+def _aadnoy_run_nodes(run_force, run_torque, run_md, run_tan, run_mu, kind, weight, radius,
+                      axial_factors, torque_factors, first, k, out_md, out_force, out_torque,
+                      out_tan):
+    """Write a closed run's profile: the run's closed form from its bottom state to every node
+    recorded inside it (the last one is the run's top)."""
+    bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
+    for i in range(first, k):
+        theta = _angle_between(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2],
+                               run_tan[0], run_tan[1], run_tan[2])
+        top_inc = _inclination(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2])
+        for o in range(run_force.size):
+            out_force[o, i], out_torque[o, i] = _aadnoy_run(
+                run_force[o], run_torque[o], top_inc, bottom_inc, run_md - out_md[i], theta,
+                kind, run_mu, axial_factors[o], torque_factors[o], weight, radius)
+
+
+@njit(cache=True)
+def _record(k, md, comp, tangent, force, torque, out_md, out_force, out_torque, out_comp,
+            out_tan):
+    out_md[k] = md
+    out_comp[k] = comp
+    out_tan[k, 0] = tangent[0]
+    out_tan[k, 1] = tangent[1]
+    out_tan[k, 2] = tangent[2]
+    for o in range(force.size):
+        out_force[o, k] = force[o]
+        out_torque[o, k] = torque[o]
+
+
+@njit(cache=True)
 def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
           mu, comp_top, comp_weight, comp_radius, bit_depth, bit_forces, bit_torques,
           axial_factors, torque_factors, record, out_md, out_force, out_torque, out_comp,
@@ -199,15 +239,10 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
     forces, top torques). With ``record`` the node MD, component index (of the piece below the
     node) and tangent, and per operation the axial force and torque, are written bit first into
     the ``out_*`` arrays (length >= n elements + n components + 2; out_force and out_torque are
-    (n_op, length)).
+    (n_op, length)). Aadnoy runs write their nodes when the run closes.
     """
-    n_op = bit_forces.size
     n_comp = comp_top.size
-    j = np.searchsorted(node_md, bit_depth) - 1
-    if j < 0:
-        j = 0
-    if j > node_md.size - 2:
-        j = node_md.size - 2
+    j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
     comp = 0
     lower = bit_depth
     tb = _tangent_at(node_md, tangents, dogleg, j, lower)
@@ -215,14 +250,7 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
     torque = bit_torques.copy()
     k = 0
     if record:
-        out_md[0] = lower
-        for o in range(n_op):
-            out_force[o, 0] = force[o]
-            out_torque[o, 0] = torque[o]
-        out_comp[0] = 0
-        out_tan[0, 0] = tb[0]
-        out_tan[0, 1] = tb[1]
-        out_tan[0, 2] = tb[2]
+        _record(0, lower, 0, tb, force, torque, out_md, out_force, out_torque, out_comp, out_tan)
         k = 1
     # Aadnoy runs: the state at the run's bottom and its length-weighted friction
     run_force = force.copy()
@@ -245,64 +273,48 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
             upper = element_top
             tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
         length = lower - upper
-        weight = comp_weight[comp]
-        radius = comp_radius[comp]
         if method == SOFT_STRING:
             if at_component_top or lower < node_md[j + 1]:
                 kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
             else:
                 kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
-            for o in range(n_op):
-                force[o], normal = _soft_string_piece(force[o], kk, ke, ee, dtvd, weight,
-                                                      axial_factors[o] * mu[j])
-                torque[o] += torque_factors[o] * mu[j] * normal * radius
+            _soft_string_step(force, torque, kk, ke, ee, dtvd, comp_weight[comp],
+                              comp_radius[comp], mu[j], axial_factors, torque_factors)
             if record:
-                out_md[k] = upper
-                for o in range(n_op):
-                    out_force[o, k] = force[o]
-                    out_torque[o, k] = torque[o]
-                out_comp[k] = comp
+                _record(k, upper, comp, tt, force, torque, out_md, out_force, out_torque,
+                        out_comp, out_tan)
                 k += 1
         else:
             run_mu_length += mu[j] * length
             if record:
-                out_md[k] = upper
-                out_comp[k] = comp
-                out_tan[k, 0] = tt[0]
-                out_tan[k, 1] = tt[1]
-                out_tan[k, 2] = tt[2]
+                _record(k, upper, comp, tt, force, torque, out_md, out_force, out_torque,
+                        out_comp, out_tan)
                 k += 1
             component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
             at_node = not at_component_top
-            closes = component_ends or (at_node and (run_break[j] or j == 0))
-            if closes:
-                run_length = run_md - upper
-                run_mu = run_mu_length / run_length
-                bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
-                kind = curve_kind[j]
+            if component_ends or (at_node and (run_break[j] or j == 0)):
+                run_mu = run_mu_length / (run_md - upper)
+                weight = comp_weight[comp]
+                radius = comp_radius[comp]
                 if record:
-                    # every node of the run from the run's bottom, with the run's friction
-                    for i in range(run_first, k):
-                        sub_theta = _angle_between(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2],
-                                                   run_tan[0], run_tan[1], run_tan[2])
-                        sub_inc = _inclination(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2])
-                        for o in range(n_op):
-                            out_force[o, i], out_torque[o, i] = _aadnoy_run(
-                                run_force[o], run_torque[o], sub_inc, bottom_inc,
-                                run_md - out_md[i], sub_theta, kind, run_mu, axial_factors[o],
-                                torque_factors[o], weight, radius)
-                    for o in range(n_op):
+                    _aadnoy_run_nodes(run_force, run_torque, run_md, run_tan, run_mu,
+                                      curve_kind[j], weight, radius, axial_factors,
+                                      torque_factors, run_first, k, out_md, out_force,
+                                      out_torque, out_tan)
+                    for o in range(force.size):
                         force[o] = out_force[o, k - 1]
                         torque[o] = out_torque[o, k - 1]
                 else:
+                    bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
+                    top_inc = _inclination(tt[0], tt[1], tt[2])
                     theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1],
                                            run_tan[2])
-                    top_inc = _inclination(tt[0], tt[1], tt[2])
-                    for o in range(n_op):
+                    for o in range(force.size):
                         force[o], torque[o] = _aadnoy_run(
-                            run_force[o], run_torque[o], top_inc, bottom_inc, run_length, theta,
-                            kind, run_mu, axial_factors[o], torque_factors[o], weight, radius)
-                for o in range(n_op):
+                            run_force[o], run_torque[o], top_inc, bottom_inc, run_md - upper,
+                            theta, curve_kind[j], run_mu, axial_factors[o], torque_factors[o],
+                            weight, radius)
+                for o in range(force.size):  # an element loop: slice copies cost more here
                     run_force[o] = force[o]
                     run_torque[o] = torque[o]
                 run_md = upper
@@ -313,9 +325,9 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
         tb = tt
         if at_component_top:
             comp += 1
+        elif j == 0:
+            break
         else:
-            if j == 0:
-                break
             j -= 1
     return k, force, torque
 
