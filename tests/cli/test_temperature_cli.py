@@ -64,9 +64,11 @@ def test_json_temperatures_equal_the_analytic_model(capsys):
     document = run_json(capsys, APAK)
     config = load_well(APAK)
     assert config.temperature is not None
+    circulation = config.temperature.circulation()
+    assert circulation is not None
     tvd = np.array(document["tvd_m"])
     direct = apak_temperature(tvd, document["bottom"]["tvd_m"], config.temperature.geotherm(),
-                              config.temperature.circulation())
+                              circulation)
     assert document["annulus_C"] == pytest.approx(direct.annulus, abs=1e-9)
     assert document["pipe_C"] == pytest.approx(direct.pipe, abs=1e-9)
     assert document["formation_C"] == pytest.approx(direct.formation, abs=1e-9)
