@@ -236,7 +236,7 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     if not math.isfinite(sample.t):
         new = replace(prior, state="unknown")
         return new, Detection("unknown", False, None)
-    return new, Detection(state, steady, velocity)
+    return new, Detection(state, bool(steady), velocity)
 
 
 def _optional(values: ArrayLike | None, n: int) -> NDArray[np.float64]:

@@ -1,0 +1,282 @@
+"""Alarms: loads leaving the modelled band, loads nearing the limits, friction jumps, sensors.
+
+Each detector is a pure function, with a small frozen state where it needs memory, returning
+:class:`Alarm` values in the shape of the daemon's ``alarm`` message (docs/architecture.md:
+``t``, ``kind``, ``severity``, ``message``, ``value``, ``limit``).
+
+* ``band``: a trend, not a spike. The excess of the measured hook load (or torque) beyond the
+  modelled band, in units of the measurement noise, is smoothed by an exponentially weighted
+  moving average; the alarm fires when the average stays beyond a threshold for a minimum
+  number of samples, and re-arms once the load is back inside the band.
+* ``limits``: at a window's bit depth, the loads modelled with the back-calculated friction
+  (which reproduce the measurement) are compared with the operating limits of
+  `tdmon.model.limits`; a utilisation above ``warn`` gives a warning, above 1 a critical alarm.
+* ``friction_jump``: a window's friction factor against the median of the recent windows of the
+  same operation; a rise larger than both an absolute step and a multiple of the combined
+  uncertainty is a tight spot or a cuttings bed building up.
+* ``sensor``: a channel gone stale, a hook load that is negative or above a plausible maximum,
+  a bit below the hole depth, a channel frozen at one value while the string moves.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from tdmon.model.limits import operating_window
+from tdmon.model.torque_drag import Loads
+from tdmon.model.well import Well
+
+__all__ = [
+    "Alarm",
+    "BandSettings",
+    "BandTrendState",
+    "JumpSettings",
+    "SensorSettings",
+    "SensorState",
+    "friction_jump",
+    "limit_alarms",
+    "sensor_alarms",
+    "update_band_trend",
+]
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """One alarm, as the daemon's ``alarm`` message."""
+
+    t: float
+    kind: str
+    severity: str
+    message: str
+    value: float | None = None
+    limit: float | None = None
+
+    def to_message(self) -> dict[str, Any]:
+        """The ``alarm`` message; non-finite numbers become null (JSON has no NaN)."""
+        def clean(x: float | None) -> float | None:
+            return float(x) if x is not None and math.isfinite(x) else None
+
+        return {"t": float(self.t), "kind": self.kind, "severity": self.severity,
+                "message": self.message, "value": clean(self.value), "limit": clean(self.limit)}
+
+
+# -- band trend -----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BandSettings:
+    """Band-trend alarm settings.
+
+    Attributes
+    ----------
+    smoothing : EWMA weight of a new sample [-]
+    threshold : EWMA excess, in noise standard deviations, that raises the alarm [-]
+    min_samples : consecutive samples beyond the band needed as well [-]
+    """
+
+    smoothing: float = 0.1
+    threshold: float = 3.0
+    min_samples: int = 10
+
+
+@dataclass(frozen=True)
+class BandTrendState:
+    """EWMA of the normalised excess, the run of samples outside, and whether it has fired."""
+
+    average: float = 0.0
+    outside: int = 0
+    active: bool = False
+
+
+def update_band_trend(state: BandTrendState, t: float, measured: float, low: float,
+                      high: float, noise_std: float, settings: BandSettings, *,
+                      what: str = "hook load") -> tuple[BandTrendState, Alarm | None]:
+    """Feed one steady sample against the modelled band [low, high] (same unit as measured).
+
+    Non-finite inputs keep the state. Returns the new state and an alarm when the trend first
+    crosses the threshold (one alarm per excursion).
+    """
+    if not all(math.isfinite(x) for x in (t, measured, low, high, noise_std)) or noise_std <= 0:
+        return state, None
+    low, high = min(low, high), max(low, high)
+    excess = ((measured - high) if measured > high else (measured - low) if measured < low
+              else 0.0) / noise_std
+    average = (1.0 - settings.smoothing) * state.average + settings.smoothing * excess
+    outside = state.outside + 1 if excess != 0.0 else 0
+    firing = abs(average) >= settings.threshold and outside >= settings.min_samples
+    if state.active:
+        active = excess != 0.0 or abs(average) >= 0.5 * settings.threshold
+        return BandTrendState(average, outside, active), None
+    if not firing:
+        return BandTrendState(average, outside, False), None
+    above = average > 0
+    bound = high if above else low
+    alarm = Alarm(t, "band", "warning",
+                  f"{what} trending {'above' if above else 'below'} the modelled band for "
+                  f"{outside} samples", measured, bound)
+    return BandTrendState(average, outside, True), alarm
+
+
+# -- limits ---------------------------------------------------------------------------------
+
+def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: float = 0.8
+                 ) -> list[Alarm]:
+    """Loads of ``operation`` nearing or beyond the tensile, buckling and make-up limits.
+
+    Parameters
+    ----------
+    well : the well
+    loads : `WellModel.loads` at the window's bit depth with the back-calculated friction
+    operation : which operation's profile to check (``pick_up``, ``slack_off``, ``rotating``)
+    t : time [s]
+    warn : utilisation that raises a warning [-]
+
+    Returns
+    -------
+    list of Alarm (worst node per limit)
+
+    Notes
+    -----
+    Tension is compared with eq 28 on the effective axial force (the true force differs by the
+    end-area pressure terms, small against the limit near surface where tension peaks);
+    compression with the sinusoidal and helical buckling loads (eq 30, 31); torque with the
+    connections' make-up torque.
+    """
+    window = operating_window(well, loads, torque_operation="rotating")
+    force = loads.axial_force[operation]
+    torque = np.abs(loads.torque[operation])
+    checks = (
+        ("tensile", force, window.tensile, "tension"),
+        ("sinusoidal_buckling", -force, window.sinusoidal_buckling, "compression"),
+        ("helical_buckling", -force, window.helical_buckling, "compression"),
+        ("makeup_torque", torque, window.makeup_torque, "torque"),
+    )
+    alarms: list[Alarm] = []
+    for name, load, limit, label in checks:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            usage = np.where(np.isfinite(limit) & (limit > 0) & (load > 0), load / limit, 0.0)
+        if not usage.size:
+            continue
+        worst = int(np.argmax(usage))
+        ratio = float(usage[worst])
+        if ratio < warn:
+            continue
+        severity = "critical" if ratio >= 1.0 else "warning"
+        alarms.append(Alarm(t, f"limit_{name}", severity,
+                            f"{operation} {label} at {loads.md[worst]:.0f} m is "
+                            f"{100 * ratio:.0f} % of the {name.replace('_', ' ')} limit",
+                            float(load[worst]), float(limit[worst])))
+    return alarms
+
+
+# -- friction jump --------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class JumpSettings:
+    """Friction-jump settings: history length [-], absolute step [-], sigmas [-]."""
+
+    history: int = 8
+    min_history: int = 3
+    min_step: float = 0.05
+    sigmas: float = 3.0
+
+
+def friction_jump(history: tuple[float, ...], mu: float, mu_std: float, t: float,
+                  settings: JumpSettings, *, operation: str, bit_depth: float
+                  ) -> Alarm | None:
+    """Alarm when ``mu`` rises above the recent median of ``history`` by a real step.
+
+    The step must exceed ``min_step`` and ``sigmas`` times the combined spread
+    ``sqrt(mu_std^2 + (1.4826 MAD)^2)`` of the history.
+    """
+    recent = np.array([x for x in history[-settings.history:] if math.isfinite(x)])
+    if recent.size < settings.min_history or not (math.isfinite(mu) and math.isfinite(mu_std)):
+        return None
+    median = float(np.median(recent))
+    spread = 1.4826 * float(np.median(np.abs(recent - median)))
+    limit = median + max(settings.min_step, settings.sigmas * math.hypot(mu_std, spread))
+    if mu <= limit:
+        return None
+    return Alarm(t, "friction_jump", "warning",
+                 f"{operation} friction {mu:.3f} at {bit_depth:.0f} m jumped above the recent "
+                 f"{median:.3f} (tight spot or cuttings bed?)", mu, limit)
+
+
+# -- sensors --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SensorSettings:
+    """Plausibility settings: hook-load range [N], depth tolerance [m], frozen run [-]."""
+
+    max_hookload: float = 10e6
+    depth_tolerance: float = 5.0
+    frozen_samples: int = 30
+
+
+@dataclass(frozen=True)
+class SensorState:
+    """Channels reported stale, the last values and their run lengths, active conditions."""
+
+    stale: frozenset[str] = frozenset()
+    last: tuple[tuple[str, float], ...] = ()
+    runs: tuple[tuple[str, int], ...] = ()
+    active: frozenset[str] = frozenset()
+
+
+def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
+                  stale: tuple[str, ...], moving: bool, settings: SensorSettings
+                  ) -> tuple[SensorState, list[Alarm]]:
+    """Stale, implausible and frozen channels; one alarm when a condition starts.
+
+    Parameters
+    ----------
+    state : prior
+    t : [s]
+    values : channel values of this frame (SI)
+    stale : channels the aligner reports as too old
+    moving : the string is moving (a frozen hook load or depth is then suspicious)
+    settings : thresholds
+    """
+    alarms: list[Alarm] = []
+    new_stale = frozenset(stale)
+    for channel in sorted(new_stale - state.stale):
+        alarms.append(Alarm(t, "sensor_stale", "warning", f"channel {channel} is stale"))
+    conditions: set[str] = set()
+    hookload = values.get("hookload")
+    if hookload is not None and (not math.isfinite(hookload) or hookload < 0.0
+                                 or hookload > settings.max_hookload):
+        conditions.add("hookload_implausible")
+    bit, hole = values.get("bit_depth"), values.get("hole_depth")
+    if (bit is not None and hole is not None and math.isfinite(bit) and math.isfinite(hole)
+            and bit > hole + settings.depth_tolerance):
+        conditions.add("bit_below_hole")
+    last = dict(state.last)
+    runs = dict(state.runs)
+    for channel in ("hookload", "torque", "bit_depth"):
+        value = values.get(channel)
+        if value is None:
+            continue
+        runs[channel] = runs.get(channel, 0) + 1 if last.get(channel) == value else 0
+        last[channel] = value
+        # bit depth legitimately stands still; a frozen load while moving is suspicious
+        if channel != "bit_depth" and moving and runs[channel] >= settings.frozen_samples \
+                and value != 0.0:
+            conditions.add(f"{channel}_frozen")
+    texts = {
+        "hookload_implausible": ("critical", "hook load is negative or implausibly large",
+                                 hookload, settings.max_hookload),
+        "bit_below_hole": ("warning", "bit depth is below the hole depth", bit, hole),
+        "hookload_frozen": ("warning", "hook load has not changed while the string moves",
+                            hookload, None),
+        "torque_frozen": ("warning", "torque has not changed while the string moves",
+                          values.get("torque"), None),
+    }
+    for condition in sorted(conditions - state.active):
+        severity, text, value, limit = texts[condition]
+        alarms.append(Alarm(t, f"sensor_{condition}", severity, text, value, limit))
+    new_state = replace(state, stale=new_stale, last=tuple(last.items()),
+                        runs=tuple(runs.items()), active=frozenset(conditions))
+    return new_state, alarms

@@ -1,0 +1,411 @@
+"""Live calibration of the friction law mu(T) from every steady window.
+
+The parameters theta of the configured mu(T) family (e.g. ``a`` and ``b`` of mu = a + b T,
+eq 5 of the seed thesis), or a single scale on a laboratory fit (mu = s mu_lab(T)), are the
+state of an iterated extended Kalman filter. Each window measures the hook load (or torque) of
+its operation at its bit depth with every element's friction mu(T_element; theta), T_element the
+annulus temperature there; the Jacobian d(hook load)/d(theta) comes from finite differences on
+the torque-and-drag model.
+
+The temperature dependence is only identifiable when windows see different temperatures: a
+window's *effective temperature* is the friction-weighted mean temperature of the elements it
+feeds on, ``T_eff = sum(J_j T_j) / sum(J_j)`` with ``J_j = dh/dmu_j``. :func:`identifiability`
+reports the slope dmu/dT with its 95 % interval and the range of T_eff seen, and says the slope
+is not identified when the interval includes zero or the range is too narrow.
+
+Pure ``predict``/``update`` on a frozen :class:`MuTState`, a thin wrapper
+(:class:`MuTCalibrator`); fit results are keyed like the family's own arguments so
+``FrictionModel(family, params)`` works (STYLE.md items 5, 6).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tdmon.calib.backcalc import OPERATION_FOR_STATE
+from tdmon.calib.windows import Window
+from tdmon.errors import FitError, ModelError
+from tdmon.model.friction import FrictionModel
+from tdmon.model.torque_drag import WellModel
+
+__all__ = [
+    "Identifiability",
+    "MuTCalibrator",
+    "MuTParametrisation",
+    "MuTState",
+    "family_parametrisation",
+    "identifiability",
+    "initial_state",
+    "measurement",
+    "predict",
+    "scale_parametrisation",
+    "update",
+]
+
+Array = NDArray[np.float64]
+
+_Z95 = 1.959964
+
+
+@dataclass(frozen=True)
+class MuTParametrisation:
+    """What is calibrated: a family's coefficients, or a scale on a lab fit.
+
+    Attributes
+    ----------
+    names : parameter names, in the order of the state vector
+    family : the family of the friction law the parameters produce
+    lab : the lab fit that is scaled (scale mode), or None
+    """
+
+    names: tuple[str, ...]
+    family: str
+    lab: FrictionModel | None = None
+
+    def friction_model(self, theta: ArrayLike) -> FrictionModel:
+        """The friction law at parameters ``theta`` (what the model layer takes)."""
+        values = np.asarray(theta, dtype=np.float64)
+        if self.lab is None:
+            return FrictionModel(self.family, dict(zip(self.names, map(float, values),
+                                                      strict=True)))
+        scale = float(values[0])
+        if self.lab.family in ("power", "exponential", "saturation-growth"):
+            coefficients = dict(self.lab.coefficients)
+            coefficients["a"] *= scale
+            return FrictionModel(self.lab.family, coefficients)
+        if self.lab.family == "constant":
+            return FrictionModel("constant", {"mu": self.lab.coefficients["mu"] * scale})
+        return FrictionModel(self.lab.family,
+                             {k: v * scale for k, v in self.lab.coefficients.items()})
+
+    def mu(self, theta: ArrayLike, temperature: ArrayLike) -> Array:
+        """Friction factor [-] at ``temperature`` [degC]."""
+        return self.friction_model(theta)(temperature)
+
+
+def family_parametrisation(model: FrictionModel) -> tuple[MuTParametrisation, Array]:
+    """Calibrate every coefficient of ``model``; returns the parametrisation and its theta."""
+    names = tuple(model.coefficients)
+    return (MuTParametrisation(names, model.family),
+            np.array([model.coefficients[n] for n in names], dtype=np.float64))
+
+
+def scale_parametrisation(lab: FrictionModel) -> tuple[MuTParametrisation, Array]:
+    """Calibrate one scale ``s`` on a lab fit: mu = s mu_lab(T); theta = [1]."""
+    return MuTParametrisation(("scale",), lab.family, lab), np.ones(1)
+
+
+@dataclass(frozen=True)
+class MuTState:
+    """Filter state.
+
+    Attributes
+    ----------
+    theta : parameters
+    covariance : their covariance
+    updates : windows used [-]
+    innovation : last measured minus predicted [N or N m]
+    innovation_variance : its predicted variance
+    temperature_min, temperature_max : range of the windows' effective temperatures [degC]
+    """
+
+    theta: Array
+    covariance: Array
+    updates: int = 0
+    innovation: float = 0.0
+    innovation_variance: float = 0.0
+    temperature_min: float = math.inf
+    temperature_max: float = -math.inf
+
+
+def initial_state(theta: ArrayLike, std: ArrayLike) -> MuTState:
+    """Prior mean ``theta`` and independent standard deviations ``std``."""
+    mean = np.asarray(theta, dtype=np.float64)
+    spread = np.broadcast_to(np.asarray(std, dtype=np.float64), mean.shape)
+    return MuTState(mean.copy(), np.diag(spread**2))
+
+
+def predict(state: MuTState, process_std: ArrayLike = 0.0) -> MuTState:
+    """Random-walk drift of the parameters between windows."""
+    q = np.broadcast_to(np.asarray(process_std, dtype=np.float64), state.theta.shape)
+    return replace(state, covariance=state.covariance + np.diag(q**2))
+
+
+def update(state: MuTState, measured: float, predicted: float, jacobian: Array,
+           noise_variance: float, effective_temperature: float | None = None) -> MuTState:
+    """Kalman update with one scalar measurement (Joseph form); bad input keeps the prior.
+
+    Parameters
+    ----------
+    state : prior
+    measured, predicted : measured value and the model at the prior mean [N or N m]
+    jacobian : d(predicted)/d(theta)
+    noise_variance : measurement variance
+    effective_temperature : the window's T_eff [degC], for the range seen
+    """
+    h = np.asarray(jacobian, dtype=np.float64)
+    if not (math.isfinite(measured) and math.isfinite(predicted) and np.isfinite(h).all()
+            and math.isfinite(noise_variance) and noise_variance > 0.0 and np.any(h)):
+        return state
+    p = state.covariance
+    ph = p @ h
+    s = float(h @ ph) + noise_variance
+    gain = ph / s
+    innovation = measured - predicted
+    a = np.eye(h.size) - np.outer(gain, h)
+    covariance = a @ p @ a.T + noise_variance * np.outer(gain, gain)
+    low, high = state.temperature_min, state.temperature_max
+    if effective_temperature is not None and math.isfinite(effective_temperature):
+        low, high = min(low, effective_temperature), max(high, effective_temperature)
+    return MuTState(state.theta + gain * innovation, 0.5 * (covariance + covariance.T),
+                    state.updates + 1, float(innovation), s, low, high)
+
+
+def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Array,
+                temperature: Array, operation: str, bit_depth: float, *,
+                quantity_index: int = 0, mask: NDArray[np.bool_] | None = None,
+                base_mu: float | Array = 0.0, method: str = "soft-string",
+                relative_step: float = 1e-3) -> tuple[float, Array, float]:
+    """Modelled value, its Jacobian in theta and the window's effective temperature.
+
+    Parameters
+    ----------
+    model : prepared well
+    parametrisation : what theta means
+    theta : parameters
+    temperature : annulus temperature per hole-grid element [degC]
+    operation : model operation
+    bit_depth : [m]
+    quantity_index : 0 hook load, 1 torque
+    mask : elements the law applies to (all when None); the others keep ``base_mu``
+    base_mu : friction of the other elements [-]
+    method : torque-and-drag method
+    relative_step : finite-difference step relative to each parameter (absolute floor 1e-6)
+
+    Returns
+    -------
+    predicted [N or N m], jacobian (len(theta),), effective temperature [degC] (nan if none)
+    """
+    n = model.n_elements
+    where = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
+
+    def evaluate(parameters: Array, extra: Array | float = 0.0) -> float:
+        mu = np.where(where, parametrisation.mu(parameters, temperature) + extra, base)
+        friction = np.maximum(mu, 0.0)
+        return model.evaluate(operation, bit_depth, friction, method=method)[quantity_index]
+
+    predicted = evaluate(theta)
+    jacobian = np.empty(theta.size)
+    for k in range(theta.size):
+        step = max(abs(theta[k]) * relative_step, 1e-6)
+        bumped = theta.copy()
+        bumped[k] += step
+        jacobian[k] = (evaluate(bumped) - predicted) / step
+    delta = 1e-3
+    uniform = evaluate(theta, delta) - predicted
+    scale = max(float(np.max(np.abs(temperature))), 1.0)
+    weighted = evaluate(theta, delta * temperature / scale) - predicted
+    effective = weighted / uniform * scale if uniform != 0.0 else math.nan
+    return predicted, jacobian, effective
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """Whether the data so far pin the temperature dependence down.
+
+    Attributes
+    ----------
+    identifiable : slope interval excludes zero and the temperature range is wide enough
+    slope : dmu/dT at the middle of the range seen [1/K]
+    slope_std : its standard deviation [1/K]
+    slope_interval : 95 % interval [1/K]
+    temperature_range : (min, max) of the windows' effective temperatures [degC]
+    reason : one line saying why (not)
+    """
+
+    identifiable: bool
+    slope: float
+    slope_std: float
+    slope_interval: tuple[float, float]
+    temperature_range: tuple[float, float]
+    reason: str
+
+
+def identifiability(parametrisation: MuTParametrisation, state: MuTState, *,
+                    min_range: float = 10.0) -> Identifiability:
+    """Slope dmu/dT with its interval and the effective-temperature range seen.
+
+    Parameters
+    ----------
+    parametrisation, state : the calibration
+    min_range : narrower ranges of T_eff [K] cannot identify a slope
+
+    Notes
+    -----
+    The slope is ``(mu(T + 0.5) - mu(T - 0.5))`` at the middle of the range; its variance is
+    ``g P g^T`` with ``g`` its gradient in theta (delta method). In scale mode the temperature
+    dependence is the lab's and only its level is fitted.
+    """
+    if state.updates == 0 or not math.isfinite(state.temperature_min):
+        return Identifiability(False, 0.0, 0.0, (0.0, 0.0), (0.0, 0.0), "no window used yet")
+    low, high = state.temperature_min, state.temperature_max
+    middle = 0.5 * (low + high)
+
+    def slope_at(theta: Array) -> float:
+        values = parametrisation.mu(theta, np.array([middle - 0.5, middle + 0.5]))
+        return float(values[1] - values[0])
+
+    try:
+        slope = slope_at(state.theta)
+        gradient = np.empty(state.theta.size)
+        for k in range(state.theta.size):
+            step = max(abs(state.theta[k]) * 1e-4, 1e-8)
+            bumped = state.theta.copy()
+            bumped[k] += step
+            gradient[k] = (slope_at(bumped) - slope) / step
+    except ModelError as exc:
+        return Identifiability(False, 0.0, 0.0, (0.0, 0.0), (low, high),
+                               f"the law is not defined over the range seen: {exc}")
+    std = math.sqrt(max(float(gradient @ state.covariance @ gradient), 0.0))
+    interval = (slope - _Z95 * std, slope + _Z95 * std)
+    if parametrisation.lab is not None:
+        reason, ok = "scale mode: the temperature dependence is the lab fit's, only its level " \
+                     "is calibrated", False
+    elif high - low < min_range:
+        reason, ok = (f"temperature range seen {high - low:.1f} K is narrower than "
+                      f"{min_range:g} K"), False
+    elif interval[0] <= 0.0 <= interval[1]:
+        reason, ok = "the slope's 95 % interval includes zero", False
+    else:
+        reason, ok = (f"slope {slope:.3g} 1/K, 95 % interval {interval[0]:.3g}.."
+                      f"{interval[1]:.3g}, over {high - low:.1f} K"), True
+    return Identifiability(bool(ok), slope, std, interval, (low, high), reason)
+
+
+class MuTCalibrator:
+    """The live mu(T) calibration: feed windows, read parameters and identifiability.
+
+    Parameters
+    ----------
+    model : prepared well
+    temperature : annulus temperature per hole-grid element [degC]
+    prior : the configured law (family mode) or the lab fit (scale mode)
+    mode : ``"family"`` or ``"scale"``
+    prior_std : standard deviation of each parameter (default: max(|theta|, 0.01))
+    mask, base_mu : elements the law applies to, and the friction of the others
+    process_std : drift per window
+    model_std_fraction : model error per window, relative to the friction part of the value
+    method : torque-and-drag method
+    """
+
+    def __init__(self, model: WellModel, temperature: ArrayLike, prior: FrictionModel, *,
+                 mode: str = "family", prior_std: ArrayLike | None = None,
+                 mask: NDArray[np.bool_] | None = None, base_mu: float | Array = 0.0,
+                 process_std: ArrayLike = 0.0, model_std_fraction: float = 0.0,
+                 method: str = "soft-string") -> None:
+        if mode not in ("family", "scale"):
+            raise FitError(f"mu(T) calibration mode must be 'family' or 'scale', got {mode!r}")
+        self.model = model
+        self.temperature = np.asarray(temperature, dtype=np.float64)
+        if self.temperature.shape != (model.n_elements,) or not np.isfinite(
+                self.temperature).all():
+            raise FitError("need one finite annulus temperature per hole-grid element")
+        self.parametrisation, theta = (family_parametrisation(prior) if mode == "family"
+                                       else scale_parametrisation(prior))
+        spread = (np.maximum(np.abs(theta), 0.01) if prior_std is None
+                  else np.asarray(prior_std, dtype=np.float64))
+        self.state = initial_state(theta, spread)
+        self.mask = mask
+        self.base_mu = base_mu
+        self.process_std = process_std
+        self.model_std_fraction = model_std_fraction
+        self.method = method
+
+    def add_window(self, window: Window, *, iterations: int = 3) -> bool:
+        """Update with one window; False when it cannot be used (state unchanged)."""
+        if window.rejected is not None or window.state not in OPERATION_FOR_STATE:
+            return False
+        operation, quantity = OPERATION_FOR_STATE[window.state]
+        index = 1 if quantity == "torque" else 0
+        measured = window.torque if quantity == "torque" else window.hookload
+        se = window.torque_se if quantity == "torque" else window.hookload_se
+        if measured is None or se is None or not (math.isfinite(measured) and math.isfinite(se)):
+            return False
+        prior = predict(self.state, self.process_std)
+        estimate = prior.theta
+        posterior = prior
+        try:
+            for _ in range(max(1, iterations)):
+                predicted, jacobian, t_eff = measurement(
+                    self.model, self.parametrisation, estimate, self.temperature, operation,
+                    window.bit_depth, quantity_index=index, mask=self.mask,
+                    base_mu=self.base_mu, method=self.method)
+                friction_part = abs(float(jacobian @ estimate))
+                noise = se**2 + (self.model_std_fraction * friction_part) ** 2
+                posterior = update(prior, measured,
+                                   predicted + float(jacobian @ (prior.theta - estimate)),
+                                   jacobian, max(noise, 1e-12), t_eff)
+                if posterior is prior:
+                    return False
+                estimate = posterior.theta
+        except ModelError:
+            return False
+        if not np.isfinite(posterior.theta).all():
+            return False
+        self.state = posterior
+        return True
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Calibrated coefficients, keyed like the family's arguments."""
+        return dict(self.friction_model().coefficients)
+
+    def friction_model(self) -> FrictionModel:
+        """The calibrated law, as the model layer takes it."""
+        return self.parametrisation.friction_model(self.state.theta)
+
+    def mu_at(self, temperature: float) -> tuple[float, float]:
+        """Calibrated friction [-] at ``temperature`` [degC] and its standard deviation [-]."""
+        theta = self.state.theta
+        value = float(self.parametrisation.mu(theta, temperature))
+        gradient = np.empty(theta.size)
+        for k in range(theta.size):
+            step = max(abs(theta[k]) * 1e-4, 1e-8)
+            bumped = theta.copy()
+            bumped[k] += step
+            gradient[k] = (float(self.parametrisation.mu(bumped, temperature)) - value) / step
+        return value, math.sqrt(max(float(gradient @ self.state.covariance @ gradient), 0.0))
+
+    def message_fields(self) -> dict[str, object]:
+        """``estimate`` fields of kind ``mu_T`` (``mu``/``mu_std`` at the middle of the
+        temperature range seen; finite numbers only)."""
+        ident = identifiability(self.parametrisation, self.state)
+        std = np.sqrt(np.maximum(np.diag(self.state.covariance), 0.0))
+        middle = (0.5 * (ident.temperature_range[0] + ident.temperature_range[1])
+                  if ident.temperature_range != (0.0, 0.0) else 50.0)
+        try:
+            mu_middle, mu_std = self.mu_at(middle)
+        except ModelError:
+            mu_middle, mu_std = 0.0, 0.0
+        return {
+            "mu": mu_middle,
+            "mu_std": mu_std,
+            "model": self.friction_model().describe(),
+            "params": {k: float(v) for k, v in zip(self.parametrisation.names,
+                                                   self.state.theta, strict=True)},
+            "params_std": {k: float(v) for k, v in zip(self.parametrisation.names, std,
+                                                       strict=True)},
+            "mu_at_temperature_C": middle,
+            "temperature_C": [float(ident.temperature_range[0]),
+                              float(ident.temperature_range[1])],
+            "slope_per_K": ident.slope,
+            "slope_std_per_K": ident.slope_std,
+            "slope_interval_per_K": [ident.slope_interval[0], ident.slope_interval[1]],
+            "identifiable": bool(ident.identifiable),
+            "identifiability": ident.reason,
+        }
