@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
 from tdmon.model import _kernels
-from tdmon.model.survey import dogleg_angle, interpolate_survey, tangent_vectors
+from tdmon.model.survey import interpolate_survey, tangent_vectors
 from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
 
 __all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"]
@@ -181,10 +181,7 @@ class WellModel:
         grid = self.grid
         self.node_md = np.ascontiguousarray(grid.md)
         self.tangents = np.ascontiguousarray(tangent_vectors(grid.inclination, grid.azimuth))
-        self.dogleg = np.ascontiguousarray(
-            dogleg_angle(grid.inclination[:-1], grid.azimuth[:-1], grid.inclination[1:],
-                         grid.azimuth[1:])
-        )
+        self.dogleg = np.ascontiguousarray(grid.dogleg)
         self.element_geometry = _kernels.element_geometry(self.node_md, self.tangents)
         self.curve_kind = _curve_kinds(well, grid)
         self.run_break = _run_breaks(well, grid)
