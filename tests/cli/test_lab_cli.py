@@ -51,7 +51,7 @@ def test_json_has_raw_and_average_fits_of_every_model(capsys):
                                               "exponential", "saturation-growth"}
         assert sorted(f["rank"] for f in fits) == list(range(1, 7))
         for fit in fits:
-            assert KEYS <= set(fit), KEYS - set(fit)
+            assert set(fit) >= KEYS, KEYS - set(fit)
 
 
 def test_json_equals_the_calib_functions(capsys):
