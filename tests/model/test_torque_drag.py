@@ -348,3 +348,25 @@ def test_case_2_geothermal_local_friction(example_71: Well) -> None:
     # (23.45 / 21.64 kN m)
     assert thesis.surface_torque["rotating"] / (46.0 * KN) == pytest.approx(23.45 / 21.64,
                                                                             rel=5e-3)
+
+
+def test_aadnoy_uses_the_2010_interval_formulas_on_a_horizontal_turn() -> None:
+    # Horizontal well: 500 m straight below a 30 deg turn of 300 m at 90 deg inclination.
+    # Pick-up at the bottom of the turn: mu w L (eq 42 at 90 deg); over the turn the Aadnoy,
+    # Fazaelizadeh and Hareland (2010) formula F2 = F1 e^(mu theta) + w L (sin a2 - sin a1) /
+    # (a2 - a1) with a1 = a2 = 90 deg adds no weight: F2 = F1 e^(mu theta).
+    kop, radius = 500.0, 600.0
+    heel = kop + radius * math.pi / 2
+    md = [0.0, kop, heel, heel + 200.0, heel + 500.0, heel + 1000.0]
+    survey = minimum_curvature(md, [0, 0, 90, 90, 90, 90], [0, 0, 0, 0, 30, 30])
+    string = DrillString((StringComponent("DP", md[-1], 0.127, 0.1086, buoyed_weight=250.0),))
+    well = Well(survey, string, (HoleSection(0.0, md[-1], 0.2159, "open", 0.3),), Fluid(1200.0))
+    loads = torque_drag(well, md[-1], method="aadnoy")
+    turn_bottom = _at(loads.md, loads.axial_force["pick_up"], md[4])
+    turn_top = _at(loads.md, loads.axial_force["pick_up"], md[3])
+    assert turn_bottom == pytest.approx(0.3 * 250.0 * 500.0, rel=1e-9)
+    assert turn_top == pytest.approx(turn_bottom * math.exp(0.3 * math.radians(30.0)), rel=1e-9)
+    # rotating: no axial force in the horizontal, so the turn adds no torque (T = mu r |F1| theta)
+    torque = loads.torque["rotating"]
+    assert _at(loads.md, torque, md[3]) == pytest.approx(_at(loads.md, torque, md[4]), rel=1e-9)
+    assert _at(loads.md, torque, md[4]) == pytest.approx(0.3 * 250.0 * 500.0 * 0.0635, rel=1e-9)
