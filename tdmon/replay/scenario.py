@@ -293,21 +293,21 @@ def _friction(config: WellConfig, well: Well, source: Path, mode: str) -> tuple[
     if config.temperature is None:
         return config.element_friction(well, source), None, None, None
     grid = hole_grid(well)
-    temperature_config = config.temperature
     if mode == "geothermal":
-        temperature_config = temperature_config.model_copy(update={"model": "geothermal"})
+        config = config.model_copy(update={
+            "temperature": config.temperature.model_copy(update={"model": "geothermal"})})
     laws: list[FrictionModel | float] = []
     for index, section in enumerate(config.hole):
         if section.friction is None:
             raise ConfigError(str(source), f"hole[{index}].friction", "missing key")
         laws.append(section.friction.friction_model())
+    # the well file's own adapter, so that the truth is the profile `tdmon model` computes
+    depths = np.concatenate([[well.hole_top], grid.element_mid_md])
+    profile = config.annulus_temperature(well, depths, source)
     try:
-        depths = np.concatenate([[well.hole_top], grid.element_mid_md])
-        profile = temperature_config.profile(depths, well.survey.md, well.survey.tvd,
-                                             total_md=well.hole_bottom)
         mu = local_friction(laws, grid.element_section, profile.annulus[1:])
     except ModelError as exc:
-        raise ConfigError(str(source), "temperature", str(exc)) from exc
+        raise ConfigError(str(source), "hole", str(exc)) from exc
     return (np.asarray(mu, dtype=np.float64), np.asarray(profile.annulus[1:], dtype=np.float64),
             float(profile.pipe[0]), float(profile.annulus[0]))
 
