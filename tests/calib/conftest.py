@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from tdmon.calib.rigstate import DetectorState, RigSample, RigStateThresholds, detect
+from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings, add_sample, close
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.survey import minimum_curvature
 from tdmon.model.torque_drag import WellModel
@@ -196,3 +198,36 @@ def temperatures() -> Callable[[WellModel], Array]:
 @pytest.fixture(scope="session")
 def make_well() -> Callable[..., Well]:
     return example_71
+
+
+def session_windows(session: Session, thresholds: RigStateThresholds,
+                    settings: WindowSettings) -> tuple[list[str], list[Window]]:
+    """Run the detector and the window builder over a session: states and closed windows."""
+    prior = DetectorState()
+    acc = WindowAccumulator()
+    states: list[str] = []
+    windows: list[Window] = []
+    for i in range(session.t.size):
+        sample = RigSample(float(session.t[i]), float(session.hookload[i]),
+                           float(session.bit_depth[i]), float(session.block_position[i]),
+                           float(session.rpm[i]), float(session.flow[i]), None,
+                           float(session.hole_depth[i]), float(session.torque[i]))
+        prior, detection = detect(prior, sample, thresholds)
+        states.append(detection.state)
+        acc, window = add_sample(acc, sample, detection, settings)
+        if window is not None:
+            windows.append(window)
+    acc, window = close(acc, settings)
+    if window is not None:
+        windows.append(window)
+    return states, windows
+
+
+@pytest.fixture(scope="session")
+def windows_of() -> Callable[..., tuple[list[str], list[Window]]]:
+    def run(session: Session, thresholds: RigStateThresholds | None = None,
+            settings: WindowSettings | None = None) -> tuple[list[str], list[Window]]:
+        return session_windows(session, thresholds or RigStateThresholds(block_weight=BLOCK_WEIGHT),
+                               settings or WindowSettings(min_samples=5))
+
+    return run

@@ -1,0 +1,193 @@
+"""Rig-state detection and steady windows: hand cases, synthetic trips scored against the
+generator's truth, and bad input (gaps, spikes, a stuck sensor, the depth-tracking artefact)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tdmon.calib.rigstate import (
+    STATES,
+    DetectorState,
+    RigSample,
+    RigStateThresholds,
+    classify,
+    detect,
+    detect_series,
+)
+from tdmon.calib.windows import WindowAccumulator, WindowSettings, add_sample, close, summarise
+from tdmon.model.torque_drag import WellModel
+
+TH = RigStateThresholds(block_weight=400e3)
+RPM_100 = 100 * 2 * math.pi / 60
+
+
+@pytest.mark.parametrize(
+    ("hookload", "velocity", "rpm", "circulating", "off_bottom", "expected"),
+    [
+        (None, 0.0, 0.0, False, 100.0, "unknown"),
+        (450e3, -0.5, 0.0, False, 100.0, "in_slips"),  # empty block moving: still in slips
+        (1.4e6, -0.5, 0.0, False, 100.0, "pick_up"),
+        (1.0e6, 0.5, 0.0, False, 100.0, "slack_off"),
+        (1.2e6, 0.0, RPM_100, False, 100.0, "rotating_off_bottom"),
+        (1.0e6, 0.2, RPM_100, True, 100.0, "reaming"),
+        (1.4e6, -0.2, RPM_100, True, 100.0, "back_reaming"),
+        (1.0e6, 0.001, RPM_100, True, 0.2, "drilling"),
+        (1.2e6, 0.0, 0.0, True, 100.0, "circulating"),
+        (1.2e6, 0.0, 0.0, False, 100.0, "static"),
+        (1.2e6, 0.0, 0.02, False, 100.0, "static"),  # Volve's 0.23 rev/min offset
+    ],
+)
+def test_classify_hand_cases(hookload: float | None, velocity: float, rpm: float,
+                             circulating: bool, off_bottom: float, expected: str) -> None:
+    assert classify(hookload, velocity, rpm, circulating, off_bottom, TH) == expected
+    assert expected in STATES
+
+
+def test_circulating_from_pressure_when_flow_is_missing() -> None:
+    prior = DetectorState()
+    for t in range(3):
+        prior, result = detect(prior, RigSample(float(t), 1.2e6, 2000.0, spp=50e5), TH)
+    assert result.state == "circulating"
+
+
+def test_trip_out_states_match_truth(model_open: WellModel, trip: Any,
+                                     windows_of: Any
+                                     ) -> None:
+    mu = np.full(model_open.n_elements, 0.25)
+    session = trip(model_open, mu, start=4200.0, end=3000.0, rotate_every=3)
+    states, _ = windows_of(session)
+    agreement = float(np.mean(np.array(states) == session.truth))
+    assert agreement >= 0.95
+
+
+def test_trip_in_states_match_truth(model_open: WellModel, trip: Any,
+                                    windows_of: Any
+                                    ) -> None:
+    mu = np.full(model_open.n_elements, 0.25)
+    session = trip(model_open, mu, start=2500.0, end=3600.0, seed=4)
+    states, _ = windows_of(session)
+    agreement = float(np.mean(np.array(states) == session.truth))
+    assert agreement >= 0.95
+
+
+def test_steady_samples_leave_out_break_over_and_acceleration(
+        model_open: WellModel, trip: Any) -> None:
+    mu = np.full(model_open.n_elements, 0.25)
+    s = trip(model_open, mu, start=4200.0, end=4000.0)
+    states, steady = detect_series(s.t, s.hookload, s.bit_depth, TH,
+                                   block_position=s.block_position)
+    velocity = np.abs(np.diff(s.bit_depth, prepend=s.bit_depth[0]))
+    pulls = (states == "pick_up") & steady
+    assert pulls.sum() > 50
+    # no steady sample while the string accelerates (speed below the 0.5 m/s plateau) or in
+    # the first 5 s of a pull, where the generator puts the break-over peak
+    assert np.all(velocity[pulls] > 0.35)
+    starts = np.flatnonzero((states == "pick_up") & (np.roll(states, 1) != "pick_up"))
+    for start in starts:
+        assert not steady[start:start + 5].any()
+
+
+def _feed(samples: list[RigSample], settings: WindowSettings,
+          thresholds: RigStateThresholds = TH) -> list[Any]:
+    prior, acc, windows = DetectorState(), WindowAccumulator(), []
+    for sample in samples:
+        prior, detection = detect(prior, sample, thresholds)
+        acc, window = add_sample(acc, sample, detection, settings)
+        if window is not None:
+            windows.append(window)
+    acc, window = close(acc, settings)
+    if window is not None:
+        windows.append(window)
+    return windows
+
+
+def _pull(t0: float, n: int, hook: float, depth0: float, speed: float = -0.5,
+          noise: float = 3e3, seed: int = 0) -> list[RigSample]:
+    rng = np.random.default_rng(seed)
+    return [RigSample(t0 + k, hook + noise * rng.standard_normal(), depth0 + speed * k,
+                      block_position=1.0 - speed * k) for k in range(n)]
+
+
+def test_depth_tracking_artefact_never_makes_a_window() -> None:
+    # Volve trip in, 01:35-02:20Z: the bit depth advances while the hook load stays at the
+    # in-slips level (no block position sent here, the worst case)
+    samples = [RigSample(float(k), 405e3 + 1e3 * math.sin(k), 2000.0 + 0.6 * k)
+               for k in range(120)]
+    prior = DetectorState()
+    for sample in samples:
+        prior, detection = detect(prior, sample, TH)
+        assert detection.state == "in_slips"
+    windows = _feed(samples, WindowSettings(min_samples=3))
+    assert all(w.state == "in_slips" for w in windows)
+
+
+def test_depth_jump_without_block_is_not_steady() -> None:
+    samples = _pull(0.0, 40, 1.4e6, 3000.0)
+    samples = [RigSample(s.t, s.hookload, s.bit_depth) for s in samples]  # no block channel
+    jumped = [RigSample(s.t, s.hookload, (s.bit_depth or 0.0) - (30.0 if s.t >= 20 else 0.0))
+              for s in samples]
+    prior = DetectorState()
+    flags = []
+    for sample in jumped:
+        prior, detection = detect(prior, sample, TH)
+        flags.append(detection.steady)
+    assert not flags[20]  # the 30 m jump is a 30 m/s^2 acceleration
+
+
+def test_gap_splits_windows_and_restarts_settling() -> None:
+    first = _pull(0.0, 30, 1.4e6, 3000.0)
+    second = _pull(200.0, 30, 1.4e6, 2985.0, seed=1)  # 170 s of nothing in between
+    windows = _feed(first + second, WindowSettings(min_samples=3, max_travel=100.0))
+    pulls = [w for w in windows if w.state == "pick_up"]
+    assert len(pulls) == 2
+    assert all(w.t_start - 200.0 >= 5.0 or w.t_end < 100.0
+               for w in pulls)
+
+
+def test_spikes_are_dropped_from_a_window() -> None:
+    samples = _pull(0.0, 40, 1.4e6, 3000.0)
+    # a 40 kN spike stays inside the detector's step tolerance, so the window must drop it
+    spiked = [RigSample(s.t, (s.hookload or 0.0) + (40e3 if s.t == 20.0 else 0.0),
+                        s.bit_depth, s.block_position) for s in samples]
+    windows = _feed(spiked, WindowSettings(min_samples=3, max_travel=100.0))
+    pull = next(w for w in windows if w.state == "pick_up")
+    assert "spikes_removed:1" in pull.flags
+    assert abs(pull.hookload - 1.4e6) < 3e3
+
+
+def test_stuck_hookload_rejects_the_window() -> None:
+    samples = [RigSample(float(k), 1.4e6, 3000.0 - 0.5 * k, block_position=1.0 + 0.5 * k)
+               for k in range(40)]
+    windows = _feed(samples, WindowSettings(min_samples=3, max_travel=100.0))
+    pull = next(w for w in windows if w.state == "pick_up")
+    assert pull.rejected == "hookload_stuck"
+
+
+def test_bit_depth_not_following_block_is_low_confidence() -> None:
+    samples = [RigSample(float(k), 1.4e6 + 2e3 * math.sin(k), 3000.0,  # depth frozen
+                         block_position=1.0 + 0.5 * k) for k in range(40)]
+    windows = _feed(samples, WindowSettings(min_samples=3, max_travel=100.0))
+    pull = next(w for w in windows if w.state == "pick_up")
+    assert pull.low_confidence
+    assert "depth_not_following_block" in pull.flags
+
+
+def test_single_sample_window_has_the_noise_floor() -> None:
+    sample = RigSample(0.0, 1.6e6, 2500.0, block_position=5.0)
+    window = summarise("pick_up", (sample,), (-0.3,), WindowSettings())
+    assert window is not None
+    assert window.n == 1
+    assert window.hookload_se == pytest.approx(0.005 * 1.6e6)
+
+
+def test_nan_channels_give_unknown_and_no_window() -> None:
+    samples = [RigSample(float(k), math.nan, math.nan) for k in range(20)]
+    prior = DetectorState()
+    for sample in samples:
+        prior, detection = detect(prior, sample, TH)
+        assert detection.state == "unknown" and not detection.steady
+    assert _feed(samples, WindowSettings()) == []
