@@ -42,7 +42,7 @@ def session(scenario: Scenario) -> Session:
 
 def _with_noise(scenario: Scenario, channel: str = "hookload", **settings: float) -> Scenario:
     noise = dict(scenario.noise)
-    noise[channel] = NoiseSettings(**settings)  # type: ignore[arg-type]
+    noise[channel] = NoiseSettings(**settings)
     return dataclasses.replace(scenario, noise=noise)
 
 
@@ -173,8 +173,9 @@ def test_tight_spot_overpull_and_set_down(scenario: Scenario) -> None:
     spots = (TightSpot(md=4110.0, length=5.0, force=150e3),)
     session = simulate_session(dataclasses.replace(scenario, tight_spots=spots))
     plain = simulate_session(scenario)
-    extra = session.truth["hookload"] - plain.truth["hookload"]
-    bit = session.truth["bit_depth"]
+    extra = np.asarray(session.truth["hookload"], dtype=float) - np.asarray(
+        plain.truth["hookload"], dtype=float)
+    bit = np.asarray(session.truth["bit_depth"], dtype=float)
     state = session.truth["state"]
     inside = (bit >= 4110.0) & (bit <= 4115.0)
     assert np.allclose(extra[inside & (state == "pick_up")], 150e3)
