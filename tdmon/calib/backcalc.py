@@ -164,9 +164,13 @@ def back_calculate(
     if not (math.isfinite(slope) and slope != 0.0):
         raise FitError(f"{operation} {quantity} does not depend on friction at "
                        f"{bit_depth:.1f} m (vertical string or no free element)")
+    mu_std = float(measured_se / abs(slope))
+    if not math.isfinite(mu_std):
+        raise FitError(f"the uncertainty of {operation} friction at {bit_depth:.1f} m is not "
+                       "finite (measurement standard error too large)")
     return FrictionEstimate(
         operation=operation, quantity=quantity, bit_depth=float(bit_depth), mu=mu,
-        mu_std=float(measured_se / abs(slope)), measured=float(measured),
+        mu_std=mu_std, measured=float(measured),
         measured_se=float(measured_se), sensitivity=float(slope), section=section,
         evaluations=calls,
     )
