@@ -1,0 +1,106 @@
+"""Live mu(T) calibration: the Glydril slope (0.0013 /K, Kaarstad et al. 2009) recovered within
+25 % over a trip from TD on Example 7.1 with a geothermal profile (REFERENCE.md 2-3), the
+identifiability statement, scale mode on a lab fit, and results that feed the model as is."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tdmon.calib.mu_calibration import (
+    MuTCalibrator,
+    MuTState,
+    family_parametrisation,
+    identifiability,
+    initial_state,
+    scale_parametrisation,
+    update,
+)
+from tdmon.calib.windows import Window
+from tdmon.model.friction import KAARSTAD_2009, FrictionModel
+from tdmon.model.torque_drag import WellModel
+
+GLYDRIL = KAARSTAD_2009["glydril"]  # mu = 0.23 + 0.0013 T
+
+
+@pytest.fixture(scope="module")
+def glydril_trip(model_open: WellModel, trip: Any, windows_of: Any,
+                 temperatures: Any) -> tuple[np.ndarray, list[Window]]:
+    temperature = temperatures(model_open)
+    mu = GLYDRIL(temperature)
+    session = trip(model_open, mu, start=4200.0, end=1700.0, seed=31)
+    _, windows = windows_of(session)
+    return temperature, [w for w in windows if w.state == "pick_up" and w.rejected is None]
+
+
+def test_slope_recovered_within_25_percent(model_open: WellModel,
+                                           glydril_trip: tuple[np.ndarray, list[Window]]
+                                           ) -> None:
+    temperature, windows = glydril_trip
+    # a prior that knows nothing about temperature: constant 0.25, slope 0 +/- 0.005
+    calibrator = MuTCalibrator(model_open, temperature, FrictionModel("linear",
+                               {"a": 0.25, "b": 0.0}), prior_std=[0.1, 0.005])
+    used = sum(calibrator.add_window(w) for w in windows)
+    assert used >= 60
+    params = calibrator.params
+    assert params["b"] == pytest.approx(0.0013, rel=0.25)
+    assert params["a"] == pytest.approx(0.23, abs=0.03)
+    verdict = identifiability(calibrator.parametrisation, calibrator.state)
+    assert verdict.identifiable, verdict.reason
+    assert verdict.slope_interval[0] > 0.0
+    low, high = verdict.temperature_range
+    assert high - low > 10.0
+    # what the fit returns is what the model takes
+    model = FrictionModel("linear", params)
+    assert float(model(60.0)) == pytest.approx(params["a"] + 60.0 * params["b"])
+    fields = calibrator.message_fields()
+    assert fields["identifiable"] is True
+    assert all(math.isfinite(float(x)) for x in (fields["mu"], fields["mu_std"]))  # type: ignore[arg-type]
+
+
+def test_few_windows_at_one_depth_are_not_identifiable(
+        model_open: WellModel, glydril_trip: tuple[np.ndarray, list[Window]]) -> None:
+    temperature, windows = glydril_trip
+    calibrator = MuTCalibrator(model_open, temperature,
+                               FrictionModel("linear", {"a": 0.25, "b": 0.0}),
+                               prior_std=[0.1, 0.005])
+    for window in windows[:3]:
+        calibrator.add_window(window)
+    verdict = identifiability(calibrator.parametrisation, calibrator.state)
+    assert not verdict.identifiable
+    assert "narrower" in verdict.reason or "includes zero" in verdict.reason
+    assert verdict.temperature_range[1] - verdict.temperature_range[0] < 10.0
+
+
+def test_scale_on_a_lab_fit(model_open: WellModel,
+                            glydril_trip: tuple[np.ndarray, list[Window]]) -> None:
+    temperature, windows = glydril_trip
+    lab = FrictionModel("linear", {"a": 0.8 * 0.23, "b": 0.8 * 0.0013})  # lab reads 20 % low
+    calibrator = MuTCalibrator(model_open, temperature, lab, mode="scale")
+    for window in windows[::3]:
+        calibrator.add_window(window)
+    assert calibrator.params["a"] == pytest.approx(0.23, rel=0.03)
+    assert calibrator.state.theta[0] == pytest.approx(1.25, rel=0.03)
+    verdict = identifiability(calibrator.parametrisation, calibrator.state)
+    assert not verdict.identifiable and "scale mode" in verdict.reason
+
+
+def test_update_by_hand_and_missing_measurement() -> None:
+    parametrisation, theta = family_parametrisation(FrictionModel("linear", {"a": 0.2, "b": 0.0}))
+    assert parametrisation.names == ("a", "b")
+    state = initial_state(theta, [0.1, 0.01])
+    posterior = update(state, 1010.0, 1000.0, np.array([1000.0, 0.0]), 100.0, 40.0)
+    # only a is seen: K_a = 0.01 * 1000 / (0.01 * 1e6 + 100)
+    gain = 10.0 / 10100.0
+    assert posterior.theta[0] == pytest.approx(0.2 + gain * 10.0)
+    assert posterior.theta[1] == 0.0
+    assert posterior.temperature_min == posterior.temperature_max == 40.0
+    assert update(state, math.nan, 1000.0, np.array([1.0, 1.0]), 1.0) is state
+    fresh = MuTState(theta, np.eye(2))
+    assert not identifiability(parametrisation, fresh).identifiable
+    scale, one = scale_parametrisation(GLYDRIL)
+    assert scale.names == ("scale",) and one[0] == 1.0
+    assert float(scale.mu([2.0], 10.0)) == pytest.approx(2 * (0.23 + 0.013))
