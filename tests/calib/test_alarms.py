@@ -1,0 +1,214 @@
+"""Alarms (band trend, limits, friction jump, sensors) and the daemon steps around the
+estimators: every message matches its JSON Schema and no NaN or inf is ever emitted, also for
+garbage frames (hypothesis)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from typing import Any
+
+import jsonschema
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tdmon.calib.alarms import (
+    BandSettings,
+    BandTrendState,
+    JumpSettings,
+    SensorSettings,
+    SensorState,
+    friction_jump,
+    limit_alarms,
+    sensor_alarms,
+    update_band_trend,
+)
+from tdmon.calib.rigstate import RigStateThresholds
+from tdmon.calib.windows import WindowSettings
+from tdmon.daemon.calibrate import AlarmStep, CalibrationSettings, CalibrationStep, RigStateStep
+from tdmon.daemon.pipeline import Frame
+from tdmon.model.friction import KAARSTAD_2009
+from tdmon.model.string import DrillString
+from tdmon.model.torque_drag import WellModel
+from tdmon.record.schemas import schema_for
+
+
+def test_band_spike_is_not_a_trend_but_an_offset_is() -> None:
+    band = BandSettings(smoothing=0.1, threshold=3.0, min_samples=10)
+    state = BandTrendState()
+    alarms = []
+    for k in range(50):  # one 20-sigma spike among in-band samples
+        measured = 1.62e6 if k == 25 else 1.50e6
+        state, alarm = update_band_trend(state, float(k), measured, 1.4e6, 1.55e6, 5e3, band)
+        alarms.append(alarm)
+    assert not any(alarms)
+    for k in range(50, 120):  # then a sustained overpull 8 sigma above the band
+        state, alarm = update_band_trend(state, float(k), 1.59e6, 1.4e6, 1.55e6, 5e3, band)
+        alarms.append(alarm)
+    fired = [a for a in alarms if a is not None]
+    assert len(fired) == 1  # once per excursion
+    assert fired[0].kind == "band" and fired[0].limit == 1.55e6
+    assert fired[0].t >= 59.0  # needs min_samples beyond the band first
+    state, alarm = update_band_trend(state, 200.0, math.nan, 1.4e6, 1.55e6, 5e3, band)
+    assert alarm is None
+
+
+def test_friction_jump() -> None:
+    history = (0.20, 0.21, 0.19, 0.20, 0.205)
+    jump = JumpSettings()
+    assert friction_jump(history, 0.215, 0.005, 1.0, jump, operation="pick_up",
+                         bit_depth=3000.0) is None
+    alarm = friction_jump(history, 0.30, 0.005, 1.0, jump, operation="pick_up",
+                          bit_depth=3000.0)
+    assert alarm is not None and alarm.kind == "friction_jump"
+    assert alarm.value == 0.30 and alarm.limit == pytest.approx(0.25)
+    # an uncertain estimate does not raise it
+    assert friction_jump(history, 0.30, 0.05, 1.0, jump, operation="pick_up",
+                         bit_depth=3000.0) is None
+    assert friction_jump(history[:2], 0.5, 0.005, 1.0, jump, operation="pick_up",
+                         bit_depth=3000.0) is None
+
+
+def test_limit_alarms_warn_then_critical(well_open: Any) -> None:
+    # give the drill pipe a yield strength that puts pick-up tension near its limit
+    pipe = well_open.string.components[1]
+    area = pipe.area
+    model = WellModel(well_open)
+    loads = model.loads(4200.0, 0.25)
+    top_tension = float(loads.axial_force["pick_up"][0])
+    for fraction, severity in ((0.85, "warning"), (1.1, "critical")):
+        weak = replace(pipe, yield_strength=top_tension / (fraction * area))
+        well = replace(well_open, string=DrillString((well_open.string.components[0], weak)))
+        alarms = limit_alarms(well, WellModel(well).loads(4200.0, 0.25), "pick_up", 5.0)
+        tensile = [a for a in alarms if a.kind == "limit_tensile"]
+        assert len(tensile) == 1
+        assert tensile[0].severity == severity
+        assert tensile[0].value == pytest.approx(top_tension)
+    assert limit_alarms(well_open, loads, "pick_up", 5.0) == []  # no yield strength given
+
+
+def test_sensor_alarms() -> None:
+    s = SensorSettings(frozen_samples=5)
+    state = SensorState()
+    state, alarms = sensor_alarms(state, 0.0, {"hookload": 1e6}, ("torque",), False, s)
+    assert [a.kind for a in alarms] == ["sensor_stale"]
+    state, alarms = sensor_alarms(state, 1.0, {"hookload": 1e6}, ("torque",), False, s)
+    assert alarms == []  # reported once
+    state, alarms = sensor_alarms(state, 2.0, {"hookload": -5e3}, (), False, s)
+    assert [(a.kind, a.severity) for a in alarms] == [("sensor_hookload_implausible",
+                                                       "critical")]
+    kinds = []
+    for k in range(10):
+        state, alarms = sensor_alarms(state, 3.0 + k, {"hookload": 1.2e6}, (), True, s)
+        kinds += [a.kind for a in alarms]
+    assert kinds == ["sensor_hookload_frozen"]
+    state, alarms = sensor_alarms(state, 20.0, {"bit_depth": 3010.0, "hole_depth": 3000.0},
+                                  (), False, s)
+    assert [a.kind for a in alarms] == ["sensor_bit_below_hole"]
+
+
+def _frames(session: Any) -> list[Frame]:
+    frames = []
+    for i in range(session.t.size):
+        values = {"hookload": session.hookload[i], "bit_depth": session.bit_depth[i],
+                  "block_position": session.block_position[i], "rpm": session.rpm[i],
+                  "torque": session.torque[i], "hole_depth": session.hole_depth[i],
+                  "flow_in": session.flow[i]}
+        frames.append(Frame(t=float(session.t[i]), log_time_ns=int(session.t[i] * 1e9),
+                            values={k: float(v) for k, v in values.items()}, ages={}))
+    return frames
+
+
+def _steps(model: WellModel, temperature: np.ndarray | None = None
+           ) -> tuple[RigStateStep, CalibrationStep, AlarmStep]:
+    rig = RigStateStep(RigStateThresholds(block_weight=model.well.block_weight))
+    calibrate = CalibrationStep(model, rig, CalibrationSettings(
+        windows=WindowSettings(min_samples=5), prior_mu=0.25),
+        temperature=temperature, friction_law=KAARSTAD_2009["glydril"]
+        if temperature is not None else None)
+    return rig, calibrate, AlarmStep()
+
+
+def _check(messages: list[tuple[str, dict[str, Any]]]) -> None:
+    for name, message in messages:
+        json.dumps(message, allow_nan=False)  # raises on NaN or inf
+        jsonschema.validate(message, schema_for(f"/tdmon/{name}"))
+
+
+def test_daemon_steps_emit_valid_estimates(model_cased: WellModel, trip: Any,
+                                           temperatures: Any) -> None:
+    kind = model_cased.grid.element_kind
+    session = trip(model_cased, np.where(kind == "cased", 0.2, 0.3), start=4200.0, end=2500.0,
+                   seed=41, rotate_every=5)
+    steps = _steps(model_cased, temperatures(model_cased))
+    messages: list[tuple[str, dict[str, Any]]] = []
+
+    def emit(name: str, message: dict[str, Any]) -> None:
+        messages.append((name, message))
+
+    for frame in _frames(session):
+        for step in steps:
+            step.on_frame(frame, emit)
+    for step in steps:
+        step.close(emit)
+    _check(messages)
+    estimates = [m for n, m in messages if n == "estimate"]
+    kinds = {m["kind"] for m in estimates}
+    assert kinds == {"window", "profile", "mu_T"}
+    windows = [m for m in estimates if m["kind"] == "window"]
+    # tripping out from below the shoe: open hole is solved again once cased friction is known
+    opened = [m for m in windows if m["section"] == "open" and m["operation"] == "pick_up"]
+    cased = [m for m in windows if m["section"] == "cased" and m["operation"] == "pick_up"]
+    assert opened and all(m.get("revised") for m in opened)
+    assert np.median([m["mu"] for m in opened]) == pytest.approx(0.3, abs=0.01)
+    assert np.median([m["mu"] for m in cased]) == pytest.approx(0.2, abs=0.01)
+    calibrate = steps[1]
+    assert calibrate.block_weight.estimate is not None
+    assert calibrate.block_weight.estimate.value == pytest.approx(400e3, rel=0.01)
+
+
+def test_friction_rise_raises_a_jump_alarm(model_open: WellModel, trip: Any) -> None:
+    first = trip(model_open, np.full(model_open.n_elements, 0.2), start=4200.0, end=3800.0,
+                 seed=51)
+    second = trip(model_open, np.full(model_open.n_elements, 0.3), start=3800.0, end=3500.0,
+                  seed=52, t0=float(first.t[-1]) + 1.0)
+    steps = _steps(model_open)
+    messages: list[tuple[str, dict[str, Any]]] = []
+    for session in (first, second):
+        for frame in _frames(session):
+            for step in steps:
+                step.on_frame(frame, lambda n, m: messages.append((n, m)))
+    _check(messages)
+    jumps = [m for n, m in messages if n == "alarm" and m["kind"] == "friction_jump"]
+    assert jumps and jumps[0]["t"] > first.t[-1]
+
+
+channel_value = st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True, width=64))
+
+
+@settings(max_examples=150, deadline=None)
+@given(rows=st.lists(st.fixed_dictionaries({
+    "hookload": channel_value, "bit_depth": channel_value, "block_position": channel_value,
+    "rpm": channel_value, "torque": channel_value, "hole_depth": channel_value,
+    "dt": st.floats(min_value=-5.0, max_value=100.0)}), min_size=1, max_size=60))
+def test_garbage_frames_never_emit_nan(model_open: WellModel,
+                                       rows: list[dict[str, float | None]]) -> None:
+    steps = _steps(model_open)
+    messages: list[tuple[str, dict[str, Any]]] = []
+    t = 1.6e9
+    for row in rows:
+        t += float(row.pop("dt") or 0.0)
+        values = {k: float(v) for k, v in row.items() if v is not None}
+        frame = Frame(t=t, log_time_ns=int(t * 1e9), values=values, ages={},
+                      stale=("torque",) if "torque" not in values else ())
+        for step in steps:
+            step.on_frame(frame, lambda n, m: messages.append((n, m)))
+    for step in steps:
+        step.close(lambda n, m: messages.append((n, m)))
+    for name, message in messages:
+        json.dumps(message, allow_nan=False)
+        if name != "state":  # bit_depth_m may be absent in a garbage frame, never NaN
+            jsonschema.validate(message, schema_for(f"/tdmon/{name}"))
