@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +45,7 @@ __all__ = [
     "InjectedFault",
     "NoiseSettings",
     "Phase",
+    "Position",
     "RigSettings",
     "Scenario",
     "SensorFault",
@@ -222,6 +224,15 @@ class Scenario:
     faults: tuple[SensorFault, ...] = ()
 
 
+class Position(NamedTuple):
+    """Segment index and bit depth, hole depth, block position [m] at some times."""
+
+    segment: NDArray[np.int64]
+    bit_depth: Array
+    hole_depth: Array
+    block_position: Array
+
+
 @dataclass(frozen=True)
 class Timeline:
     """Piecewise-linear rig motion: segment ``i`` runs from ``t0[i]`` to ``t1[i]`` [s] in
@@ -251,18 +262,18 @@ class Timeline:
         index = np.searchsorted(self.t1, t, side="right")
         return np.clip(index, 0, self.t1.size - 1).astype(np.int64)
 
-    def at(self, t: Array) -> dict[str, Array]:
-        """Bit depth, hole depth, block position [m] and their segment index at times ``t`` [s]."""
+    def at(self, t: Array) -> Position:
+        """Where the bit, the hole bottom and the block are at times ``t`` [s]."""
         i = self.segment_at(t)
         span = self.t1[i] - self.t0[i]
         frac = np.where(span > 0, (t - self.t0[i]) / np.where(span > 0, span, 1.0), 0.0)
         frac = np.clip(frac, 0.0, 1.0)
-        return {
-            "segment": i.astype(np.float64),
-            "bit_depth": self.bit0[i] + frac * (self.bit1[i] - self.bit0[i]),
-            "hole_depth": self.hole0[i] + frac * (self.hole1[i] - self.hole0[i]),
-            "block_position": self.block0[i] + frac * (self.block1[i] - self.block0[i]),
-        }
+        return Position(
+            segment=i,
+            bit_depth=self.bit0[i] + frac * (self.bit1[i] - self.bit0[i]),
+            hole_depth=self.hole0[i] + frac * (self.hole1[i] - self.hole0[i]),
+            block_position=self.block0[i] + frac * (self.block1[i] - self.block0[i]),
+        )
 
     def speed(self, i: NDArray[np.int64]) -> Array:
         """Bit speed of segments ``i``, positive going deeper [m/s]."""
@@ -490,14 +501,14 @@ class _Loads:
 
     def at(self, timeline: Timeline, t: Array) -> tuple[Array, Array]:
         where = timeline.at(t)
-        index = where["segment"].astype(np.int64)
+        index = where.segment
         speed = timeline.speed(index)
         hookload = np.empty(t.size)
         torque = np.empty(t.size)
         for k in range(t.size):
             i = int(index[k])
             hookload[k], torque[k] = self.one(
-                timeline.state[i], float(where["bit_depth"][k]), float(speed[k]),
+                timeline.state[i], float(where.bit_depth[k]), float(speed[k]),
                 float(timeline.rpm[i]), float(timeline.wob[i]))
         return hookload, torque
 
@@ -551,12 +562,12 @@ class _Loads:
 def _channel_truth(name: str, scenario: Scenario, timeline: Timeline, loads: _Loads,
                    t: Array) -> Array:
     where = timeline.at(t)
-    index = where["segment"].astype(np.int64)
+    index = where.segment
     if name in ("hookload", "torque"):
         hookload, torque = loads.at(timeline, t)
         return hookload if name == "hookload" else torque
     if name in ("bit_depth", "hole_depth", "block_position"):
-        return where[name]
+        return np.asarray(getattr(where, name), dtype=np.float64)
     if name == "rpm":
         return timeline.rpm[index]
     if name == "flow_in":
@@ -658,10 +669,10 @@ def _expected_alarms(scenario: Scenario, timeline: Timeline, truth_t: Array,
 def _truth(scenario: Scenario, timeline: Timeline, loads: _Loads, tau: Array,
            element_md: Array, element_length: Array) -> dict[str, NDArray[np.generic]]:
     where = timeline.at(tau)
-    index = where["segment"].astype(np.int64)
+    index = where.segment
     hookload, torque = loads.at(timeline, tau)
     state = np.asarray([timeline.state[i] for i in index], dtype=np.str_)
-    bit = where["bit_depth"]
+    bit = where.bit_depth
     mus = {"mu_pick_up": np.full(tau.size, np.nan), "mu_slack_off": np.full(tau.size, np.nan),
            "mu_rotating": np.full(tau.size, np.nan), "mu_mean": np.full(tau.size, np.nan)}
     cache: dict[float, tuple[float, float, float, float]] = {}
@@ -679,8 +690,8 @@ def _truth(scenario: Scenario, timeline: Timeline, loads: _Loads, tau: Array,
                             float(np.sum(loads.mu * inside) / max(np.sum(inside), _EPS)))
         for key, value in zip(mus, cache[depth], strict=True):
             mus[key][k] = value
-    return {"state": state, "bit_depth": bit, "hole_depth": where["hole_depth"],
-            "block_position": where["block_position"], "hookload": hookload, "torque": torque,
+    return {"state": state, "bit_depth": bit, "hole_depth": where.hole_depth,
+            "block_position": where.block_position, "hookload": hookload, "torque": torque,
             **mus}
 
 

@@ -160,8 +160,8 @@ def session_messages(session: Session) -> list[MessageRecord]:
     for t, state in session.state_changes:
         where = timeline_at(np.asarray([t - start]))
         records.append((_ns(t), "/truth/state", {
-            "t": t, "state": state, "bit_depth_m": float(where["bit_depth"][0]),
-            "hole_depth_m": float(where["hole_depth"][0])}))
+            "t": t, "state": state, "bit_depth_m": float(where.bit_depth[0]),
+            "hole_depth_m": float(where.hole_depth[0])}))
     truth = session.truth
     for k, t in enumerate(session.truth_t.tolist()):
         state = str(truth["state"][k])
