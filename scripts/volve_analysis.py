@@ -324,7 +324,8 @@ def weight_checked_model(model: WellModel, inside_density: float) -> WellModel:
 
 
 def plot(out_analysis: Analysis, in_analysis: Analysis, out_model: WellModel,
-         in_model: WellModel, folder: Path) -> list[Path]:
+         in_model: WellModel, folder: Path,
+         checked: tuple[Analysis, WellModel, float] | None = None) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -354,7 +355,7 @@ def plot(out_analysis: Analysis, in_analysis: Analysis, out_model: WellModel,
         share, _, _ = agreement(rec, analysis.states)
         ax.set_title(f"{title}: detected state, {100 * share:.1f} % agree with rig codes")
         ax.set_ylabel("hook load [kN]")
-        ax.legend(fontsize=7, ncol=4, loc="upper right")
+        ax.legend(fontsize=7, ncol=4, loc="center right")
     axes[1].set_xlabel("hours from start of record")
     fig.tight_layout()
     path = folder / "volve-states.png"
@@ -364,13 +365,18 @@ def plot(out_analysis: Analysis, in_analysis: Analysis, out_model: WellModel,
 
     # 2. per-joint friction
     fig, ax = plt.subplots(figsize=(9, 5))
-    for analysis, op, colour in ((out_analysis, "pick_up", "tab:red"),
-                                 (in_analysis, "slack_off", "tab:blue")):
+    series = [(out_analysis, "pick_up", "tab:red", "trip out"),
+              (in_analysis, "slack_off", "tab:blue", "trip in, one fluid")]
+    if checked is not None:
+        series.append((checked[0], "slack_off", "tab:cyan",
+                       f"trip in, inside fluid {checked[2]:.0f} kg/m3 (weight check)"))
+    for analysis, op, colour, label in series:
         joints = per_joint(analysis, op)
         if len(joints):
             ax.errorbar(joints["bit_depth"], joints["mu"], yerr=joints["mu_std"], fmt="o",
-                        ms=3, c=colour, label=f"{op}: median {joints['mu'].median():.3f}, "
-                        f"std {joints['mu'].std():.3f} ({len(joints)} windows)")
+                        ms=3, c=colour, label=f"{op}, {label}: median "
+                        f"{joints['mu'].median():.3f}, std {joints['mu'].std():.3f} "
+                        f"({len(joints)} windows)")
     ax.axhspan(0.16, 0.20, color="0.9", label="Table 24 cased, oil-based")
     ax.axhspan(0.25, 0.35, color="0.8", alpha=0.5, label="Table 24 cased, water-based")
     ax.set_xlabel("bit depth [m MD]")
@@ -384,9 +390,11 @@ def plot(out_analysis: Analysis, in_analysis: Analysis, out_model: WellModel,
     written.append(path)
 
     # 3. measured against modelled (broomstick)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 6), sharey=False)
-    for ax, analysis, model, title in ((axes[0], out_analysis, out_model, "trip out"),
-                                       (axes[1], in_analysis, in_model, "trip in")):
+    panels = [(out_analysis, out_model, "trip out"), (in_analysis, in_model, "trip in, one fluid")]
+    if checked is not None:
+        panels.append((checked[0], checked[1], f"trip in, inside {checked[2]:.0f} kg/m3"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 6), sharey=False)
+    for ax, (analysis, model, title) in zip(axes, panels, strict=True):
         rec = analysis.record
         block = analysis.block_weight.value
         mmodel = WellModel(replace(model.well, block_weight=block))
@@ -410,7 +418,7 @@ def plot(out_analysis: Analysis, in_analysis: Analysis, out_model: WellModel,
         ax.invert_yaxis()
         ax.set_xlabel("hook load [kN]")
         ax.set_ylabel("bit depth [m MD]")
-        ax.set_title(f"{title}: block weight {block / 1e3:.0f} kN (in slips)")
+        ax.set_title(f"{title}: block {block / 1e3:.0f} kN (in slips)", fontsize=10)
         ax.legend(fontsize=7)
     fig.tight_layout()
     path = folder / "volve-broomstick.png"
@@ -436,10 +444,13 @@ def main() -> None:
     out_analysis, in_analysis, out_model, in_model = run(args.data)
     merit = figures_of_merit(out_analysis, in_analysis, out_model, in_model)
     print(json.dumps(merit, indent=2, default=float))
+    density = merit["trip_in_weight_checked"]["inside_density_kg_m3"]
+    checked_model = weight_checked_model(in_model, density)
+    checked = (analyse(in_analysis.record, checked_model), checked_model, density)
     for name, analysis in (("trip out", out_analysis), ("trip in", in_analysis)):
         print(f"\nconfusion table, {name} (rows: rig_activity_code, columns: detected state)")
         print(agreement(analysis.record, analysis.states)[2].to_string())
-    for path in plot(out_analysis, in_analysis, out_model, in_model, args.out):
+    for path in plot(out_analysis, in_analysis, out_model, in_model, args.out, checked):
         print("wrote", path)
 
 
