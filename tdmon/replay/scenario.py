@@ -120,6 +120,8 @@ class RigConfig(StrictModel):
     flow_reference: Flow = Field(default=2000.0 / 60000.0, gt=0)
     bit_torque_factor: Length = Field(default=0.02, ge=0)
     latency: Seconds = Field(default=0.2, ge=0)
+    break_over: Force = Field(default=0.0, ge=0)
+    break_over_time: Seconds = Field(default=3.0, gt=0)
 
 
 class SamplingConfig(StrictModel):

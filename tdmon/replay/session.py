@@ -112,6 +112,9 @@ class RigSettings:
         ``spp = spp_reference (flow / flow_reference)^2`` (turbulent losses)
     bit_torque_factor : bit torque per weight on bit [m] (about mu_bit D_bit / 3)
     latency : delay between sampling and arrival at tdmon [s]
+    break_over : extra hook load at the start of a pull from rest (static friction and the
+        string's inertia) [N], decaying as ``exp(-t / break_over_time)``
+    break_over_time : decay time of the break-over peak [s]
     """
 
     stand_length: float = 28.0
@@ -120,6 +123,8 @@ class RigSettings:
     flow_reference: float = 2000.0 / 60000.0
     bit_torque_factor: float = 0.02
     latency: float = 0.2
+    break_over: float = 0.0
+    break_over_time: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -510,7 +515,20 @@ class _Loads:
             hookload[k], torque[k] = self.one(
                 timeline.state[i], float(where.bit_depth[k]), float(speed[k]),
                 float(timeline.rpm[i]), float(timeline.wob[i]))
-        return hookload, torque
+        return hookload + self.break_over(timeline, index, t), torque
+
+    def break_over(self, timeline: Timeline, index: NDArray[np.int64], t: Array) -> Array:
+        """Break-over peak [N] of pulls that start from rest (not from another pull)."""
+        rig = self.scenario.rig
+        extra = np.zeros(t.size)
+        if rig.break_over <= 0.0:
+            return extra
+        for k, i in enumerate(index):
+            if (timeline.state[i] in _MOVING_UP and i > 0
+                    and timeline.state[i - 1] not in _MOVING_UP):
+                extra[k] = rig.break_over * math.exp(-(t[k] - timeline.t0[i])
+                                                     / rig.break_over_time)
+        return extra
 
     def one(self, state: str, bit: float, speed: float, rpm: float, wob: float) -> tuple[
             float, float]:

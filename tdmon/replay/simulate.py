@@ -153,7 +153,7 @@ def session_messages(session: Session) -> list[MessageRecord]:
         topic = f"{scenario.prefix}/{name}"
         unit = payload_unit(name)
         for t, receive, value in zip(series.t, series.receive_time, series.value, strict=True):
-            records.append((_ns(float(receive)), RAW_TOPIC,
+            records.append((_ns(round(float(receive), 3)), RAW_TOPIC,
                             raw_input(topic, float(t), float(value), unit, float(receive))))
 
     timeline_at = session.timeline.at

@@ -300,3 +300,25 @@ def test_impossible_phases_are_errors(scenario: Scenario) -> None:
         Phase("trip_in", to=4300.0, speed=0.5),))
     with pytest.raises(ModelError, match="deeper than the drill string"):
         simulate_session(deep)
+
+
+def test_break_over_peak_at_the_start_of_a_pull_from_rest(scenario: Scenario) -> None:
+    rig = dataclasses.replace(scenario.rig, break_over=50e3, break_over_time=3.0)
+    session = simulate_session(dataclasses.replace(scenario, rig=rig))
+    plain = simulate_session(scenario)
+    extra = np.asarray(session.truth["hookload"], dtype=float) - np.asarray(
+        plain.truth["hookload"], dtype=float)
+    timeline = session.timeline
+    expected = np.zeros_like(extra)
+    tau = session.truth_t - scenario.start
+    for i, state in enumerate(timeline.state):
+        # back-reaming after drilling and the pull after a connection start from rest; the
+        # pull that follows back-reaming does not
+        if state in ("pick_up", "back_reaming") and timeline.state[i - 1] not in (
+                "pick_up", "back_reaming"):
+            inside = (tau >= timeline.t0[i]) & (tau < timeline.t1[i])
+            expected[inside] = 50e3 * np.exp(-(tau[inside] - timeline.t0[i]) / 3.0)
+    np.testing.assert_allclose(extra, expected, atol=1e-6)
+    assert np.count_nonzero(expected > 49e3) == 2
+    # the friction truth is the model's, without the peak
+    np.testing.assert_array_equal(session.truth["mu_pick_up"], plain.truth["mu_pick_up"])

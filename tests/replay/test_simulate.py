@@ -81,6 +81,8 @@ def test_schemas_are_json_schema_and_messages_conform(simulated: list[Read]) -> 
             checked.add(read.topic)
     raw = next(r.message for r in simulated if r.topic == "/tdmon/raw")
     assert raw["source"] == "mcap" and raw["payload_encoding"] == "utf-8"
+    assert all(r.log_time == round(r.message["receive_time"] * 1e9) for r in simulated
+               if r.topic == "/tdmon/raw")
     assert set(json.loads(raw["payload"])) == {"t", "value", "unit"}
 
 
