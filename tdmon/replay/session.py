@@ -406,6 +406,9 @@ class _Builder:
         while abs(target - self.bit) > 1e-6:
             travel = (self.block - self.rig.block_low) if deeper else (self.block_high - self.block)
             if travel < _MIN_TRAVEL:
+                if self.rig.stand_length < 2 * _MIN_TRAVEL:
+                    raise ModelError(f"stand length {self.rig.stand_length:g} m leaves the block "
+                                     "no travel")
                 self.connection(phase.slips_time, deeper)
                 continue
             step = min(abs(target - self.bit), travel)
@@ -430,6 +433,12 @@ def build_timeline(scenario: Scenario) -> Timeline:
         drilling, bit below the hole, zero speed).
     """
     builder = _Builder(scenario)
+    if not scenario.rig.block_low - 1e-9 <= scenario.block_position <= builder.block_high + 1e-9:
+        raise ModelError(f"block position {scenario.block_position:g} m is outside its travel "
+                         f"({scenario.rig.block_low:g} to {builder.block_high:g} m)")
+    if scenario.bit_depth > scenario.hole_depth + 1e-9:
+        raise ModelError(f"bit depth {scenario.bit_depth:g} m is below the hole depth "
+                         f"{scenario.hole_depth:g} m")
     for number, phase in enumerate(scenario.phases):
         where = f"phase {number + 1} ({phase.kind})"
         kind = phase.kind

@@ -296,6 +296,14 @@ def test_impossible_phases_are_errors(scenario: Scenario) -> None:
     with pytest.raises(ModelError, match="below the hole depth"):
         build_timeline(dataclasses.replace(scenario, phases=(
             Phase("trip_in", to=4200.0, speed=0.5),)))
+    with pytest.raises(ModelError, match="outside its travel"):
+        build_timeline(dataclasses.replace(scenario, block_position=40.0))
+    with pytest.raises(ModelError, match="below the hole depth 4150"):
+        build_timeline(dataclasses.replace(scenario, bit_depth=4160.0))
+    with pytest.raises(ModelError, match="no travel"):
+        build_timeline(dataclasses.replace(
+            scenario, block_position=0.5, rig=dataclasses.replace(
+                scenario.rig, stand_length=0.5, block_low=0.0)))
     deep = dataclasses.replace(scenario, hole_depth=4300.0, phases=(
         Phase("trip_in", to=4300.0, speed=0.5),))
     with pytest.raises(ModelError, match="deeper than the drill string"):
