@@ -1,6 +1,7 @@
 """Per-window friction back-calculation: hand values against the forward model, synthetic
 trips with 1 % hook-load noise (within +/-0.02 of the truth), cased hole first, rejections,
-and garbage input (hypothesis) that must give a finite estimate or a FitError."""
+garbage input (hypothesis) that must give a finite estimate or a FitError, and the block
+weight and buoyancy check by hand."""
 
 from __future__ import annotations
 
@@ -13,6 +14,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tdmon.calib.backcalc import back_calculate, back_calculate_window, shoe_depth
+from tdmon.calib.blockweight import (
+    BlockWeightState,
+    block_weight_from_samples,
+    buoyancy_check,
+    update_block_weight,
+)
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError
 from tdmon.model.torque_drag import WellModel
@@ -126,3 +133,23 @@ def test_garbage_gives_finite_estimate_or_fit_error(model_open: WellModel, hookl
         return
     assert all(math.isfinite(x) for x in (estimate.mu, estimate.mu_std, estimate.sensitivity))
     assert 0.0 <= estimate.mu <= 1.0
+
+
+def test_block_weight_and_buoyancy_check_by_hand(well_open: Any) -> None:
+    hookloads = np.array([655e3, 652e3, 658e3, 654e3, 900e3, 656e3])  # one hoisting peak
+    estimate = block_weight_from_samples(hookloads)
+    assert estimate.value == pytest.approx(655.5e3)
+    assert estimate.n == 6
+    with pytest.raises(FitError):
+        block_weight_from_samples([math.nan])
+    # eq 35: beta = 1 - 1200/7850; a string of 100 kN in air weighs 84.71 kN in 1.2 sg mud
+    beta = 1.0 - 1200.0 / 7850.0
+    check = buoyancy_check(400e3 + beta * 100e3, 400e3, 500e3 + beta * 100e3, 600e3, 500e3)
+    assert check.buoyancy_factor == pytest.approx(beta)
+    assert check.fluid_density == pytest.approx(1200.0)
+    assert check.ratio == pytest.approx(1.0)
+    state = BlockWeightState()
+    for value in (650e3, math.nan, 660e3):
+        state = update_block_weight(state, value)
+    assert state.estimate is not None and state.estimate.n == 2
+    assert state.estimate.value == pytest.approx(655e3)
