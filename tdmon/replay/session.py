@@ -307,7 +307,12 @@ class ChannelSeries:
 
 @dataclass(frozen=True)
 class ExpectedAlarm:
-    """An alarm the daemon should raise: ``kind`` at about ``t`` [Unix s], with context."""
+    """An alarm the daemon should raise: ``kind`` at about ``t`` [Unix s], with context.
+
+    ``kind`` names the event (``overpull``, ``set_down``, ``friction_anomaly``,
+    ``stuck_sensor``, ``data_gap``); ``accept`` lists the daemon's alarm kinds
+    (:mod:`tdmon.calib.alarms`) that count as raising it.
+    """
 
     t: float
     kind: str
@@ -315,6 +320,7 @@ class ExpectedAlarm:
     message: str
     channel: str | None = None
     md: float | None = None
+    accept: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -498,6 +504,9 @@ def friction_with_anomalies(element_mid_md: Array, base: Array,
 
 
 _MOVING_UP = ("pick_up", "back_reaming")
+# A tight spot or a local friction change shows as a window's friction jumping above the recent
+# ones, or as the load trending out of the modelled band.
+_FRICTION_ALARMS = ("friction_jump", "band")
 _MOVING_DOWN = ("slack_off", "reaming")
 
 
@@ -672,7 +681,7 @@ def _expected_alarms(scenario: Scenario, timeline: Timeline, truth_t: Array,
                 alarms.append(ExpectedAlarm(
                     float(truth_t[hits[0]]), kind, "warning",
                     f"{word} of {spot.force / 1e3:.0f} kN at a tight spot at {spot.md:.0f} m MD",
-                    md=spot.md))
+                    md=spot.md, accept=_FRICTION_ALARMS))
     moving = np.isin(state, ("pick_up", "slack_off"))
     for anomaly in scenario.anomalies:
         hits = np.flatnonzero(moving & (bit >= anomaly.top))
@@ -680,7 +689,8 @@ def _expected_alarms(scenario: Scenario, timeline: Timeline, truth_t: Array,
             alarms.append(ExpectedAlarm(
                 float(truth_t[hits[0]]), "friction_anomaly", "warning",
                 f"local friction {anomaly.delta_mu:+.2f} between {anomaly.top:.0f} and "
-                f"{anomaly.bottom:.0f} m MD", md=0.5 * (anomaly.top + anomaly.bottom)))
+                f"{anomaly.bottom:.0f} m MD", md=0.5 * (anomaly.top + anomaly.bottom),
+                accept=_FRICTION_ALARMS))
     for fault in scenario.faults:
         kind = "stuck_sensor" if fault.kind == "stuck" else "data_gap"
         channels = [c for c in fault.channels if c in scenario.sample_interval]
@@ -689,7 +699,9 @@ def _expected_alarms(scenario: Scenario, timeline: Timeline, truth_t: Array,
             alarms.append(ExpectedAlarm(
                 scenario.start + fault.start, kind, "warning",
                 f"{', '.join(channels)} {'stuck' if fault.kind == 'stuck' else 'silent'} for "
-                f"{fault.duration:.0f} s", channel=channels[0] if len(channels) == 1 else None))
+                f"{fault.duration:.0f} s", channel=channels[0] if len(channels) == 1 else None,
+                accept=tuple(f"sensor_{c}_frozen" for c in channels) if fault.kind == "stuck"
+                else ("sensor_stale",)))
     return sorted(alarms, key=lambda alarm: alarm.t)
 
 

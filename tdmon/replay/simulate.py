@@ -94,7 +94,9 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
     "/truth/alarm": _schema(
         "truth.alarm", "an alarm the daemon is expected to raise at about t",
         {"t": _TIME, "kind": _TEXT, "severity": {"enum": ["info", "warning", "critical"]},
-         "message": _TEXT, "channel": {"type": ["string", "null"]}, "md_m": _OPTIONAL},
+         "message": _TEXT, "channel": {"type": ["string", "null"]}, "md_m": _OPTIONAL,
+         "accept": {"type": "array", "items": _TEXT,
+                    "description": "daemon alarm kinds that count as raising it"}},
         ("t", "kind", "severity", "message")),
     "/truth/fault": _schema(
         "truth.fault", "a sensor fault injected into the data (spike, stuck, dropout)",
@@ -181,7 +183,8 @@ def session_messages(session: Session) -> list[MessageRecord]:
     for alarm in session.alarms:
         records.append((_ns(alarm.t), "/truth/alarm", {
             "t": alarm.t, "kind": alarm.kind, "severity": alarm.severity,
-            "message": alarm.message, "channel": alarm.channel, "md_m": alarm.md}))
+            "message": alarm.message, "channel": alarm.channel, "md_m": alarm.md,
+            "accept": list(alarm.accept)}))
     for fault in session.faults:
         records.append((_ns(fault.t), "/truth/fault", {
             "t": fault.t, "kind": fault.kind, "channel": fault.channel, "until": fault.until}))

@@ -184,6 +184,7 @@ def test_tight_spot_overpull_and_set_down(scenario: Scenario) -> None:
     kinds = {alarm.kind: alarm for alarm in session.alarms}
     assert set(kinds) == {"overpull", "set_down"}
     assert kinds["overpull"].md == 4110.0
+    assert kinds["overpull"].accept == ("friction_jump", "band")
     first = session.truth_t[np.flatnonzero(inside & np.isin(state, ["pick_up", "back_reaming"]))[0]]
     assert kinds["overpull"].t == first
 
@@ -254,7 +255,7 @@ def test_dropout_leaves_a_gap(scenario: Scenario) -> None:
         assert np.max(np.diff(t)) >= 60.0
     assert session.channels["bit_depth"].t.size == simulate_session(
         scenario).channels["bit_depth"].t.size
-    assert [a.kind for a in session.alarms] == ["data_gap"]
+    assert [(a.kind, a.accept) for a in session.alarms] == [("data_gap", ("sensor_stale",))]
     assert {(f.kind, f.channel) for f in session.faults} == {("dropout", "hookload"),
                                                             ("dropout", "torque")}
 
@@ -275,6 +276,7 @@ def test_stuck_sensor_repeats_its_last_value(scenario: Scenario) -> None:
     alarm = session.alarms[0]
     assert (alarm.kind, alarm.channel, alarm.t) == ("stuck_sensor", "torque",
                                                    scenario.start + 470.0)
+    assert alarm.accept == ("sensor_torque_frozen",)
 
 
 def test_clock_jitter_moves_stamps_not_order(scenario: Scenario) -> None:
