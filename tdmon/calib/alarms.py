@@ -209,11 +209,13 @@ def friction_jump(history: tuple[float, ...], mu: float, mu_std: float, t: float
 
 @dataclass(frozen=True)
 class SensorSettings:
-    """Plausibility settings: hook-load range [N], depth tolerance [m], frozen run [-]."""
+    """Plausibility settings: hook-load range [N], depth tolerance [m], frozen run [-], and
+    how long a depth inconsistency must last (hole-depth channels are coarse and noisy) [s]."""
 
     max_hookload: float = 10e6
     depth_tolerance: float = 5.0
     frozen_samples: int = 30
+    persist_time: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -224,6 +226,7 @@ class SensorState:
     last: tuple[tuple[str, float], ...] = ()
     runs: tuple[tuple[str, int], ...] = ()
     active: frozenset[str] = frozenset()
+    below_since: float | None = None
 
 
 def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
@@ -250,11 +253,13 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
                                  or hookload > settings.max_hookload):
         conditions.add("hookload_implausible")
     bit, hole = values.get("bit_depth"), values.get("hole_depth")
-    if (bit is not None and hole is not None and math.isfinite(bit) and math.isfinite(hole)
-            and bit > hole + settings.depth_tolerance):
-        conditions.add("bit_below_hole")
     last = dict(state.last)
     runs = dict(state.runs)
+    below = (bit is not None and hole is not None and math.isfinite(bit) and math.isfinite(hole)
+             and bit > hole + settings.depth_tolerance)
+    below_since = (state.below_since if state.below_since is not None else t) if below else None
+    if below_since is not None and t - below_since >= settings.persist_time:
+        conditions.add("bit_below_hole")
     for channel in ("hookload", "torque", "bit_depth"):
         value = values.get(channel)
         if value is None:
@@ -278,5 +283,6 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
         severity, text, value, limit = texts[condition]
         alarms.append(Alarm(t, f"sensor_{condition}", severity, text, value, limit))
     new_state = replace(state, stale=new_stale, last=tuple(last.items()),
-                        runs=tuple(runs.items()), active=frozenset(conditions))
+                        runs=tuple(runs.items()), active=frozenset(conditions),
+                        below_since=below_since)
     return new_state, alarms

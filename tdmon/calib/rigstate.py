@@ -62,6 +62,13 @@ class RigStateThresholds:
         ``max(max_hookload_step, max_hookload_step_fraction * hook load)`` [N]
     max_hookload_step_fraction : see above [-]
     max_gap : a longer gap between samples restarts the state (no steady sample across it) [s]
+    max_speed : a block or bit-depth velocity above this is a glitch (depth reset, spike) and
+        is not used [m/s]
+    velocity_disagreement : block and bit-depth velocities further apart than this disagree;
+        the one closer to the previous velocity is used [m/s]
+    drilling_wob : with a weight-on-bit channel, rotating on bottom needs more than this [N]
+    on_bottom_with_wob : with weight on bit, the bit counts as on bottom this far off the
+        reported hole depth (hole-depth channels are coarse) [m]
     """
 
     block_weight: float = 0.0
@@ -76,6 +83,10 @@ class RigStateThresholds:
     max_hookload_step: float = 20e3
     max_hookload_step_fraction: float = 0.05
     max_gap: float = 60.0
+    max_speed: float = 2.0
+    velocity_disagreement: float = 0.25
+    drilling_wob: float = 10e3
+    on_bottom_with_wob: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -93,6 +104,10 @@ class RigSample:
     spp : standpipe pressure [Pa]
     hole_depth : [m]
     torque : surface torque [N m]
+    wob : weight on bit [N]
+    block_time, bit_time : when the block position and the bit depth were sampled [s]
+        (None: at ``t``); an aligner repeats a channel's last value on frames between its
+        samples, and a velocity must use the channel's own times
     """
 
     t: float
@@ -104,6 +119,9 @@ class RigSample:
     spp: float | None = None
     hole_depth: float | None = None
     torque: float | None = None
+    wob: float | None = None
+    block_time: float | None = None
+    bit_time: float | None = None
 
 
 @dataclass(frozen=True)
@@ -112,7 +130,10 @@ class DetectorState:
 
     t: float = -math.inf
     bit_depth: float | None = None
+    bit_time: float = -math.inf
     block_position: float | None = None
+    block_time: float = -math.inf
+    block_loaded: bool = False
     velocity: float | None = None
     hookload: float | None = None
     state: str = "unknown"
@@ -133,8 +154,7 @@ def _finite(value: float | None) -> float | None:
 
 
 def classify(hookload: float | None, velocity: float | None, rpm: float | None,
-             circulating: bool, off_bottom: float | None,
-             thresholds: RigStateThresholds) -> str:
+             circulating: bool, on_bottom: bool, thresholds: RigStateThresholds) -> str:
     """Rig state of one sample.
 
     Parameters
@@ -143,7 +163,7 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
     velocity : axial velocity of the string, > 0 going deeper [m/s]
     rpm : surface rotation [rad/s]
     circulating : mud is being pumped
-    off_bottom : hole depth minus bit depth [m]
+    on_bottom : the bit is on bottom (see `detect`)
     thresholds : the detector's settings
 
     Returns
@@ -163,7 +183,6 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
     moving_down = velocity is not None and velocity > thresholds.moving_speed
     moving_up = velocity is not None and velocity < -thresholds.moving_speed
     rotating = rpm is not None and rpm > thresholds.rotating_speed
-    on_bottom = off_bottom is not None and off_bottom <= thresholds.on_bottom
     if rotating:
         if on_bottom:
             return "drilling"
@@ -177,15 +196,62 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
     return "circulating" if circulating else "static"
 
 
-def _velocity(prior: DetectorState, sample: RigSample, dt: float) -> float | None:
-    # The block position moves with the string only when the string hangs on the hook, but it
-    # does not jump with depth-tracking resets, so it is preferred when the rig sends it.
+def _channel_velocity(value: float | None, time: float, prior_value: float | None,
+                      prior_time: float, sign: float, thresholds: RigStateThresholds
+                      ) -> tuple[float | None, bool]:
+    """(velocity or None, whether this is a new sample of the channel)."""
+    if value is None or prior_value is None:
+        return None, value is not None
+    dt = time - prior_time
+    if not (0.0 < dt <= thresholds.max_gap):
+        return None, dt > 0.0
+    velocity = sign * (value - prior_value) / dt
+    return (velocity if abs(velocity) <= thresholds.max_speed else None), True
+
+
+def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
+              thresholds: RigStateThresholds) -> tuple[float | None, DetectorState]:
+    # Two measures of the string's axial speed. The bit depth is what the rig reports for the
+    # string, but it can jump (depth-tracking resets, Volve trip in); the block moves with the
+    # string only while the hook carries it (in slips it travels empty) and its encoder can be
+    # noisy. Rules: the block counts only between samples taken with the string on the hook;
+    # when both agree the bit depth is used; when they disagree, the one continuing the last
+    # velocity wins (a jump is a discontinuity), unless the bit depth is frozen. A frame that
+    # repeats a channel's last sample keeps that channel's last velocity, except across the
+    # slips.
     block, bit = _finite(sample.block_position), _finite(sample.bit_depth)
-    if block is not None and prior.block_position is not None:
-        return -(block - prior.block_position) / dt
-    if bit is not None and prior.bit_depth is not None:
-        return (bit - prior.bit_depth) / dt
-    return None
+    block_time = sample.t if sample.block_time is None else sample.block_time
+    bit_time = sample.t if sample.bit_time is None else sample.bit_time
+    carry = prior.velocity if prior.state != "in_slips" else None
+    memory = prior
+    v_block: float | None = None
+    if block is not None and block_time == prior.block_time and block == prior.block_position:
+        v_block = carry if prior.block_loaded else None
+    elif block is not None:
+        if prior.block_loaded and loaded:
+            v_block, _ = _channel_velocity(block, block_time, prior.block_position,
+                                           prior.block_time, -1.0, thresholds)
+        if block_time > prior.block_time:
+            memory = replace(memory, block_position=block, block_time=block_time,
+                             block_loaded=loaded)
+    frozen_bit = False
+    if bit is not None and bit_time == prior.bit_time and bit == prior.bit_depth:
+        v_bit = carry
+    else:
+        # a new sample repeating the last value exactly while the block moves: a stuck
+        # depth channel (a depth that follows the block never repeats while it moves)
+        frozen_bit = bit is not None and bit == prior.bit_depth
+        v_bit, fresh = _channel_velocity(bit, bit_time, prior.bit_depth, prior.bit_time, 1.0,
+                                         thresholds)
+        if fresh and bit is not None:
+            memory = replace(memory, bit_depth=bit, bit_time=bit_time)
+    if v_block is None or v_bit is None:
+        return (v_bit if v_bit is not None else v_block), memory
+    if frozen_bit and abs(v_block) > thresholds.moving_speed:
+        return v_block, memory
+    if abs(v_block - v_bit) <= thresholds.velocity_disagreement or carry is None:
+        return v_bit, memory
+    return (v_block if abs(v_block - carry) < abs(v_bit - carry) else v_bit), memory
 
 
 def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThresholds
@@ -203,16 +269,28 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     (DetectorState, Detection)
     """
     hookload = _finite(sample.hookload)
+    if not math.isfinite(sample.t):
+        return replace(prior, state="unknown"), Detection("unknown", False, None)
     dt = sample.t - prior.t
     fresh = not (math.isfinite(dt) and 0.0 < dt <= thresholds.max_gap)
-    velocity = None if fresh else _velocity(prior, sample, dt)
+    loaded = hookload is not None and (
+        hookload >= thresholds.block_weight + thresholds.in_slips_margin)
+    velocity, memory = _velocity(prior, sample, loaded, thresholds)
+    if fresh:
+        velocity = None
     rpm = _finite(sample.rpm)
     flow, spp = _finite(sample.flow), _finite(sample.spp)
     circulating = ((flow is not None and flow > thresholds.circulating_flow)
                    or (flow is None and spp is not None and spp > thresholds.circulating_pressure))
-    bit, hole = _finite(sample.bit_depth), _finite(sample.hole_depth)
+    bit, hole, wob = _finite(sample.bit_depth), _finite(sample.hole_depth), _finite(sample.wob)
     off_bottom = None if bit is None or hole is None else hole - bit
-    state = classify(hookload, velocity, rpm, circulating, off_bottom, thresholds)
+    if wob is not None:
+        # hole-depth channels are coarse; weight on the bit says the bit touches bottom
+        on_bottom = wob > thresholds.drilling_wob and (
+            off_bottom is None or off_bottom <= thresholds.on_bottom_with_wob)
+    else:
+        on_bottom = off_bottom is not None and off_bottom <= thresholds.on_bottom
+    state = classify(hookload, velocity, rpm, circulating, on_bottom, thresholds)
     since = prior.state_since if (state == prior.state and not fresh) else sample.t
     steady = (state != "unknown" and not fresh and sample.t - since >= thresholds.settle_time
               and hookload is not None and prior.hookload is not None)
@@ -224,18 +302,8 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
         steady = abs(hookload - prior.hookload) <= step
     if steady and state in MOVING_STATES and velocity is None:
         steady = False
-    new = DetectorState(
-        t=sample.t if math.isfinite(sample.t) else prior.t,
-        bit_depth=bit if bit is not None else prior.bit_depth,
-        block_position=_finite(sample.block_position),
-        velocity=velocity,
-        hookload=hookload,
-        state=state,
-        state_since=since,
-    )
-    if not math.isfinite(sample.t):
-        new = replace(prior, state="unknown")
-        return new, Detection("unknown", False, None)
+    new = replace(memory, t=sample.t, velocity=velocity, hookload=hookload, state=state,
+                  state_since=since)
     return new, Detection(state, bool(steady), velocity)
 
 
@@ -256,6 +324,7 @@ def detect_series(
     flow: ArrayLike | None = None,
     spp: ArrayLike | None = None,
     hole_depth: ArrayLike | None = None,
+    wob: ArrayLike | None = None,
 ) -> tuple[NDArray[np.str_], NDArray[np.bool_]]:
     """Run :func:`detect` over a whole record (NaN = missing).
 
@@ -268,13 +337,15 @@ def detect_series(
     n = times.size
     columns = [np.asarray(hookload, dtype=np.float64), np.asarray(bit_depth, dtype=np.float64),
                _optional(block_position, n), _optional(rpm, n), _optional(flow, n),
-               _optional(spp, n), _optional(hole_depth, n)]
+               _optional(spp, n), _optional(hole_depth, n), _optional(wob, n)]
     states = np.empty(n, dtype="<U20")
     steady = np.zeros(n, dtype=bool)
     prior = DetectorState()
     for i in range(n):
         values = [float(column[i]) for column in columns]
-        sample = RigSample(float(times[i]), *(v if math.isfinite(v) else None for v in values))
+        v = [x if math.isfinite(x) else None for x in values]
+        sample = RigSample(float(times[i]), hookload=v[0], bit_depth=v[1], block_position=v[2],
+                           rpm=v[3], flow=v[4], spp=v[5], hole_depth=v[6], wob=v[7])
         prior, result = detect(prior, sample, thresholds)
         states[i] = result.state
         steady[i] = result.steady

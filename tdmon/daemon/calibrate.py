@@ -13,7 +13,9 @@ Three steps, in this order in the pipeline (see docs/back-calculation.md):
 
 Frame fields read: ``values["hookload"]`` [N], ``values["bit_depth"]`` [m], and when present
 ``values["block_position"]`` [m], ``values["rpm"]`` [rad/s], ``values["flow_in"]`` [m3/s],
-``values["spp"]`` [Pa], ``values["hole_depth"]`` [m], ``values["torque"]`` [N m];
+``values["spp"]`` [Pa], ``values["hole_depth"]`` [m], ``values["torque"]`` [N m],
+``values["wob"]`` [N]; ``frame.ages`` (when each channel was sampled: velocities use the
+channel's own times);
 ``frame.stale``; ``frame.results["model"]`` (from the monitor) for the band alarm.
 Everything emitted is finite: a value that is not is left out or the message is not sent.
 """
@@ -70,13 +72,20 @@ def _value(values: dict[str, float], name: str) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
 
 
+def _sampled_at(frame: Frame, channel: str) -> float | None:
+    age = frame.ages.get(channel)
+    return frame.t - age if age is not None and math.isfinite(age) else None
+
+
 def _sample(frame: Frame) -> RigSample:
     v = frame.values
     return RigSample(
         t=frame.t, hookload=_value(v, "hookload"), bit_depth=_value(v, "bit_depth"),
         block_position=_value(v, "block_position"), rpm=_value(v, "rpm"),
         flow=_value(v, "flow_in"), spp=_value(v, "spp"), hole_depth=_value(v, "hole_depth"),
-        torque=_value(v, "torque"),
+        torque=_value(v, "torque"), wob=_value(v, "wob"),
+        block_time=_sampled_at(frame, "block_position"),
+        bit_time=_sampled_at(frame, "bit_depth"),
     )
 
 

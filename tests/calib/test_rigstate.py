@@ -26,24 +26,24 @@ RPM_100 = 100 * 2 * math.pi / 60
 
 
 @pytest.mark.parametrize(
-    ("hookload", "velocity", "rpm", "circulating", "off_bottom", "expected"),
+    ("hookload", "velocity", "rpm", "circulating", "on_bottom", "expected"),
     [
-        (None, 0.0, 0.0, False, 100.0, "unknown"),
-        (450e3, -0.5, 0.0, False, 100.0, "in_slips"),  # empty block moving: still in slips
-        (1.4e6, -0.5, 0.0, False, 100.0, "pick_up"),
-        (1.0e6, 0.5, 0.0, False, 100.0, "slack_off"),
-        (1.2e6, 0.0, RPM_100, False, 100.0, "rotating_off_bottom"),
-        (1.0e6, 0.2, RPM_100, True, 100.0, "reaming"),
-        (1.4e6, -0.2, RPM_100, True, 100.0, "back_reaming"),
-        (1.0e6, 0.001, RPM_100, True, 0.2, "drilling"),
-        (1.2e6, 0.0, 0.0, True, 100.0, "circulating"),
-        (1.2e6, 0.0, 0.0, False, 100.0, "static"),
-        (1.2e6, 0.0, 0.02, False, 100.0, "static"),  # Volve's 0.23 rev/min offset
+        (None, 0.0, 0.0, False, False, "unknown"),
+        (450e3, -0.5, 0.0, False, False, "in_slips"),  # empty block moving: still in slips
+        (1.4e6, -0.5, 0.0, False, False, "pick_up"),
+        (1.0e6, 0.5, 0.0, False, False, "slack_off"),
+        (1.2e6, 0.0, RPM_100, False, False, "rotating_off_bottom"),
+        (1.0e6, 0.2, RPM_100, True, False, "reaming"),
+        (1.4e6, -0.2, RPM_100, True, False, "back_reaming"),
+        (1.0e6, 0.001, RPM_100, True, True, "drilling"),
+        (1.2e6, 0.0, 0.0, True, False, "circulating"),
+        (1.2e6, 0.0, 0.0, False, False, "static"),
+        (1.2e6, 0.0, 0.02, False, False, "static"),  # Volve's 0.23 rev/min offset
     ],
 )
 def test_classify_hand_cases(hookload: float | None, velocity: float, rpm: float,
-                             circulating: bool, off_bottom: float, expected: str) -> None:
-    assert classify(hookload, velocity, rpm, circulating, off_bottom, TH) == expected
+                             circulating: bool, on_bottom: bool, expected: str) -> None:
+    assert classify(hookload, velocity, rpm, circulating, on_bottom, TH) == expected
     assert expected in STATES
 
 
