@@ -82,7 +82,11 @@ class ZenohSource:
         self._loop = asyncio.get_running_loop()
         self._closed = False
         try:
-            self._subscriber = self.session.declare_subscriber(self.key_expr, self._on_sample)
+            # remote origin only: the daemon's own results, put on the same session, would
+            # otherwise be delivered here synchronously inside put(), on the event loop
+            # thread, and deadlock once the bridge buffer is full
+            self._subscriber = self.session.declare_subscriber(
+                self.key_expr, self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
         except zenoh.ZError as exc:
             raise IngestError(f"zenoh: cannot subscribe to '{self.key_expr}': {exc}") from exc
         return self

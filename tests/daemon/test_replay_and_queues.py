@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import time
 from pathlib import Path
@@ -73,3 +74,41 @@ async def test_publisher_queue_drops_oldest_and_counts() -> None:
         publisher.write("/tdmon/sample", 0, {"i": i})  # not a published name: ignored
     assert publisher.pending == 3 and publisher.dropped == 7 and stats.dropped == 7
     assert not await publisher.drain(0.05)  # no broker: still pending
+
+
+async def test_zenoh_source_and_publisher_on_one_session_do_not_deadlock(
+        tmp_path: Path) -> None:
+    """Regression: results put on the session the source subscribes with were delivered
+    locally inside put(), on the loop thread, which blocked once the bridge was full."""
+    import zenoh
+    from conftest import free_port
+    from daemon_support import running, wait_until
+
+    port = free_port()
+    config = make_config({
+        "prefix": "rig/T1",
+        "sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{port}"]}},
+        "publish": {"zenoh": True}, "queues": {"ingest": 8},
+    }, tmp_path)
+    conf = zenoh.Config()
+    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    rig = zenoh.open(conf)
+    try:
+        async with running(config, connected=("zenoh",)) as (built, _):
+            await wait_until(lambda: bool(list(rig.info.peers_zid())), 10, "peer")
+            await asyncio.sleep(0.3)
+            rows = 1500
+
+            def burst() -> None:
+                block = zenoh.CongestionControl.BLOCK
+                for i in range(rows):
+                    for name, value in (("bit_depth", 1000.0), ("torque", 5.0),
+                                        ("hookload", 900.0)):
+                        body = json.dumps({"t": 1_700_000_000.0 + i, "value": value})
+                        rig.put(f"rig/T1/{name}", body.encode(), congestion_control=block)
+
+            await asyncio.wait_for(asyncio.to_thread(burst), 30)
+            await wait_until(lambda: built.stats.samples_in == 3 * rows, 30, "all samples")
+    finally:
+        rig.close()
