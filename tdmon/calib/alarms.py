@@ -13,7 +13,9 @@ Each detector is a pure function, with a small frozen state where it needs memor
   `tdmon.model.limits`; a utilisation above ``warn`` gives a warning, above 1 a critical alarm.
 * ``friction_jump``: a window's friction factor against the median of the recent windows of the
   same operation; a rise larger than both an absolute step and a multiple of the combined
-  uncertainty is a tight spot or a cuttings bed building up.
+  uncertainty is a tight spot or a cuttings bed building up. The same kind is raised when a
+  stretch of the friction profile along MD stands above the rest (a local anomaly the bit has
+  passed).
 * ``sensor``: a channel gone stale, a hook load that is negative or above a plausible maximum,
   a bit below the hole depth, a channel frozen at one value while the string moves.
 """
@@ -39,6 +41,7 @@ __all__ = [
     "SensorState",
     "friction_jump",
     "limit_alarms",
+    "profile_anomaly",
     "sensor_alarms",
     "update_band_trend",
 ]
@@ -203,6 +206,68 @@ def friction_jump(history: tuple[float, ...], mu: float, mu_std: float, t: float
     return Alarm(t, "friction_jump", "warning",
                  f"{operation} friction {mu:.3f} at {bit_depth:.0f} m jumped above the recent "
                  f"{median:.3f} (tight spot or cuttings bed?)", mu, limit)
+
+
+def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.ndarray,
+                    prior_std: float, settings: JumpSettings, *, width: int = 3,
+                    known: frozenset[int] = frozenset()) -> tuple[Alarm | None, frozenset[int]]:
+    """A stretch of the friction profile standing above the rest: local friction anomaly.
+
+    Single bins trade friction with their neighbours and the whole profile trades with its
+    level (their standard deviations stay large); the contrast of ``width`` adjacent bins
+    against the rest is much better known, so the test runs on it, with its variance ``c P c``
+    from the full covariance. Only stretches the data have touched
+    (every bin's standard deviation below 0.8 of the prior's) count. A stretch is anomalous when
+    its mean exceeds the mean of the other touched bins by more than ``min_step`` and ``sigmas``
+    standard deviations of that contrast; it is reported once (``known`` holds the bins
+    reported).
+
+    Parameters
+    ----------
+    t : [s]
+    edges : bin edges [m]
+    mu : profile mean per bin [-]
+    covariance : its covariance
+    prior_std : the profile's prior standard deviation [-]
+    settings : friction-jump settings (``min_step``, ``sigmas``)
+    width : bins per stretch [-]
+    known : bins already reported
+
+    Returns
+    -------
+    (Alarm or None, bins reported so far)
+    """
+    n = mu.size
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    touched = np.isfinite(mu) & (std < 0.8 * prior_std)
+    starts = [k for k in range(n - width + 1) if touched[k:k + width].all()]
+    if len(starts) < 3:
+        return None, known
+    best: tuple[float, int, float, float, float] | None = None
+    for first in starts:
+        # contrast: this stretch's mean minus the mean of the other touched bins (leaving a
+        # bin out on each side); its variance c P c is small even where single bins are not
+        rest = touched.copy()
+        rest[max(0, first - 1):first + width + 1] = False
+        if rest.sum() < width:
+            continue
+        contrast = np.zeros(n)
+        contrast[first:first + width] = 1.0 / width
+        contrast[rest] = -1.0 / rest.sum()
+        excess = float(contrast @ mu)
+        spread = math.sqrt(max(float(contrast @ covariance @ contrast), 0.0))
+        limit = max(settings.min_step, settings.sigmas * spread)
+        if excess > limit and not (frozenset(range(first, first + width)) & known) and (
+                best is None or excess - limit > best[0]):
+            best = (excess - limit, first, excess, limit, float(np.mean(mu[rest])))
+    if best is None:
+        return None, known
+    _, first, excess, limit, reference = best
+    alarm = Alarm(t, "friction_jump", "warning",
+                  f"local friction {reference + excess:.3f} between {edges[first]:.0f} and "
+                  f"{edges[first + width]:.0f} m MD, {excess:.3f} above the rest of the profile "
+                  "(tight spot or cuttings bed?)", reference + excess, reference + limit)
+    return alarm, known | frozenset(range(first, first + width))
 
 
 # -- sensors --------------------------------------------------------------------------------

@@ -194,12 +194,17 @@ class FrictionProfile:
     model_std_fraction : model error added to each window's variance, as a fraction of the
         friction part of the modelled value (keeps a long session from over-trusting the model)
     method : torque-and-drag method
+    gate : a window whose innovation exceeds ``gate`` of its predicted standard deviation is
+        left out (counted in ``gated``) [-]
     """
 
     def __init__(self, model: WellModel, *, bin_length: float = 30.0, prior_mu: float = 0.25,
                  prior_std: float = 0.1, process_std: float = 0.002,
-                 model_std_fraction: float = 0.0, method: str = "soft-string") -> None:
+                 model_std_fraction: float = 0.0, method: str = "soft-string",
+                 gate: float = 4.0) -> None:
         self.model = model
+        self.gate = gate
+        self.gated = 0
         self.grid = profile_grid(model, bin_length)
         self.state = initial_state(self.grid, prior_mu, prior_std)
         self.process_std = process_std
@@ -235,6 +240,11 @@ class FrictionProfile:
                 noise = se**2 + (self.model_std_fraction * friction_part) ** 2
                 posterior = update(prior, measured, predicted_at_prior, jacobian,
                                    max(noise, 1e-12))
+                if posterior.innovation**2 > self.gate**2 * posterior.innovation_variance:
+                    # an overpull at a tight spot or a set-down is not friction along the
+                    # string: a window this far from what the filter expects is left out
+                    self.gated += 1
+                    return False
                 estimate = posterior.mu
         except ModelError:
             return False

@@ -40,6 +40,7 @@ from tdmon.calib.alarms import (
     SensorState,
     friction_jump,
     limit_alarms,
+    profile_anomaly,
     sensor_alarms,
     update_band_trend,
 )
@@ -196,6 +197,7 @@ class CalibrationStep:
         self.estimates: list[FrictionEstimate] = []
         self.rejected: Counter[str] = Counter()
         self._active_limits: set[str] = set()
+        self._anomalous_bins: frozenset[int] = frozenset()
         self._air_model: WellModel | None = None
         self._block_alarmed = False
 
@@ -260,6 +262,12 @@ class CalibrationStep:
         self._limits(window, estimate, emit)
         if self.profile.add_window(window):
             emit("estimate", self._profile_message(window))
+            alarm, self._anomalous_bins = profile_anomaly(
+                window.t_end, self.profile.grid.edges, self.profile.state.mu,
+                self.profile.state.covariance, self.settings.prior_std, self.settings.jump,
+                known=self._anomalous_bins)
+            if alarm is not None:
+                self._alarm(emit, alarm)
         if self.mu_t is not None and self.mu_t.add_window(window):
             fields = self.mu_t.message_fields()
             if math.isfinite(float(fields["mu"])):  # type: ignore[arg-type]

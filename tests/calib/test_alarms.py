@@ -23,6 +23,7 @@ from tdmon.calib.alarms import (
     SensorState,
     friction_jump,
     limit_alarms,
+    profile_anomaly,
     sensor_alarms,
     update_band_trend,
 )
@@ -215,3 +216,47 @@ def test_garbage_frames_never_emit_nan(model_open: WellModel,
         json.dumps(message, allow_nan=False)
         if name != "state":  # bit_depth_m may be absent in a garbage frame, never NaN
             jsonschema.validate(message, schema_for(f"/tdmon/{name}"))
+
+
+def test_profile_anomaly_on_the_contrast() -> None:
+    edges = np.arange(0.0, 30.0 * 21, 30.0)
+    mu = np.full(20, 0.25)
+    mu[10:13] = 0.35
+    covariance = np.eye(20) * 0.01**2
+    jump = JumpSettings()
+    alarm, known = profile_anomaly(1.0, edges, mu, covariance, 0.1, jump)
+    assert alarm is not None and alarm.kind == "friction_jump"
+    assert "between 300 and 390 m" in alarm.message
+    assert alarm.value == pytest.approx(0.35)
+    again, _ = profile_anomaly(2.0, edges, mu, covariance, 0.1, jump, known=known)
+    assert again is None  # reported once
+    # the same bump with bins that trade friction (uncertain contrast) is no alarm
+    loose = np.eye(20) * 0.07**2
+    assert profile_anomaly(1.0, edges, mu, loose, 0.1, jump)[0] is None
+    # untouched bins (prior uncertainty) never count
+    assert profile_anomaly(1.0, edges, mu, np.eye(20) * 0.1**2, 0.1, jump)[0] is None
+
+
+def test_replay_trip_out_tight_spot_alarms(replayed: Any) -> None:
+    result = replayed("trip-out-tight-spot")
+    _check(result.messages)
+    session = result.run.session
+    overpull = next(a for a in session.alarms if a.kind == "overpull")
+    raised = [m for n, m in result.messages if n == "alarm" and m["kind"] in overpull.accept]
+    assert raised, "the 150 kN overpull at the tight spot raised nothing"
+    assert abs(raised[0]["t"] - overpull.t) <= 60.0
+    # the break-over peaks (40 kN at every pull) raise nothing
+    assert len(raised) == 1
+
+
+def test_replay_stuck_torque_and_dropout(replayed: Any) -> None:
+    stuck = replayed("drill-ream-stuck-torque")
+    _check(stuck.messages)
+    expected = next(a for a in stuck.run.session.alarms if a.kind == "stuck_sensor")
+    frozen = [m for n, m in stuck.messages if n == "alarm" and m["kind"] in expected.accept]
+    assert frozen and 0.0 <= frozen[0]["t"] - expected.t <= 120.0
+    noisy = replayed("trip-in-noisy")
+    _check(noisy.messages)
+    gap = next(a for a in noisy.run.session.alarms if a.kind == "data_gap")
+    stale = [m for n, m in noisy.messages if n == "alarm" and m["kind"] == "sensor_stale"]
+    assert stale and 0.0 <= stale[0]["t"] - gap.t <= 90.0

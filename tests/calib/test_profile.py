@@ -4,6 +4,7 @@ and a local anomaly (+0.1 over 100 m) located within +/-50 m after the bit passe
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -109,3 +110,20 @@ def test_uncertainty_shrinks_where_the_string_was(model_open: WellModel, trip: A
     assert np.min(std[(md > 2100.0) & (md < 3350.0)]) > 0.09
     state = initial_state(profile.grid, 0.25, 0.1)
     assert state.std == pytest.approx(np.full(profile.grid.n_bins, 0.1))
+
+
+def test_overpull_window_is_gated_out(model_open: WellModel, trip: Any, windows_of: Any) -> None:
+    session = trip(model_open, np.full(model_open.n_elements, 0.25), start=4200.0, end=3700.0,
+                   seed=7)
+    _, windows = windows_of(session)
+    pulls = [w for w in windows if w.state == "pick_up"]
+    profile = FrictionProfile(model_open, bin_length=30.0, prior_mu=0.25, process_std=0.0)
+    for window in pulls[:-1]:
+        profile.add_window(window)
+    before = profile.state
+    last = pulls[-1]
+    overpull = replace(last, hookload=last.hookload + 200e3)  # a tight spot, not friction
+    assert not profile.add_window(overpull)
+    assert profile.gated == 1
+    assert profile.state is before
+    assert profile.add_window(last)
