@@ -260,3 +260,40 @@ def test_replay_stuck_torque_and_dropout(replayed: Any) -> None:
     gap = next(a for a in noisy.run.session.alarms if a.kind == "data_gap")
     stale = [m for n, m in noisy.messages if n == "alarm" and m["kind"] == "sensor_stale"]
     assert stale and 0.0 <= stale[0]["t"] - gap.t <= 90.0
+
+
+def test_steps_behind_the_daemon_aligner(replay: Any) -> None:
+    # the same scenario fed sample by sample (in receive order) through the daemon's own
+    # aligner, as `tdmon replay` would, instead of the test's alignment
+    from tdmon.daemon.aligner import Aligner
+    from tdmon.ingest.types import Sample
+
+    run = replay("trip-out-tight-spot")
+    session = run.session
+    samples = sorted(
+        (Sample(channel, float(series.t[k]), float(series.value[k]), "mcap", channel, "",
+                float(series.receive_time[k]))
+         for channel, series in session.channels.items() for k in range(series.t.size)),
+        key=lambda s: s.receive_time)
+    aligner = Aligner(wait_for=("bit_depth", "block_position"), stale_timeout=30.0)
+    model = WellModel(session.scenario.well)
+    rig = RigStateStep(RigStateThresholds(block_weight=session.scenario.well.block_weight))
+    steps = [rig, CalibrationStep(model, rig, CalibrationSettings(
+        windows=WindowSettings(min_samples=3), method=session.scenario.method)), AlarmStep()]
+    messages: list[tuple[str, dict[str, Any]]] = []
+    states: list[tuple[float, str]] = []
+    frames = []
+    for sample in samples:
+        frames += aligner.push(sample, sample.receive_time)
+    frames += aligner.flush()
+    for frame in frames:
+        for step in steps:
+            step.on_frame(frame, lambda n, m: messages.append((n, m)))
+        states.append((frame.t, frame.state))
+    _check(messages)
+    times = np.array([t for t, _ in states])
+    truth = np.asarray(session.truth["state"])[
+        np.clip(np.searchsorted(session.truth_t, times), 0, session.truth_t.size - 1)]
+    assert float(np.mean(np.array([s for _, s in states]) == truth)) >= 0.95
+    windows = [m for n, m in messages if n == "estimate" and m["kind"] == "window"]
+    assert len(windows) >= 30
