@@ -9,8 +9,9 @@ Reads the trip-out (2016-10-04, 7" tubing) and trip-in (2016-10-05, 7" tubing be
 pipe) CSV files of the Volve data set (Equinor Open Data Licence; attribution: "Equinor and the
 former Volve licence partners"), runs the rig-state detector, the window builder, the block
 weight and the per-window back-calculation of `tdmon.calib`, and prints the figures of merit as
-JSON. The functions are imported by tests/calib/test_volve.py, so the test and the documented
-numbers come from the same code.
+JSON. Without the CSV folder (``--data``, or ``TDMON_VOLVE_DATA``) it reads the same records
+from the project's imported replays, replays/volve-f4-trip-*.mcap. The functions are imported
+by tests/calib/test_volve.py, so the test and the documented numbers come from the same code.
 """
 
 from __future__ import annotations
@@ -82,6 +83,45 @@ def load_record(path: Path) -> pd.DataFrame:
         "code": raw["rig_activity_code"].to_numpy(int),
         "time_utc": raw["time_utc"],
     })
+
+
+REPLAYS = ROOT / "replays"
+MCAP_FOR = {TRIP_OUT: "volve-f4-trip-out.mcap", TRIP_IN: "volve-f4-trip-in.mcap"}
+_MCAP_CHANNELS = {"hookload": "hookload", "bit_depth": "bit_depth", "hole_depth": "hole_depth",
+                  "block_position": "block_position", "rpm": "rpm", "flow_in": "flow",
+                  "spp": "spp", "torque": "torque"}
+
+
+def load_record_mcap(path: Path) -> pd.DataFrame:
+    """The same record from the project's imported replay (replays/volve-f4-*.mcap): the
+    ``/tdmon/raw`` samples (SI) and the rig's codes on ``/reference/rig_activity``."""
+    from mcap.reader import make_reader
+
+    rows: dict[float, dict[str, float]] = {}
+    with open(path, "rb") as stream:
+        for _, channel, message in make_reader(stream).iter_messages(
+                topics=["/tdmon/raw", "/reference/rig_activity"]):
+            record = json.loads(message.data)
+            if channel.topic == "/reference/rig_activity":
+                rows.setdefault(float(record["t"]), {})["code"] = float(record["code"])
+                continue
+            name = _MCAP_CHANNELS.get(record["topic"].rsplit("/", 1)[-1])
+            if name is None:
+                continue
+            payload = json.loads(record["payload"])
+            rows.setdefault(float(payload["t"]), {})[name] = float(payload["value"])
+    frame = pd.DataFrame.from_dict(rows, orient="index").sort_index()
+    frame = frame.reindex(columns=[*_MCAP_CHANNELS.values(), "code"])
+    frame.insert(0, "t", frame.index.to_numpy(float))
+    frame = frame[frame["code"].notna()].reset_index(drop=True)
+    frame["code"] = frame["code"].astype(int)
+    return frame
+
+
+def load(name: str, data: Path = DATA) -> pd.DataFrame:
+    """A record by file name: the CSV in ``data`` when there, else the committed replay."""
+    csv = data / name
+    return load_record(csv) if csv.exists() else load_record_mcap(REPLAYS / MCAP_FOR[name])
 
 
 def trip_out_well() -> Well:
@@ -431,8 +471,8 @@ def plot(out_analysis: Analysis, in_analysis: Analysis, out_model: WellModel,
 def run(data: Path = DATA) -> tuple[Analysis, Analysis, WellModel, WellModel]:
     out_model = WellModel(trip_out_well())
     in_model = WellModel(trip_in_well())
-    out_analysis = analyse(load_record(data / TRIP_OUT), out_model)
-    in_analysis = analyse(load_record(data / TRIP_IN), in_model)
+    out_analysis = analyse(load(TRIP_OUT, data), out_model)
+    in_analysis = analyse(load(TRIP_IN, data), in_model)
     return out_analysis, in_analysis, out_model, in_model
 
 

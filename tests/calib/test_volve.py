@@ -3,7 +3,7 @@ licence partners"): detected states against the rig's activity codes, block weig
 pick-up friction, the modelled band around the measured loads, and the trip-in depth-tracking
 artefact. The numbers come from scripts/volve_analysis.py, the code behind
 docs/back-calculation.md; the data folder is TDMON_VOLVE_DATA (default
-/work/shared/data/volve-f4)."""
+/work/shared/data/volve-f4), and without it the committed replays/volve-f4-*.mcap."""
 
 from __future__ import annotations
 
@@ -113,3 +113,14 @@ def test_depth_tracking_artefact_is_kept_out(volve: Any, runs: Any) -> None:
         np.abs(np.diff(record["block_position"].to_numpy(), prepend=np.nan)) < 0.1)
     assert jump.any()
     assert not np.isin(states[jump], ["slack_off", "pick_up"]).any()
+
+
+def test_committed_replays_give_the_same_numbers(volve: Any, runs: Any,
+                                                 tmp_path: Path) -> None:
+    # without the CSV folder the script reads replays/volve-f4-*.mcap (the imported records)
+    out_csv, in_csv, _, _ = runs
+    out_mcap, in_mcap, _, _ = volve.run(tmp_path)
+    for csv, mcap in ((out_csv, out_mcap), (in_csv, in_mcap)):
+        assert mcap.states == csv.states
+        assert mcap.block_weight.value == pytest.approx(csv.block_weight.value)
+        assert [e.mu for _, e in mcap.estimates] == pytest.approx([e.mu for _, e in csv.estimates])
