@@ -113,7 +113,11 @@ class Daemon:
                                 queue: asyncio.Queue[RawMessage | None]) -> None:
         async def pump(source: AsyncIterator[RawMessage]) -> None:
             async for raw in source:
-                await queue.put(raw)
+                # put_nowait skips a coroutine round trip per message; await only when full
+                if queue.full():
+                    await queue.put(raw)
+                else:
+                    queue.put_nowait(raw)
 
         await supervise(spec.name, spec.open, pump, self.connections, self.backoff,
                         finite=spec.finite)
@@ -123,14 +127,16 @@ class Daemon:
         handled = 0
         while True:
             raw = await queue.get()
-            if raw is None:
-                return
-            process(raw)
-            handled += 1
-            if handled % 256 == 0:
-                # queue.get() on a non-empty queue never suspends: give the sources and the
-                # housekeeping a turn during long bursts
-                await asyncio.sleep(0)
+            while True:
+                if raw is None:
+                    return
+                process(raw)
+                handled += 1
+                if handled % 256 == 0 or queue.empty():
+                    break
+                raw = queue.get_nowait()
+            # give the sources and the housekeeping a turn between bursts
+            await asyncio.sleep(0)
 
     async def _housekeeping(self) -> None:
         next_status = time.monotonic() + self.status_interval

@@ -8,8 +8,11 @@ Plug-in points for other issues:
 
 * a **sink** (the MCAP recorder, Rerun, publishers) receives every message the daemon produces:
   ``write(topic: str, log_time_ns: int, message: dict) -> None`` and ``close() -> None``, with
-  ``topic`` = ``/tdmon/<name>``. Raw input, samples and rejections reach every sink before any
-  later step sees the sample (DESIGN.md data flow step 3).
+  ``topic`` = ``/tdmon/<name>``. A sink that only wants some topics may say so with a
+  ``topics`` attribute (a collection of topics); messages nobody wants are then not even
+  built, which matters for the per-message ``raw`` and ``sample`` dicts. Raw input, samples
+  and rejections reach every sink before any later step sees the sample (DESIGN.md data
+  flow step 3).
 * a **step** (rig state, monitor, back-calculation, alarms) sees each aligned frame in order:
   ``on_frame(frame, emit)`` and ``close(emit)``; ``emit(name, message)`` sends a result to all
   sinks and leaves it in ``frame.results[name]`` for the steps after it.
@@ -131,16 +134,30 @@ class Pipeline:
         self.stats = stats or Stats()
         self._monotonic = monotonic
         self._closed = False
+        self._routes: dict[str, list[Sink]] = {}
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
+        self._routes.clear()
+
+    def _sinks_for(self, topic: str) -> list[Sink]:
+        route = self._routes.get(topic)
+        if route is None:
+            route = []
+            for sink in self.sinks:
+                wanted = getattr(sink, "topics", None)
+                if wanted is None or topic in wanted:
+                    route.append(sink)
+            self._routes[topic] = route
+        return route
 
     def process(self, raw: RawMessage) -> Sample | Rejected:
         """Handle one message completely; returns what the decoder made of it."""
         stats = self.stats
         stats.messages_in += 1
         log_ns = int(raw.receive_time * 1e9)
-        self._write("/tdmon/raw", log_ns, raw_message(raw))
+        if self._sinks_for("/tdmon/raw"):
+            self._write("/tdmon/raw", log_ns, raw_message(raw))
         decoded = self.decoder.decode(raw)
         if isinstance(decoded, Rejected):
             stats.rejected += 1
@@ -153,7 +170,8 @@ class Pipeline:
         stats.samples_in += 1
         stats.last_sample_t = decoded.t
         stats.last_receive_time = raw.receive_time
-        self._write("/tdmon/sample", log_ns, sample_message(decoded))
+        if self._sinks_for("/tdmon/sample"):
+            self._write("/tdmon/sample", log_ns, sample_message(decoded))
         frames = self.aligner.push(decoded, self._monotonic())
         self._sync_aligner_counts()
         for frame in frames:
@@ -236,7 +254,7 @@ class Pipeline:
         return emit
 
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        for sink in self.sinks:
+        for sink in self._sinks_for(topic):
             try:
                 sink.write(topic, log_time_ns, message)
             except Exception:

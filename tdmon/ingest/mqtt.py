@@ -192,6 +192,8 @@ class MqttPublisher:
         self.config = config
         self.prefix = prefix.strip("/")
         self.names = frozenset(names)
+        #: the pipeline routes only these topics here (see tdmon.daemon.pipeline)
+        self.topics = frozenset(f"/tdmon/{name}" for name in names)
         self.qos = qos
         self.base = base
         self._queue: deque[tuple[str, bytes]] = deque()

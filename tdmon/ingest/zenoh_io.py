@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import threading
 import time
 from collections import deque
 from types import TracebackType
@@ -69,9 +68,7 @@ class ZenohSource:
         self.key_expr = key_expr
         self.ignore_prefixes = ignore_prefixes
         self.max_buffer = max_buffer
-        self._cond = threading.Condition()
         self._buffer: deque[RawMessage] = deque()
-        self._batch: deque[RawMessage] = deque()
         self._wake_pending = False
         self._closed = False
         self._event = asyncio.Event()
@@ -97,9 +94,7 @@ class ZenohSource:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()  # release a callback waiting for room
+        self._closed = True  # releases a callback waiting for room
         if self._subscriber is not None:
             # the session may already be closed: then there is nothing to undeclare
             with contextlib.suppress(zenoh.ZError):
@@ -107,38 +102,36 @@ class ZenohSource:
             self._subscriber = None
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        # runs on a zenoh thread: copy out of zenoh's buffers before returning
+        # runs on a zenoh thread: copy out of zenoh's buffers before returning. No lock per
+        # message: deque.append/popleft are atomic, and the wake-up flag is re-checked by the
+        # consumer after it resets it (see __anext__), so no wake-up can be missed.
         topic = str(sample.key_expr)
         if topic.startswith(self.ignore_prefixes):
-            return  # our own results published on the same prefix
-        raw = RawMessage("zenoh", topic, sample.payload.to_bytes(), time.time())
-        with self._cond:
-            while len(self._buffer) >= self.max_buffer and not self._closed:
-                self._cond.wait(0.5)
-            if self._closed:
-                return
-            self._buffer.append(raw)
-            wake = not self._wake_pending
+            return  # our own results published on the same prefix by another session
+        buffer = self._buffer
+        while len(buffer) >= self.max_buffer and not self._closed:
+            time.sleep(0.001)  # full: hold zenoh back (backpressure) until the loop catches up
+        if self._closed:
+            return
+        buffer.append(RawMessage("zenoh", topic, sample.payload.to_bytes(), time.time()))
+        if not self._wake_pending:
             self._wake_pending = True
-        if wake and self._loop is not None:
-            with contextlib.suppress(RuntimeError):  # loop closed during shutdown
-                self._loop.call_soon_threadsafe(self._event.set)
+            if self._loop is not None:
+                with contextlib.suppress(RuntimeError):  # loop closed during shutdown
+                    self._loop.call_soon_threadsafe(self._event.set)
 
     def __aiter__(self) -> ZenohSource:
         return self
 
     async def __anext__(self) -> RawMessage:
+        buffer = self._buffer
         while True:
-            if self._batch:
-                return self._batch.popleft()
-            with self._cond:
-                if self._buffer:
-                    self._batch, self._buffer = self._buffer, deque()
-                    self._wake_pending = False
-                    self._cond.notify_all()
-                    continue
-                self._event.clear()
-                self._wake_pending = False
+            if buffer:
+                return buffer.popleft()
+            self._event.clear()
+            self._wake_pending = False
+            if buffer:
+                continue  # appended while the flag was still set: no wake-up is coming
             await self._event.wait()
 
 
@@ -153,6 +146,8 @@ class ZenohPublisher:
         self.session = session
         self.prefix = prefix.strip("/")
         self.names = frozenset(names)
+        #: the pipeline routes only these topics here (see tdmon.daemon.pipeline)
+        self.topics = frozenset(f"/tdmon/{name}" for name in names)
         self._publishers: dict[str, Any] = {}
         self.published = 0
         self._closed = False

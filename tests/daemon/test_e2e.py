@@ -50,6 +50,9 @@ def _check_models(models: list[dict[str, Any]], sequence: list[tuple[float, ...]
         assert len(message["band"]["pick_up_N"]) == len(message["band"]["mu"])
 
 
+# the frame must wait for the bit depth of its own instant even when the machine is busy
+# (the default 0.25 s hold is about latency, not what this test checks)
+ALIGN = {"max_wait": 3.0}
 MONITOR = {"mu": 0.25, "band_mu": [0.1, 0.2, 0.3], "method": "aadnoy", "grid_step": "1 m"}
 
 
@@ -63,7 +66,7 @@ def _model_expected(bit_depth: float) -> tuple[float, float, float, float]:
 async def test_mqtt_end_to_end(mosquitto: Mosquitto, tmp_path: Path) -> None:
     config = make_config({
         "sources": {"mqtt": {"port": mosquitto.port, "client_id": "tdmon-e2e"}},
-        "publish": {"mqtt": True}, "well": str(WELL_FILE), "monitor": MONITOR,
+        "publish": {"mqtt": True}, "well": str(WELL_FILE), "monitor": MONITOR, "align": ALIGN,
     }, tmp_path)
     results: list[dict[str, Any]] = []
     async with aiomqtt.Client("127.0.0.1", mosquitto.port, identifier="dashboard") as dashboard:
@@ -99,7 +102,7 @@ async def test_zenoh_end_to_end(tmp_path: Path) -> None:
     config = make_config({
         "sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{daemon_port}"],
                               "connect": [f"tcp/127.0.0.1:{rig_port}"]}},
-        "publish": {"zenoh": True}, "well": str(WELL_FILE), "monitor": MONITOR,
+        "publish": {"zenoh": True}, "well": str(WELL_FILE), "monitor": MONITOR, "align": ALIGN,
     }, tmp_path)
     rig_conf = zenoh.Config()
     rig_conf.insert_json5("mode", '"peer"')

@@ -1,0 +1,349 @@
+"""Benchmark the live daemon on loopback: latency, throughput, memory over a soak.
+
+The daemon runs as its own process (``python -m tdmon run``), as in production; this script
+plays the rig (publishes) and the dashboard (subscribes to the results) over real MQTT
+(a mosquitto it starts on a free loopback port) and real Zenoh (peer mode, loopback).
+
+    .venv/bin/python benchmarks/bench_daemon.py                       # everything, 10 min soak
+    .venv/bin/python benchmarks/bench_daemon.py --soak-seconds 60     # shorter soak
+    .venv/bin/python benchmarks/bench_daemon.py --transport zenoh --skip-soak
+
+Measures
+- latency: 10 Hz x 8 channels; time from publishing a row's hook load to receiving the
+  daemon's ``model`` result for it (p50, p99, max) [ms]
+- throughput: N samples as fast as the publisher can send (8 channels); samples/s until the
+  daemon's status reports all N processed, and that none was rejected or dropped
+- soak: 10 Hz x 8 channels for --soak-seconds; the daemon's RSS sampled every 5 s
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
+
+import aiomqtt
+import zenoh
+
+ROOT = Path(__file__).resolve().parents[1]
+WELL = ROOT / "config" / "wells" / "aadnoy-example-7-1.toml"
+CHANNELS = ("hookload", "torque", "bit_depth", "hole_depth", "rpm", "flow_in", "spp", "wob")
+PREFIX = "rig/B1"
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def row(t: float, i: int) -> list[tuple[str, bytes]]:
+    """One row of the 8 channels at time t (hook load first, as the worst case)."""
+    bit_depth = 2000.0 + 0.01 * i
+    values = {"hookload": 1100.0 + (i % 7), "torque": 15.0, "bit_depth": bit_depth,
+              "hole_depth": 4000.0, "rpm": 0.0, "flow_in": 0.0, "spp": 10.0, "wob": 0.0}
+    units = {"hookload": "kN", "torque": "kN*m", "bit_depth": "m", "hole_depth": "m",
+             "rpm": "rpm", "flow_in": "L/min", "spp": "bar", "wob": "kN"}
+    return [(f"{PREFIX}/{c}",
+             json.dumps({"t": t, "value": values[c], "unit": units[c]}).encode())
+            for c in CHANNELS]
+
+
+class Broker:
+    def __init__(self, folder: Path) -> None:
+        self.port = free_port()
+        folder.chmod(0o755)
+        conf = folder / "mosquitto.conf"
+        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\n"
+                        "max_queued_messages 1000000\nmax_inflight_messages 200\n")
+        self.process = subprocess.Popen([shutil.which("mosquitto") or "/usr/sbin/mosquitto",
+                                         "-c", str(conf)], stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), 0.2).close()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)
+
+    def stop(self) -> None:
+        self.process.send_signal(signal.SIGTERM)
+        self.process.wait(10)
+
+
+class Daemon:
+    """``tdmon run`` in a subprocess, with its RSS readable from /proc."""
+
+    def __init__(self, folder: Path, transport: str, port: int) -> None:
+        if transport == "mqtt":
+            source = (f'[sources.mqtt]\nport = {port}\nclient_id = "bench-{time.time_ns()}"\n'
+                      "clean_session = true\n[publish]\nmqtt = true\nqos = 0\n")
+        else:
+            source = (f'[sources.zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
+                      "[publish]\nzenoh = true\n")
+        config = folder / f"daemon-{transport}.toml"
+        config.write_text(f'prefix = "{PREFIX}"\nwell = "{WELL}"\n{source}'
+                          'names = ["model", "status"]\nstatus_interval = "0.1 s"\n'
+                          "[queues]\ningest = 20000\npublish = 200000\n"
+                          '[monitor]\nmethod = "aadnoy"\n')
+        self.log = folder / f"daemon-{transport}.log"
+        self.stream = self.log.open("w")
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "tdmon", "run", "--config", str(config),
+             "--log-level", "warning"], stderr=self.stream, cwd=ROOT)
+        time.sleep(0.2)
+
+    def rss_mb(self) -> float:
+        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def stop(self) -> str:
+        self.process.send_signal(signal.SIGTERM)
+        code = self.process.wait(60)
+        self.stream.close()
+        text = self.log.read_text()
+        if code != 0:
+            raise RuntimeError(f"daemon exited {code}: {text}")
+        return text
+
+
+class Rig:
+    """Publisher and result subscriber over one transport."""
+
+    def __init__(self) -> None:
+        self.models: list[tuple[float, dict[str, Any]]] = []
+        self.status: dict[str, Any] = {}
+        self.send: Callable[[str, bytes], Awaitable[None]]
+        self.last_t = 0.0
+
+    def next_t(self, step: float) -> float:
+        """Data time of the next row: now, but never before the previous row (the daemon
+        would rightly count an older row as out of order and make no frame of it)."""
+        self.last_t = max(time.time(), self.last_t + step)
+        return self.last_t
+
+    def on_result(self, topic: str, payload: bytes) -> None:
+        message = json.loads(payload)
+        if topic.endswith("/model"):
+            self.models.append((time.time(), message))
+        elif topic.endswith("/status"):
+            self.status = message
+
+
+async def with_mqtt(port: int, body: Callable[[Rig], Awaitable[dict[str, Any]]]
+                    ) -> dict[str, Any]:
+    rig = Rig()
+    async with aiomqtt.Client("127.0.0.1", port, identifier="bench-dash") as dash, \
+            aiomqtt.Client("127.0.0.1", port, identifier="bench-rig",
+                           max_inflight_messages=200) as pub:
+        pub.pending_calls_threshold = 10_000
+        await dash.subscribe(f"{PREFIX}/tdmon/#", qos=0)
+
+        async def listen() -> None:
+            async for message in dash.messages:
+                assert isinstance(message.payload, bytes)
+                rig.on_result(str(message.topic), message.payload)
+
+        listener = asyncio.create_task(listen())
+        window = asyncio.Semaphore(200)
+        tasks: set[asyncio.Task[None]] = set()
+
+        async def one(topic: str, payload: bytes) -> None:
+            try:
+                await pub.publish(topic, payload, qos=1)
+            finally:
+                window.release()
+
+        async def send(topic: str, payload: bytes) -> None:
+            await window.acquire()  # QoS 1 with up to 200 unacknowledged messages in flight
+            task = asyncio.create_task(one(topic, payload))
+            tasks.add(task)
+            task.add_done_callback(tasks.discard)
+
+        rig.send = send
+        try:
+            await asyncio.sleep(0.5)
+            return await body(rig)
+        finally:
+            await asyncio.gather(*list(tasks))
+            listener.cancel()
+
+
+async def with_zenoh(port: int, body: Callable[[Rig], Awaitable[dict[str, Any]]]
+                     ) -> dict[str, Any]:
+    rig = Rig()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    session = zenoh.open(conf)
+    loop = asyncio.get_running_loop()
+    subscriber = session.declare_subscriber(
+        f"{PREFIX}/tdmon/**",
+        lambda s: loop.call_soon_threadsafe(rig.on_result, str(s.key_expr),
+                                            s.payload.to_bytes()))
+    publishers = {c: session.declare_publisher(
+        f"{PREFIX}/{c}", congestion_control=zenoh.CongestionControl.BLOCK) for c in CHANNELS}
+
+    async def send(topic: str, payload: bytes) -> None:
+        publishers[topic.rsplit("/", 1)[1]].put(payload)
+
+    rig.send = send
+    try:
+        deadline = time.monotonic() + 10
+        while not list(session.info.peers_zid()) and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(0.5)
+        return await body(rig)
+    finally:
+        subscriber.undeclare()
+        session.close()
+
+
+async def latency(rig: Rig, seconds: float) -> dict[str, Any]:
+    rig.models.clear()
+    sent: dict[float, float] = {}
+    start = time.monotonic()
+    i = 0
+    while time.monotonic() - start < seconds:
+        t = rig.next_t(0.1)
+        sent[round(t, 6)] = time.time()
+        for topic, payload in row(t, i):
+            await rig.send(topic, payload)
+        i += 1
+        await asyncio.sleep(max(0.0, start + i * 0.1 - time.monotonic()))
+    await asyncio.sleep(1.0)
+    delays = sorted((received - sent[round(m["t"], 6)]) * 1e3 for received, m in rig.models
+                    if round(m["t"], 6) in sent)
+    return {"rows": i, "results": len(delays),
+            "p50_ms": round(statistics.median(delays), 2),
+            "p99_ms": round(delays[min(len(delays) - 1, int(0.99 * len(delays)))], 2),
+            "max_ms": round(delays[-1], 2)}
+
+
+async def throughput(rig: Rig, samples: int) -> dict[str, Any]:
+    await asyncio.sleep(0.3)
+    base = int(rig.status.get("samples_in", 0))
+    rows = samples // len(CHANNELS)
+    started = time.perf_counter()
+    for i in range(rows):
+        for topic, payload in row(rig.next_t(0.001), i):
+            await rig.send(topic, payload)
+        if i % 64 == 0:
+            await asyncio.sleep(0)
+    sent_s = time.perf_counter() - started
+    total = rows * len(CHANNELS)
+    deadline = time.monotonic() + 300
+    while int(rig.status.get("samples_in", 0)) - base < total:
+        if time.monotonic() > deadline:
+            break
+        await asyncio.sleep(0.02)
+    elapsed = time.perf_counter() - started
+    processed = int(rig.status.get("samples_in", 0)) - base
+    return {"samples": total, "processed": processed, "seconds": round(elapsed, 2),
+            "publish_seconds": round(sent_s, 2),
+            "samples_per_s": round(processed / elapsed),
+            "rejected": rig.status.get("rejected"), "dropped": rig.status.get("dropped"),
+            "lost": total - processed}
+
+
+async def soak(rig: Rig, daemon: Daemon, seconds: float) -> dict[str, Any]:
+    rss: list[tuple[float, float]] = []
+    start = time.monotonic()
+    next_sample = start
+    i = 0
+    while time.monotonic() - start < seconds:
+        if time.monotonic() >= next_sample:
+            rss.append((round(time.monotonic() - start, 1), round(daemon.rss_mb(), 1)))
+            next_sample += 5.0
+            rig.models.clear()  # the bench must not be what grows
+        t = rig.next_t(0.1)
+        for topic, payload in row(t, i):
+            await rig.send(topic, payload)
+        i += 1
+        await asyncio.sleep(max(0.0, start + i * 0.1 - time.monotonic()))
+    rss.append((round(time.monotonic() - start, 1), round(daemon.rss_mb(), 1)))
+    # judge flatness after warm-up (first 20 % of the run)
+    settled = [m for s, m in rss if s >= 0.2 * seconds] or [rss[-1][1]]
+    return {"seconds": seconds, "rows": i, "rss_start_mb": rss[0][1],
+            "rss_after_warmup_mb": settled[0], "rss_end_mb": rss[-1][1],
+            "rss_max_mb": max(m for _, m in rss),
+            "growth_after_warmup_mb": round(rss[-1][1] - settled[0], 1)}
+
+
+def run_transport(transport: str, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
+    broker = Broker(folder) if transport == "mqtt" else None
+    port = broker.port if broker else free_port()
+    daemon = Daemon(folder, transport, port)
+    deadline = time.monotonic() + 30
+    while "model for" not in daemon.log.read_text() and time.monotonic() < deadline:
+        time.sleep(0.1)  # warning log level: wait for the process instead
+        if daemon.process.poll() is not None:
+            raise RuntimeError(daemon.log.read_text())
+        if time.monotonic() > deadline - 28:
+            break
+    time.sleep(2.0)
+    samples = args.mqtt_samples if transport == "mqtt" else args.zenoh_samples
+
+    async def body(rig: Rig) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        out["latency"] = await latency(rig, args.latency_seconds)
+        print(transport, "latency", out["latency"], flush=True)
+        out["throughput"] = await throughput(rig, samples)
+        print(transport, "throughput", out["throughput"], flush=True)
+        if not args.skip_soak:
+            out["soak"] = await soak(rig, daemon, args.soak_seconds)
+            print(transport, "soak", out["soak"], flush=True)
+        return out
+
+    try:
+        runner = with_mqtt if transport == "mqtt" else with_zenoh
+        result = asyncio.run(runner(port, body))
+    finally:
+        log = daemon.stop()
+        if broker:
+            broker.stop()
+    result["daemon_exit_summary"] = log.strip().splitlines()[-1]
+    return result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--transport", choices=["mqtt", "zenoh", "both"], default="both")
+    parser.add_argument("--latency-seconds", type=float, default=30.0)
+    parser.add_argument("--mqtt-samples", type=int, default=80_000)
+    parser.add_argument("--zenoh-samples", type=int, default=400_000)
+    parser.add_argument("--soak-seconds", type=float, default=600.0)
+    parser.add_argument("--skip-soak", action="store_true")
+    parser.add_argument("--json", type=Path, help="write the results here")
+    args = parser.parse_args()
+    results: dict[str, Any] = {"cpus": os.cpu_count()}
+    with tempfile.TemporaryDirectory(prefix="tdmon-bench-") as tmp:
+        for transport in (["mqtt", "zenoh"] if args.transport == "both" else [args.transport]):
+            results[transport] = run_transport(transport, args, Path(tmp))
+    print(json.dumps(results, indent=2))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
