@@ -28,9 +28,11 @@ from tdmon.model.torque_drag import WellModel
 
 __all__ = [
     "OPERATION_FOR_STATE",
+    "REAMING_OPERATIONS",
     "FrictionEstimate",
     "back_calculate",
     "back_calculate_window",
+    "motion_angle",
     "shoe_depth",
 ]
 
@@ -42,6 +44,10 @@ OPERATION_FOR_STATE: dict[str, tuple[str, Quantity]] = {
     "rotating_off_bottom": ("rotating", "torque"),
 }
 """Which model operation and measured quantity a window of a rig state calibrates."""
+
+REAMING_OPERATIONS: dict[str, str] = {"reaming": "slack_off", "back_reaming": "pick_up"}
+"""Axial operation of the combined-motion states; their friction comes from the torque with
+the friction split by the motion angle psi (Aadnoy, Fazaelizadeh and Hareland 2010)."""
 
 _DERIVATIVE_STEP = 1e-3
 
@@ -96,6 +102,7 @@ def back_calculate(
     method: str = "soft-string",
     section: str = "all",
     xtol: float = 1e-6,
+    psi: float | None = None,
 ) -> FrictionEstimate:
     """Friction factor on the ``free`` elements that reproduces ``measured``.
 
@@ -113,6 +120,8 @@ def back_calculate(
     method : torque-and-drag method
     section : label of the free elements for the result
     xtol : absolute tolerance on mu [-]
+    psi : motion angle for pick-up/slack-off while rotating, ``atan(V_axial / V_tangential)``
+        [rad]; None for pure axial motion
 
     Returns
     -------
@@ -138,7 +147,7 @@ def back_calculate(
         nonlocal calls
         calls += 1
         friction = np.where(mask, mu, base)
-        return model.evaluate(operation, bit_depth, friction, method=method)[index]
+        return model.evaluate(operation, bit_depth, friction, method=method, psi=psi)[index]
 
     low, high = bracket
     try:
@@ -190,7 +199,9 @@ def back_calculate_window(
     Parameters
     ----------
     model : prepared well
-    window : a usable window of state ``pick_up``, ``slack_off`` or ``rotating_off_bottom``
+    window : a usable window of state ``pick_up``, ``slack_off``, ``rotating_off_bottom``
+        (torque), ``reaming`` or ``back_reaming`` (torque with the friction split by the motion
+        angle, `motion_angle`)
     mu_cased : cased-hole friction found so far; with the bit more than ``min_open_length``
         below the shoe it is held on the cased elements and the open-hole mu is solved
     min_open_length : string length below the shoe needed for an open-hole solve [m]
@@ -209,9 +220,15 @@ def back_calculate_window(
     """
     if window.rejected is not None:
         raise FitError(f"window rejected: {window.rejected}")
-    if window.state not in OPERATION_FOR_STATE:
+    psi = None
+    quantity: Quantity
+    if window.state in REAMING_OPERATIONS:
+        operation, quantity = REAMING_OPERATIONS[window.state], "torque"
+        psi = motion_angle(model, window)
+    elif window.state in OPERATION_FOR_STATE:
+        operation, quantity = OPERATION_FOR_STATE[window.state]
+    else:
         raise FitError(f"no friction solve for rig state {window.state!r}")
-    operation, quantity = OPERATION_FOR_STATE[window.state]
     if quantity == "torque":
         if window.torque is None or window.torque_se is None:
             raise FitError("rotating window without surface torque")
@@ -225,9 +242,27 @@ def back_calculate_window(
         return back_calculate(model, operation, window.bit_depth, measured, se,
                               quantity=quantity, base_mu=np.where(kind == "cased", mu_cased, 0.0),
                               free=np.asarray(kind == "open"), bracket=bracket, method=method,
-                              section="open")
+                              section="open", psi=psi)
     if below_shoe <= 0.0 and shoe > 0.0:
         return back_calculate(model, operation, window.bit_depth, measured, se,
-                              quantity=quantity, bracket=bracket, method=method, section="cased")
+                              quantity=quantity, bracket=bracket, method=method, section="cased",
+                              psi=psi)
     return back_calculate(model, operation, window.bit_depth, measured, se, quantity=quantity,
-                          bracket=bracket, method=method, section="all")
+                          bracket=bracket, method=method, section="all", psi=psi)
+
+
+def motion_angle(model: WellModel, window: Window) -> float:
+    """Angle of the pipe surface's motion from the tangential direction [rad].
+
+    ``psi = atan(|V_axial| / (omega r))`` with the window's mean axial speed and rotation and the
+    torque radius of the string's top component (most of the string's contact length).
+
+    Raises
+    ------
+    FitError
+        The window has no speed or no rotation.
+    """
+    if window.velocity is None or window.rpm is None or window.rpm <= 0.0:
+        raise FitError(f"{window.state} window without axial speed and rotation")
+    radius = float(model.component_radius[-1])
+    return math.atan2(abs(window.velocity), window.rpm * radius)

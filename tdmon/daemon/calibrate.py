@@ -231,7 +231,8 @@ class CalibrationStep:
             return
         if window.state in ("static", "circulating", "rotating_off_bottom"):
             self._weight_check(window, emit)
-        if window.state not in ("pick_up", "slack_off", "rotating_off_bottom"):
+        if window.state not in ("pick_up", "slack_off", "rotating_off_bottom", "reaming",
+                                "back_reaming"):
             return
         try:
             estimate = back_calculate_window(
@@ -245,6 +246,8 @@ class CalibrationStep:
             return
         self.estimates.append(estimate)
         emit("estimate", self._window_message(window, estimate))
+        if window.state in ("reaming", "back_reaming"):
+            return  # combined motion: not a reference for the cased value, profile or mu(T)
         if estimate.section in ("cased", "all") and window.bit_depth <= self.shoe:
             total, weight = self.mu_cased.get(window.state, (0.0, 0.0))
             w = 1.0 / max(estimate.mu_std, 1e-4) ** 2
@@ -299,8 +302,10 @@ class CalibrationStep:
         return total / weight if weight > 0 else None
 
     def _window_message(self, window: Window, estimate: FrictionEstimate) -> dict[str, Any]:
+        operation = (window.state if window.state in ("reaming", "back_reaming")
+                     else estimate.operation)
         message: dict[str, Any] = {
-            "t": window.t_end, "kind": "window", "operation": estimate.operation,
+            "t": window.t_end, "kind": "window", "operation": operation,
             "mu": estimate.mu, "mu_std": estimate.mu_std, "bit_depth_m": window.bit_depth,
             "section": estimate.section, "samples": window.n, "t_start": window.t_start,
             "low_confidence": bool(window.low_confidence), "flags": list(window.flags),

@@ -6,6 +6,7 @@ weight and buoyancy check by hand."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -168,11 +169,31 @@ def test_replay_window_friction_against_the_simulator_truth(replayed: Any,
             continue
         operation = message["operation"]
         state = "rotating_off_bottom" if operation == "rotating" else operation
+        # reaming windows are solved from torque: compare with the rotating-torque truth
+        key = "mu_rotating" if operation in ("reaming", "back_reaming") else f"mu_{operation}"
         rows = np.flatnonzero(truth["state"] == state)
         nearest = rows[np.argmin(np.abs(truth["bit_depth"][rows] - message["bit_depth_m"]))]
-        errors.append(message["mu"] - float(truth[f"mu_{operation}"][nearest]))
+        errors.append(message["mu"] - float(truth[key][nearest]))
     errors_array = np.abs(np.array(errors))
     assert errors_array.size >= 5
     # the tight spot's overpull window is the one allowed outlier (it raises an alarm instead)
     assert float(np.median(errors_array)) <= 0.01
     assert float(np.mean(errors_array <= 0.02)) >= 0.85
+
+
+def test_reaming_friction_from_torque_with_the_motion_angle(model_open: WellModel) -> None:
+    speed, rpm = 0.3, 100 * 2 * math.pi / 60
+    radius = float(model_open.component_radius[-1])
+    psi = math.atan2(speed, rpm * radius)
+    torque = model_open.evaluate("slack_off", 3800.0, 0.28, psi=psi)[1]
+    hook = model_open.evaluate("slack_off", 3800.0, 0.28, psi=psi)[0]
+    window = Window("reaming", 0.0, 30.0, 30, 3800.0, 3795.0, 3805.0, hook, 5e3,
+                    torque=torque, torque_se=200.0, rpm=rpm, velocity=speed)
+    estimate = back_calculate_window(model_open, window)
+    assert estimate.mu == pytest.approx(0.28, abs=1e-5)
+    assert estimate.quantity == "torque" and estimate.operation == "slack_off"
+    # the torque of combined motion is smaller than rotating alone: mu cos(psi) tangentially
+    assert torque < model_open.evaluate("rotating", 3800.0, 0.28)[1]
+    no_rotation = replace(window, rpm=None)
+    with pytest.raises(FitError, match="without axial speed and rotation"):
+        back_calculate_window(model_open, no_rotation)
