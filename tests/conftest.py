@@ -57,6 +57,7 @@ class Mosquitto:
             listener_extra,
             "max_queued_messages 1000000",
             "max_inflight_messages 100",
+            "set_tcp_nodelay true",
             f"log_dest file {workdir / 'mosquitto.log'}",
             "log_type error",
             "log_type warning",
