@@ -41,10 +41,12 @@ class Built:
     steps: list[Step] = field(default_factory=list)
 
 
-def default_steps(config: DaemonConfig, model: LoadModel | None) -> list[Step]:
-    """Rig state, then the monitor when a model is available."""
+def default_steps(config: DaemonConfig, model: LoadModel | None,
+                  rig_state: Step | None = None) -> list[Step]:
+    """Rig state (``rig_state``, else the simple threshold step), then the monitor when a
+    model is available."""
     rs = config.rig_state
-    steps: list[Step] = [SimpleRigState(RigStateThresholds(
+    steps: list[Step] = [rig_state or SimpleRigState(RigStateThresholds(
         in_slips_hookload=rs.in_slips_hookload, moving_speed=rs.moving_speed,
         rotating_rpm=rs.rotating_rpm, circulating_flow=rs.circulating_flow,
         on_bottom=rs.on_bottom, steady_frames=rs.steady_frames,
@@ -70,13 +72,15 @@ async def build_daemon(
     model: LoadModel | None = None,
     extra_sinks: Sequence[Sink] = (),
     extra_steps: Sequence[Step] = (),
+    rig_state: Step | None = None,
     backoff: Backoff | None = None,
     stop_when_sources_done: bool | None = None,
 ) -> AsyncIterator[Built]:
     """Create the daemon for ``config``; resources (Zenoh sessions) close on exit.
 
-    ``model`` overrides the well file's model (tests); ``extra_steps`` run after the built-in
-    steps, ``extra_sinks`` receive everything (the recorder is added first when enabled).
+    ``model`` overrides the well file's model (tests); ``rig_state`` replaces the simple
+    rig-state step; ``extra_steps`` run after the monitor (back-calculation, alarms);
+    ``extra_sinks`` receive everything (the recorder is added first when enabled).
     """
     if model is None:
         model = load_model(config)
@@ -163,7 +167,7 @@ async def build_daemon(
             sinks.append(publisher)
             publishers.append(publisher)
 
-        steps = default_steps(config, model) + list(extra_steps)
+        steps = default_steps(config, model, rig_state) + list(extra_steps)
         aligner = Aligner(
             wait_for=config.align.wait_for,
             stale_timeout=config.align.stale_timeout,
