@@ -105,6 +105,15 @@ async def build_daemon(
                 on_alarm=on_alarm,
             )
             sinks.append(recorder)
+        if config.rerun.mode != "off":
+            from tdmon.record.rerun_views import RerunViews
+
+            rrd = config.resolve(config.rerun.path) if config.rerun.path else None
+            if config.rerun.mode == "file" and rrd is None:
+                raise ConfigError(str(config.source_file), "rerun.path",
+                                  "mode 'file' needs a path for the .rrd file")
+            sinks.append(RerunViews(
+                rrd, live_port=config.rerun.port if config.rerun.mode == "live" else None))
         sinks.extend(extra_sinks)
 
         own = f"{config.prefix}/tdmon/"

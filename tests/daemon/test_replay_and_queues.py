@@ -112,3 +112,21 @@ async def test_zenoh_source_and_publisher_on_one_session_do_not_deadlock(
             await wait_until(lambda: built.stats.samples_in == 3 * rows, 30, "all samples")
     finally:
         rig.close()
+
+
+async def test_recorder_and_rerun_sinks_from_the_config(tmp_path: Path) -> None:
+    from tdmon.record.reader import read_messages
+
+    path = tmp_path / "in.mcap"
+    _recording(path, 20)
+    config = make_config({"sources": {"mcap": {"path": str(path)}},
+                          "recorder": {"enabled": True, "output": str(tmp_path / "rec")},
+                          "rerun": {"mode": "file", "path": str(tmp_path / "views.rrd")}},
+                         tmp_path)
+    stats = await run_daemon(config, model=linear_model())
+    assert stats.samples_in == 60
+    [recording] = (tmp_path / "rec").glob("*.mcap")
+    topics = [m.topic for m in read_messages(recording)]
+    assert topics.count("/tdmon/raw") == 60 and topics.count("/tdmon/sample") == 60
+    assert topics.count("/tdmon/model") == 20 and "/tdmon/status" in topics
+    assert (tmp_path / "views.rrd").stat().st_size > 0
