@@ -45,7 +45,12 @@ from tdmon.calib.alarms import (
     update_band_trend,
 )
 from tdmon.calib.backcalc import FrictionEstimate, back_calculate_window, shoe_depth
-from tdmon.calib.blockweight import BlockWeightState, buoyancy_check, update_block_weight
+from tdmon.calib.blockweight import (
+    BlockWeightState,
+    BuoyancyCheck,
+    buoyancy_check,
+    update_block_weight,
+)
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import (
@@ -200,6 +205,8 @@ class CalibrationStep:
         self._anomalous_bins: frozenset[int] = frozenset()
         self._air_model: WellModel | None = None
         self._block_alarmed = False
+        self._weight_off = 0
+        self.weight_checks: list[BuoyancyCheck] = []
 
     # -- frames ---------------------------------------------------------------------------
 
@@ -394,13 +401,21 @@ class CalibrationStep:
                                    self.model.well.block_weight)
         except (FitError, ModelError):
             return
-        if abs(check.ratio - 1.0) > self.settings.block_weight_tolerance and all(
-                math.isfinite(x) for x in (check.ratio, check.fluid_density)):
-            self._alarm(emit, Alarm(
-                window.t_end, "weight_check", "info",
-                f"{window.state} string weight at {window.bit_depth:.0f} m is "
-                f"{100 * check.ratio:.0f} % of the model's (implied fluid density "
-                f"{check.fluid_density:.0f} kg/m3)", check.measured_weight, check.modelled_weight))
+        self.weight_checks.append(check)
+        off = abs(check.ratio - 1.0) > self.settings.block_weight_tolerance
+        # static hangs keep part of the last pull's or run's drag locked in: one odd hang is
+        # not news, three in a row are; reported once until the weights agree again
+        self._weight_off = self._weight_off + 1 if off else 0
+        if self._weight_off != 3 or not math.isfinite(check.ratio):
+            return
+        buoyed_given = abs(in_air - modelled) < 1e-6 * max(abs(modelled), 1.0)
+        density = ("" if buoyed_given or not math.isfinite(check.fluid_density)
+                   else f" (implied fluid density {check.fluid_density:.0f} kg/m3)")
+        self._alarm(emit, Alarm(
+            window.t_end, "weight_check", "info",
+            f"{window.state} string weight at {window.bit_depth:.0f} m is "
+            f"{100 * check.ratio:.0f} % of the model's for three hangs in a row{density}",
+            check.measured_weight, check.modelled_weight))
 
 
 class AlarmStep:

@@ -28,7 +28,7 @@ from tdmon.calib.alarms import (
     update_band_trend,
 )
 from tdmon.calib.rigstate import RigStateThresholds
-from tdmon.calib.windows import WindowSettings
+from tdmon.calib.windows import Window, WindowSettings
 from tdmon.daemon.calibrate import AlarmStep, CalibrationSettings, CalibrationStep, RigStateStep
 from tdmon.daemon.pipeline import Frame
 from tdmon.model.friction import KAARSTAD_2009
@@ -297,3 +297,18 @@ def test_steps_behind_the_daemon_aligner(replay: Any) -> None:
     assert float(np.mean(np.array([s for _, s in states]) == truth)) >= 0.95
     windows = [m for n, m in messages if n == "estimate" and m["kind"] == "window"]
     assert len(windows) >= 30
+
+
+def test_weight_check_needs_three_odd_hangs(model_open: WellModel) -> None:
+    calibrate = _steps(model_open)[1]
+    messages: list[tuple[str, dict[str, Any]]] = []
+    static = model_open.evaluate("static", 3500.0, 0.0)[0]
+    for k, factor in enumerate((1.0, 0.85, 0.85, 1.0, 0.85, 0.85, 0.85, 0.85)):
+        window = Window("static", 10.0 * k, 10.0 * k + 5, 5, 3500.0, 3500.0, 3500.0,
+                        400e3 + factor * (static - 400e3), 3e3)
+        calibrate.on_window(window, lambda n, m: messages.append((n, m)))
+    checks = [m for n, m in messages if n == "alarm" and m["kind"] == "weight_check"]
+    assert len(checks) == 1 and checks[0]["t"] == 65.0
+    assert "85 %" in checks[0]["message"]
+    assert "density" not in checks[0]["message"]  # weights given buoyed: no density to infer
+    assert calibrate.weight_checks[0].ratio == pytest.approx(1.0)
