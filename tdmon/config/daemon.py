@@ -171,7 +171,8 @@ class AlignConfig(_Model):
     max_wait: Seconds = Field(
         default=0.25, ge=0, description="how long a hook-load frame waits for the other channels"
     )
-    wait_for: list[str] = Field(default_factory=lambda: ["bit_depth", "torque"])
+    # channels a frame waits for while they keep pace with the hook load (default: all)
+    wait_for: list[str] | None = None
 
 
 class RigStateConfig(_Model):
@@ -199,6 +200,15 @@ class MonitorConfig(_Model):
         return sorted(value)
 
 
+class CalibrationConfig(_Model):
+    """Live back-calculation (tdmon.calib) in the daemon; needs a well file."""
+
+    enabled: bool = False
+    # hook load up to the block weight plus this margin means in slips (replaces
+    # [rig_state] in_slips_hookload when calibration is on)
+    in_slips_margin: Newtons = Field(default=150e3, ge=0)
+
+
 class DaemonConfig(_Model):
     """The whole daemon file."""
 
@@ -213,6 +223,7 @@ class DaemonConfig(_Model):
     align: AlignConfig = Field(default_factory=AlignConfig)
     rig_state: RigStateConfig = Field(default_factory=RigStateConfig)
     monitor: MonitorConfig = Field(default_factory=MonitorConfig)
+    calibration: CalibrationConfig = Field(default_factory=CalibrationConfig)
     #: the file this was read from (set by load_daemon_config; paths are relative to it)
     source_file: Path | None = Field(default=None, exclude=True)
 
@@ -309,9 +320,11 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     for name in config.publish.names:
         if not name or "/" in name:
             raise ConfigError(str(file), "publish.names", f"'{name}' is not a message name")
-    for channel in config.align.wait_for:
+    for channel in config.align.wait_for or ():
         if channel not in CHANNEL_UNITS:
             raise ConfigError(str(file), "align.wait_for", f"unknown channel '{channel}'")
+    if config.calibration.enabled and config.well is None:
+        raise ConfigError(str(file), "calibration.enabled", "calibration needs a well file")
     if config.well is not None and not config.resolve(config.well).exists():
         raise ConfigError(str(file), "well", f"file not found: {config.resolve(config.well)}")
     return config

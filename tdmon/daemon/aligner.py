@@ -1,12 +1,17 @@
 """Align channels on the hook-load timeline.
 
 Each channel keeps a short history of (t, value). A hook-load sample newer than the last frame
-opens a pending frame at its time; the frame is emitted as soon as every channel in
-``wait_for`` has data at or after that time, when the next hook-load sample arrives, or after
-``max_wait`` seconds (wall clock, so a silent channel delays results by at most that much).
-Channels silent for longer than the stale timeout are not waited for, nor are channels never
-seen once the stream is older than the stale timeout (a rig that sends no torque must not
-delay every frame).
+opens a pending frame at its time; the frame is emitted as soon as every channel waited for
+has data at or after that time, when the next hook-load sample arrives, or after ``max_wait``
+seconds (wall clock, so a late channel delays results by at most that much).
+
+A channel is waited for (all channels, or those in ``wait_for``) while it keeps pace with the
+hook load: it had a sample at or after the previous frame, not older than the stale timeout
+(which must therefore exceed the rig's sampling interval). A slower channel (bit depth at 1 Hz
+against hook load at 10 Hz) or a silent one is used with its age instead of holding every
+frame back. Channels in ``expected`` (the rig's channel map) but never seen are waited for
+during the first ``stale_timeout`` of the stream, so the first frames of a start-up are
+complete.
 
 Duplicates (same channel and time as a sample already held) are counted and ignored.
 Out-of-order samples (older than the channel's newest) are counted; they still fill the history
@@ -41,13 +46,17 @@ class Aligner:
     def __init__(
         self,
         trigger: str = "hookload",
-        wait_for: Iterable[str] = ("bit_depth", "torque"),
+        wait_for: Iterable[str] | None = None,
+        expected: Iterable[str] = (),
         stale_timeout: float = 5.0,
         max_wait: float = 0.25,
         history: int = 8,
     ) -> None:
         self.trigger = trigger
-        self.wait_for = tuple(c for c in wait_for if c != trigger)
+        self.wait_for = None if wait_for is None else tuple(c for c in wait_for if c != trigger)
+        # channels the rig is known to send (its channel map): waited for at start-up even
+        # before their first sample, so that the first frames are complete
+        self.expected = tuple(c for c in expected if c != trigger)
         self.stale_timeout = stale_timeout
         self.max_wait = max_wait
         self.history = history
@@ -127,7 +136,15 @@ class Aligner:
         return True
 
     def _complete(self, t: float) -> bool:
-        for channel in self.wait_for:
+        if self.wait_for is not None:
+            channels: Iterable[str] = self.wait_for
+        elif len(self._times) > len(self.expected):
+            channels = self._times.keys()
+        else:
+            channels = {*self._times, *self.expected}
+        for channel in channels:
+            if channel == self.trigger:
+                continue
             times = self._times.get(channel)
             if not times:
                 if self._first_t is not None and t - self._first_t > self.stale_timeout:
@@ -136,9 +153,8 @@ class Aligner:
             newest = times[-1]
             if newest >= t - _SAME_TIME:
                 continue
-            if t - newest > self.stale_timeout:
-                continue  # silent channel: stale, not worth waiting for
-            return False
+            if newest >= self._last_frame_t - _SAME_TIME and t - newest <= self.stale_timeout:
+                return False  # it kept pace so far: its sample for t is on the way
         return True
 
     def _emit(self) -> Frame:

@@ -65,6 +65,25 @@ def load_model(config: DaemonConfig) -> LoadModel | None:
     return grid_model_for_well(config)
 
 
+def calibration_steps_for(config: DaemonConfig) -> tuple[Step, list[Step]]:
+    """The back-calculation's rig-state step and the steps after the monitor
+    (docs/back-calculation.md, "Daemon composition"). The mu(T) calibration, which needs the
+    well's temperature model and a friction law, is not wired yet."""
+    from tdmon.calib.rigstate import RigStateThresholds as CalibThresholds
+    from tdmon.config.well import load_well_model
+    from tdmon.daemon.calibrate import AlarmStep, CalibrationStep, RigStateStep
+    from tdmon.model.torque_drag import WellModel
+
+    assert config.well is not None
+    well = load_well_model(config.resolve(config.well))
+    rs = config.rig_state
+    rig_state = RigStateStep(CalibThresholds(
+        block_weight=well.block_weight, in_slips_margin=config.calibration.in_slips_margin,
+        moving_speed=rs.moving_speed, rotating_speed=rs.rotating_rpm,
+        circulating_flow=rs.circulating_flow, on_bottom=rs.on_bottom))
+    return rig_state, [CalibrationStep(WellModel(well), rig_state), AlarmStep()]
+
+
 @contextlib.asynccontextmanager
 async def build_daemon(
     config: DaemonConfig,
@@ -84,6 +103,10 @@ async def build_daemon(
     """
     if model is None:
         model = load_model(config)
+    extra_steps = list(extra_steps)
+    if config.calibration.enabled and rig_state is None:
+        rig_state, calibration_steps = calibration_steps_for(config)
+        extra_steps = calibration_steps + extra_steps
     stats = Stats()
     base = config.source_file.parent if config.source_file else None
     sinks: list[Sink] = []
@@ -179,6 +202,7 @@ async def build_daemon(
         steps = default_steps(config, model, rig_state) + list(extra_steps)
         aligner = Aligner(
             wait_for=config.align.wait_for,
+            expected=list(config.channels),
             stale_timeout=config.align.stale_timeout,
             max_wait=config.align.max_wait,
         )

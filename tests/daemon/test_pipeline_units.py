@@ -38,8 +38,20 @@ class TestAligner:
         assert aligner.expire(10.1) == []
         [frame] = aligner.expire(10.3)
         assert frame.t == 1.0 and frame.ages["bit_depth"] == 1.0
-        aligner.push(s("hookload", 2.0, 1e6), 11.0)
-        assert [f.t for f in aligner.flush()] == [2.0]
+        # the bit depth no longer keeps pace with the hook load: not waited for any more
+        assert [f.t for f in aligner.push(s("hookload", 2.0, 1e6), 11.0)] == [2.0]
+        aligner.push(s("bit_depth", 2.0, 101.0), 11.0)
+        aligner.push(s("hookload", 3.0, 1e6), 12.0)  # waits: the bit depth is back in step
+        assert [f.t for f in aligner.flush()] == [3.0]
+
+    def test_expected_channels_are_awaited_at_start_up_only(self) -> None:
+        aligner = Aligner(expected=("bit_depth",), stale_timeout=5.0)
+        assert aligner.push(s("hookload", 0.0, 1e6), 0.0) == []
+        [frame] = aligner.push(s("bit_depth", 0.0, 100.0), 0.0)
+        assert frame.values["bit_depth"] == 100.0
+        quiet = Aligner(expected=("torque",), stale_timeout=5.0)
+        quiet.push(s("hookload", 0.0, 1e6), 0.0)
+        assert [f.t for f in quiet.push(s("hookload", 10.0, 1e6), 0.0)] == [0.0, 10.0]
 
     def test_stale_channel_is_left_out_and_not_waited_for(self) -> None:
         aligner = Aligner(wait_for=("bit_depth",), stale_timeout=5.0)
