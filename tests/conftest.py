@@ -13,7 +13,7 @@ import socket
 import subprocess
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -112,6 +112,13 @@ class Mosquitto:
     @property
     def log(self) -> str:
         return (self.workdir / "mosquitto.log").read_text()
+
+
+@pytest.fixture(scope="session")
+def free_tcp_port() -> Callable[[], int]:
+    """``free_tcp_port()`` gives a loopback port nothing listens on (tests import no helpers
+    from this file: several conftest modules share the name once the whole suite runs)."""
+    return free_port
 
 
 @pytest.fixture

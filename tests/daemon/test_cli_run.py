@@ -6,10 +6,11 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
-from conftest import Mosquitto, free_port
 
 from tdmon.cli import main
 
@@ -44,8 +45,9 @@ def _wait_for(path: Path, text: str, timeout: float = 20) -> None:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_run_publish_and_stop_with_a_signal(tmp_path: Path, sig: signal.Signals) -> None:
-    port = free_port()
+def test_run_publish_and_stop_with_a_signal(tmp_path: Path, sig: signal.Signals,
+                                            free_tcp_port: Callable[[], int]) -> None:
+    port = free_tcp_port()
     config = _zenoh_config(tmp_path, port, f"""
 [recorder]
 enabled = true
@@ -80,7 +82,7 @@ output = "{tmp_path / 'rec'}"
     assert len(samples) == 900  # finished and flushed on the signal
 
 
-def test_publish_over_mqtt_to_the_daemon(mosquitto: Mosquitto, tmp_path: Path) -> None:
+def test_publish_over_mqtt_to_the_daemon(mosquitto: Any, tmp_path: Path) -> None:
     config = tmp_path / "mqtt.toml"
     config.write_text(f"""
 prefix = "rig/F4"
@@ -138,12 +140,13 @@ def test_missing_config_file(capsys: pytest.CaptureFixture[str]) -> None:
     assert "file not found" in capsys.readouterr().err
 
 
-def test_publish_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_publish_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                          free_tcp_port: Callable[[], int]) -> None:
     assert main(["publish", str(VOLVE)]) == 2
     assert "say where to publish" in capsys.readouterr().err
     assert main(["publish", str(VOLVE), "--mqtt", "127.0.0.1:1", "--columns", "x=y:kN"]) == 2
     assert "unknown channel 'x'" in capsys.readouterr().err
-    port = free_port()  # nothing listens there
+    port = free_tcp_port()  # nothing listens there
     assert main(["publish", str(VOLVE), "--mqtt", f"127.0.0.1:{port}", "--limit", "1"]) == 2
     assert "cannot connect" in capsys.readouterr().err
 

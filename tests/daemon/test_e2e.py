@@ -5,13 +5,13 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import aiomqtt
 import pytest
 import zenoh
-from conftest import Mosquitto, free_port
 from daemon_support import WELL_FILE, make_config, payload, running, wait_until
 
 from tdmon.config.well import load_well_model
@@ -63,7 +63,7 @@ def _model_expected(bit_depth: float) -> tuple[float, float, float, float]:
             loads.hookload["rotating"], loads.surface_torque["rotating"])
 
 
-async def test_mqtt_end_to_end(mosquitto: Mosquitto, tmp_path: Path) -> None:
+async def test_mqtt_end_to_end(mosquitto: Any, tmp_path: Path) -> None:
     config = make_config({
         "sources": {"mqtt": {"port": mosquitto.port, "client_id": "tdmon-e2e"}},
         "publish": {"mqtt": True}, "well": str(WELL_FILE), "monitor": MONITOR, "align": ALIGN,
@@ -97,8 +97,8 @@ async def test_mqtt_end_to_end(mosquitto: Mosquitto, tmp_path: Path) -> None:
     assert sink["status"][-1]["connections"]["mqtt"] == "closed"
 
 
-async def test_zenoh_end_to_end(tmp_path: Path) -> None:
-    rig_port, daemon_port = free_port(), free_port()
+async def test_zenoh_end_to_end(tmp_path: Path, free_tcp_port: Callable[[], int]) -> None:
+    rig_port, daemon_port = free_tcp_port(), free_tcp_port()
     config = make_config({
         "sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{daemon_port}"],
                               "connect": [f"tcp/127.0.0.1:{rig_port}"]}},

@@ -11,13 +11,12 @@ import json
 import math
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import pytest
 import zenoh
-from conftest import free_port
 from daemon_support import CollectSink, make_config, running
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -37,8 +36,9 @@ class Harness:
 
 
 @pytest.fixture(scope="module")
-def harness(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Harness]:
-    rig_port, daemon_port = free_port(), free_port()
+def harness(tmp_path_factory: pytest.TempPathFactory,
+            free_tcp_port: Callable[[], int]) -> Iterator[Harness]:
+    rig_port, daemon_port = free_tcp_port(), free_tcp_port()
     config = make_config({
         "sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{daemon_port}"],
                               "connect": [f"tcp/127.0.0.1:{rig_port}"]}},

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from daemon_support import CollectSink, linear_model, make_config
@@ -77,14 +78,13 @@ async def test_publisher_queue_drops_oldest_and_counts() -> None:
 
 
 async def test_zenoh_source_and_publisher_on_one_session_do_not_deadlock(
-        tmp_path: Path) -> None:
+        tmp_path: Path, free_tcp_port: Callable[[], int]) -> None:
     """Regression: results put on the session the source subscribes with were delivered
     locally inside put(), on the loop thread, which blocked once the bridge was full."""
     import zenoh
-    from conftest import free_port
     from daemon_support import running, wait_until
 
-    port = free_port()
+    port = free_tcp_port()
     config = make_config({
         "prefix": "rig/T1",
         "sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{port}"]}},

@@ -5,13 +5,13 @@ from __future__ import annotations
 import ssl
 import time
 from pathlib import Path
+from typing import Any
 
 import aiomqtt
-from conftest import Mosquitto
 from daemon_support import make_config, payload, running, wait_until
 
 
-async def test_tls_with_password(tls_mosquitto: tuple[Mosquitto, Path, str, str],
+async def test_tls_with_password(tls_mosquitto: tuple[Any, Path, str, str],
                                  tmp_path: Path) -> None:
     broker, ca_file, user, password = tls_mosquitto
     config = make_config({"sources": {"mqtt": {
@@ -28,7 +28,7 @@ async def test_tls_with_password(tls_mosquitto: tuple[Mosquitto, Path, str, str]
 
 
 async def test_wrong_password_is_a_clear_error_with_backoff(
-        tls_mosquitto: tuple[Mosquitto, Path, str, str], tmp_path: Path) -> None:
+        tls_mosquitto: tuple[Any, Path, str, str], tmp_path: Path) -> None:
     broker, ca_file, user, _ = tls_mosquitto
     config = make_config({"sources": {"mqtt": {
         "port": broker.port, "client_id": "tdmon-badpw", "username": user,
@@ -50,7 +50,7 @@ async def test_wrong_password_is_a_clear_error_with_backoff(
 
 
 async def test_untrusted_certificate_is_reported(
-        tls_mosquitto: tuple[Mosquitto, Path, str, str], tmp_path: Path) -> None:
+        tls_mosquitto: tuple[Any, Path, str, str], tmp_path: Path) -> None:
     broker, _, user, password = tls_mosquitto
     config = make_config({"sources": {"mqtt": {
         "port": broker.port, "username": user, "password": password,

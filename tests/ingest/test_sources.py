@@ -6,12 +6,11 @@ import asyncio
 import contextlib
 import json
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import free_port
 from mcap.writer import Writer
 
 from tdmon.config.daemon import ZenohConfig
@@ -89,8 +88,9 @@ async def test_mcap_source_missing_file(tmp_path: Path) -> None:
         await _read(McapSource(tmp_path / "none.mcap"))
 
 
-async def test_zenoh_bridge_applies_backpressure_and_loses_nothing() -> None:
-    port = free_port()
+async def test_zenoh_bridge_applies_backpressure_and_loses_nothing(
+        free_tcp_port: Callable[[], int]) -> None:
+    port = free_tcp_port()
     session = open_session(ZenohConfig(listen=[f"tcp/127.0.0.1:{port}"]))
     rig = open_session(ZenohConfig(connect=[f"tcp/127.0.0.1:{port}"]))
     n = 3000
