@@ -100,7 +100,9 @@ class Daemon:
         config.write_text(f'prefix = "{PREFIX}"\nwell = "{WELL}"\n{source}'
                           'names = ["model", "status"]\nstatus_interval = "0.1 s"\n'
                           "[queues]\ningest = 20000\npublish = 200000\n"
-                          '[monitor]\nmethod = "aadnoy"\n')
+                          # the channel map: the first frame waits for all eight channels
+                          + "".join(f"[channels.{c}]\n" for c in CHANNELS)
+                          + '[monitor]\nmethod = "aadnoy"\n')
         self.log = folder / f"daemon-{transport}.log"
         self.stream = self.log.open("w")
         self.process = subprocess.Popen(
