@@ -1,21 +1,47 @@
-"""Commands that make replay files: ``tdmon simulate`` and ``tdmon import``.
-
-(``tdmon replay`` itself follows with the replay driver.)
-"""
+"""Replay commands: ``tdmon replay`` (a recording through the daemon's pipeline, checked
+against its expectations), ``tdmon simulate`` and ``tdmon import`` (make replay files)."""
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
 import sys
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 from tdmon.errors import ConfigError, ModelError
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
-    """Add ``simulate`` and ``import``."""
+    """Add ``replay``, ``simulate`` and ``import``."""
+    replay = subparsers.add_parser(
+        "replay",
+        help="run a recording through the daemon's pipeline",
+        description=(
+            "Feed a replay (MCAP with /tdmon/raw input, e.g. a flight recording, a simulated "
+            "session or an imported log) to the daemon built from --config, as fast as "
+            "possible or paced, and write the full flight recording to --out (and a Rerun "
+            ".rrd). With --check, compare the results with the replay's expectations and exit "
+            "1 when one fails. See docs/replays.md."
+        ),
+    )
+    replay.add_argument("replay", type=Path, metavar="X.mcap", help="the replay")
+    replay.add_argument("--config", type=Path, metavar="D.toml",
+                        help="daemon TOML (default: the expectations' config)")
+    replay.add_argument("--out", required=True, type=Path, metavar="Y.mcap",
+                        help="flight recording to write (replaced if present)")
+    replay.add_argument("--rrd", type=Path, metavar="Z.rrd", help="Rerun recording to write")
+    replay.add_argument("--speed", default="max",
+                        help="real time x N, or 'max' (default: as fast as possible)")
+    replay.add_argument("--check", nargs="?", const="", default=None, metavar="E.toml",
+                        help="check expectations (default file: found beside the replay by "
+                             "name, replays/expectations/<name>.toml)")
+    replay.add_argument("--no-progress", action="store_true", help="no progress bar")
+    replay.add_argument("--json", action="store_true", help="print the summary as JSON")
+    replay.set_defaults(func=_replay)
+
     simulate = subparsers.add_parser(
         "simulate",
         help="generate a rig session with known truth as MCAP",
@@ -119,3 +145,89 @@ def _import_generic(args: argparse.Namespace) -> int:
     result = import_csv(args.csv, layout, args.out, prefix=prefix,
                         progress=sys.stderr.isatty())
     return _report(result, args.json)
+
+
+def _speed(text: str) -> float | None:
+    if text == "max":
+        return None
+    try:
+        speed = float(text)
+    except ValueError:
+        speed = -1.0
+    if not speed > 0 or speed == float("inf"):
+        raise ConfigError("--speed", "", f"'{text}' is not 'max' or a positive number")
+    return speed
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from tdmon.config.daemon import load_daemon_config
+    from tdmon.replay.driver import raw_message_count, replay
+    from tdmon.replay.expectations import check_replay, find_expectations, load_expectations
+
+    speed = _speed(args.speed)
+    expectations = None
+    if args.check is not None:
+        path = Path(args.check) if args.check else find_expectations(args.replay)
+        if path is None:
+            raise ConfigError(str(args.replay), "--check",
+                              "no expectations beside the replay (expectations/<name>.toml); "
+                              "give the file")
+        expectations = load_expectations(path)
+    if args.config is not None:
+        config_path = args.config
+    elif expectations is not None:
+        config_path = expectations.config_path
+    else:
+        raise ConfigError(str(args.replay), "--config", "give the daemon configuration")
+    config = load_daemon_config(config_path)
+
+    show = not args.no_progress and sys.stderr.isatty()
+    bar: Any = None
+    if show:
+        from tqdm import tqdm
+
+        bar = tqdm(total=raw_message_count(args.replay), unit="msg", file=sys.stderr,
+                   desc=args.replay.name)
+    try:
+        result = asyncio.run(replay(args.replay, config, args.out, rrd=args.rrd, speed=speed,
+                                    progress=bar.update if bar is not None else None))
+    finally:
+        if bar is not None:
+            bar.close()
+    summary = result.summary()
+    checks = [] if expectations is None else check_replay(
+        expectations, args.out, replay=args.replay, non_finite_published=result.non_finite)
+    failures = [c for c in checks if c.fails]
+    if args.json:
+        summary["checks"] = [{"name": c.name, "passed": c.passed, "measured": c.measured,
+                              "expected": c.expected, "detail": c.detail,
+                              "known_issue": c.known_issue} for c in checks]
+        print(json.dumps(summary, indent=2))
+    else:
+        _print_summary(summary)
+        for check in checks:
+            print(check.line())
+        if checks:
+            met = sum(c.passed for c in checks)
+            known = sum(1 for c in checks if not c.passed and not c.fails)
+            print(f"{met}/{len(checks)} expectations met"
+                  + (f", {known} known issues" if known else "")
+                  + (f", {len(failures)} FAILED" if failures else ""))
+    return 1 if failures else 0
+
+
+def _print_summary(s: dict[str, Any]) -> None:
+    def counts(d: dict[str, Any]) -> str:
+        return ", ".join(f"{k} {v}" for k, v in d.items()) or "none"
+
+    shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in
+                       sorted(s["state_shares"].items(), key=lambda kv: -kv[1])) or "none"
+    print(f"{s['input']} -> {s['out']}" + (f" + {s['rrd']}" if s["rrd"] else ""))
+    print(f"  messages in {s['messages_in']}, samples {s['samples']}, rejected {s['rejected']}, "
+          f"dropped {s['dropped']}, frames {s['frames']}")
+    print(f"  windows {s['windows']} (+{s['windows_rejected']} rejected); estimates: "
+          f"{counts(s['estimates'])}")
+    print(f"  alarms: {counts(s['alarms'])}")
+    print(f"  rig states: {shares}")
+    print(f"  wall time {s['wall_s']:.2f} s, {s['rate_msg_per_s']:.0f} messages/s"
+          + (f"; {s['non_finite']} results with NaN/inf" if s["non_finite"] else ""))

@@ -1,0 +1,278 @@
+"""The replay driver: a recording through the daemon's own pipeline, into one flight recording.
+
+There is no replay-specific processing: the driver takes the daemon configuration, swaps its
+sources for one :class:`~tdmon.ingest.mcap_source.McapSource` on the replay, turns off
+publishing and the folder recorder, and hands :func:`tdmon.daemon.build.build_daemon` three
+extra sinks: the MCAP recorder in single-file mode (``--out``), Rerun (``--rrd``) and a
+counting sink for the summary. The daemon stops by itself when the source is exhausted and
+flushes the aligner and the steps, exactly as a live daemon does on SIGTERM.
+
+Determinism: at ``speed=None`` (as fast as possible) the daemon's wall-clock housekeeping is
+switched off for the run. In a live daemon (and in a paced replay) a hook-load frame that waits
+longer than ``align.max_wait`` of wall time for its other channels is emitted by that
+housekeeping tick; at full speed wall time says nothing about the data, and a tick landing
+between two messages would make the frames, hence the estimates, depend on the machine's load.
+Without it a frame is completed by the data alone (its channels, or the next hook load), so the
+same file always gives the same estimates. The final status message is still written.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tdmon.config.daemon import (
+    DaemonConfig,
+    McapSourceConfig,
+    PublishConfig,
+    RecorderConfig,
+    RerunConfig,
+    SourcesConfig,
+)
+from tdmon.daemon.build import build_daemon
+from tdmon.daemon.pipeline import Pipeline, Sink
+from tdmon.errors import RecordError
+
+__all__ = ["ReplayResult", "SummarySink", "raw_message_count", "replay", "replay_config"]
+
+#: Housekeeping period used at full speed [s]: long enough never to fire during a replay.
+_NO_TICKS = 10 * 365 * 86400.0
+
+
+@dataclass
+class ReplayResult:
+    """What one replay did; ``summary()`` is the JSON the CLI prints."""
+
+    input: Path
+    out: Path
+    rrd: Path | None
+    messages_in: int = 0
+    samples: int = 0
+    rejected: int = 0
+    dropped: int = 0
+    frames: int = 0
+    step_errors: int = 0
+    sink_errors: int = 0
+    windows: int = 0
+    windows_rejected: int = 0
+    estimates: dict[str, int] = field(default_factory=dict)
+    alarms: dict[str, int] = field(default_factory=dict)
+    state_shares: dict[str, float] = field(default_factory=dict)
+    non_finite: int = 0
+    wall_s: float = 0.0
+
+    @property
+    def rate(self) -> float:
+        """Input messages per second of wall time."""
+        return self.messages_in / self.wall_s if self.wall_s > 0 else 0.0
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "input": str(self.input), "out": str(self.out),
+            "rrd": None if self.rrd is None else str(self.rrd),
+            "messages_in": self.messages_in, "samples": self.samples,
+            "rejected": self.rejected, "dropped": self.dropped, "frames": self.frames,
+            "step_errors": self.step_errors, "sink_errors": self.sink_errors,
+            "windows": self.windows, "windows_rejected": self.windows_rejected,
+            "estimates": dict(sorted(self.estimates.items())),
+            "alarms": dict(sorted(self.alarms.items())),
+            "state_shares": dict(sorted(self.state_shares.items())),
+            "non_finite": self.non_finite,
+            "wall_s": round(self.wall_s, 3), "rate_msg_per_s": round(self.rate, 1),
+        }
+
+
+def _has_non_finite(value: Any) -> bool:
+    if isinstance(value, float):
+        return not math.isfinite(value)
+    if isinstance(value, dict):
+        return any(_has_non_finite(v) for v in value.values())
+    if isinstance(value, list | tuple):
+        return any(_has_non_finite(v) for v in value)
+    return False
+
+
+class SummarySink:
+    """Counts results for the summary: estimates and alarms per kind, rig-state time shares,
+    non-finite numbers in anything published (JSON has no NaN: there should be none)."""
+
+    #: only results: raw input and samples are counted by the pipeline's own stats
+    topics = frozenset({"/tdmon/state", "/tdmon/estimate", "/tdmon/alarm", "/tdmon/model",
+                        "/tdmon/status"})
+
+    def __init__(self) -> None:
+        self.estimates: Counter[str] = Counter()
+        self.alarms: Counter[str] = Counter()
+        self.state_time: dict[str, float] = {}
+        self.non_finite = 0
+        self._state: tuple[str, float] | None = None
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        if _has_non_finite(message):
+            self.non_finite += 1
+        if topic == "/tdmon/state":
+            # a state message is sent on a change and at least every second: time shares
+            # come from the rig-time intervals between them
+            t, state = float(message.get("t", math.nan)), str(message.get("state"))
+            if self._state is not None and math.isfinite(t) and t > self._state[1]:
+                previous = self._state[0]
+                self.state_time[previous] = self.state_time.get(previous, 0.0) + t - self._state[1]
+            if math.isfinite(t):
+                self._state = (state, t)
+        elif topic == "/tdmon/estimate":
+            self.estimates[str(message.get("kind"))] += 1
+        elif topic == "/tdmon/alarm":
+            self.alarms[str(message.get("kind"))] += 1
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    def shares(self) -> dict[str, float]:
+        total = sum(self.state_time.values())
+        if total <= 0:
+            return {}
+        return {state: round(seconds / total, 4) for state, seconds in self.state_time.items()}
+
+
+class _ProgressSink:
+    """Advances a progress callback every ``every`` input messages (cheap per message)."""
+
+    topics = frozenset({"/tdmon/raw"})
+
+    def __init__(self, advance: Callable[[int], None], every: int = 1000) -> None:
+        self.advance = advance
+        self.every = every
+        self.count = 0
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        self.count += 1
+        if self.count % self.every == 0:
+            self.advance(self.every)
+
+    def close(self) -> None:
+        rest = self.count % self.every
+        if rest:
+            self.advance(rest)
+
+
+def raw_message_count(path: str | Path) -> int | None:
+    """Input messages in a replay (from its summary; None when it has none)."""
+    from tdmon.record.reader import topic_counts
+
+    try:
+        counts = topic_counts(path)
+    except RecordError:
+        return None
+    if "/tdmon/raw" in counts:
+        return counts["/tdmon/raw"]
+    return sum(n for topic, n in counts.items() if not topic.startswith(("/tdmon/", "/truth/",
+                                                                            "/reference/")))
+
+
+def replay_config(config: DaemonConfig, path: Path, speed: float | None) -> DaemonConfig:
+    """``config`` with the replay as its only source; no publishing, no folder recorder, no
+    Rerun from the file (the driver adds its own single-file recorder and .rrd sink)."""
+    mcap = McapSourceConfig(path=path.resolve(), speed="max" if speed is None else speed)
+    return config.model_copy(update={
+        "sources": SourcesConfig(mcap=mcap),
+        "publish": PublishConfig(mqtt=False, zenoh=False, names=list(config.publish.names),
+                                 status_interval=config.publish.status_interval),
+        "recorder": RecorderConfig(enabled=False),
+        "rerun": RerunConfig(mode="off"),
+    })
+
+
+async def replay(
+    path: str | Path,
+    config: DaemonConfig,
+    out: str | Path,
+    *,
+    rrd: str | Path | None = None,
+    speed: float | None = None,
+    progress: Callable[[int], None] | None = None,
+    extra_sinks: Sequence[Sink] = (),
+) -> ReplayResult:
+    """Run ``path`` through the daemon built from ``config``; record everything to ``out``.
+
+    Parameters
+    ----------
+    path : the replay (MCAP with ``/tdmon/raw`` input messages, or rig topics)
+    config : the daemon configuration (prefix, channel map, well, calibration)
+    out : the flight recording to write (replaced if it exists)
+    rrd : a Rerun .rrd file to write as well
+    speed : real time x ``speed``; None: as fast as the pipeline goes (deterministic)
+    progress : called with the number of input messages handled since the last call
+    extra_sinks : more sinks (tests)
+
+    Raises
+    ------
+    IngestError, RecordError, ConfigError
+        The replay cannot be read, an output cannot be written, the configuration is unusable.
+    """
+    from tdmon.record.mcap_recorder import McapRecorder
+
+    source = Path(path)
+    if not source.is_file():
+        from tdmon.errors import IngestError
+
+        raise IngestError(f"replay not found: {source}")
+    out_path = Path(out)
+    rrd_path = None if rrd is None else Path(rrd)
+    if out_path.resolve() == source.resolve():
+        raise RecordError(f"{out_path}: the output would replace the replay being read")
+    run_config = replay_config(config, source, speed)
+    pipeline: Pipeline | None = None
+
+    def on_alarm(message: dict[str, Any]) -> None:
+        if pipeline is not None:
+            pipeline.emit("alarm", message)
+
+    summary = SummarySink()
+    sinks: list[Any] = []
+    recorder = McapRecorder(path=out_path, overwrite=True, on_alarm=on_alarm,
+                            flush_interval_s=5.0)
+    sinks.append(recorder)
+    try:
+        if rrd_path is not None:
+            from tdmon.record.rerun_views import RerunViews
+
+            sinks.append(RerunViews(rrd_path))
+        sinks.append(summary)
+        if progress is not None:
+            sinks.append(_ProgressSink(progress))
+        sinks.extend(extra_sinks)
+        started = time.perf_counter()
+        async with build_daemon(run_config, extra_sinks=sinks,
+                                stop_when_sources_done=True) as built:
+            pipeline = built.pipeline
+            if speed is None:
+                built.daemon.tick_interval = _NO_TICKS
+            await built.daemon.run(asyncio.Event())
+        wall = time.perf_counter() - started
+    finally:
+        # idempotent: the daemon closed them unless building failed half-way
+        for sink in sinks:
+            sink.close()
+    stats = built.stats
+    result = ReplayResult(
+        input=source, out=out_path, rrd=rrd_path, messages_in=stats.messages_in,
+        samples=stats.samples_in, rejected=stats.rejected,
+        # recorded nothing of it: as lost as a dropped publication
+        dropped=stats.dropped + recorder.stats.lost,
+        frames=stats.frames, step_errors=stats.step_errors, sink_errors=stats.sink_errors,
+        estimates=dict(summary.estimates), alarms=dict(summary.alarms),
+        state_shares=summary.shares(), wall_s=wall,
+        non_finite=max(summary.non_finite, recorder.stats.nonfinite_replaced),
+    )
+    result.windows = summary.estimates.get("window", 0)
+    for step in built.steps:
+        rejected = getattr(step, "rejected", None)
+        if isinstance(rejected, Counter):
+            result.windows_rejected += sum(rejected.values())
+    return result
