@@ -1,0 +1,483 @@
+"""Expectations of a replay: what the daemon must (and must not) find in it, checked afterwards.
+
+An expectations file (TOML, ``replays/expectations/<replay>.toml``) names the replay and the
+daemon configuration and states, all optional:
+
+* ``[input]``: decoded ``messages`` (exact), at most ``rejected`` rejections;
+* ``[states]``: rig-state ``agreement`` with ``/truth/state`` (simulated files) or with the
+  rig contractor's ``/reference/rig_activity`` codes (Volve files), ignoring ``settle`` seconds
+  after each reference change; ``required`` states that must be reported at least once;
+* ``[[friction]]``: back-calculated window friction of one ``operation`` (optionally within
+  ``depth`` = [top, bottom] m, ``section``) between ``min`` and ``max`` (median of the windows),
+  and/or within ``truth_abs`` of ``/truth/friction`` at the window's end (median abs error);
+* ``[[alarm]]``: an alarm that must be raised: ``event`` names a ``/truth/alarm`` kind (its
+  ``nth`` occurrence, with its ``accept`` list and time), and/or ``kinds`` lists daemon kinds
+  (with ``at`` [s from the replay's first message] when there is no event); ``window`` =
+  [before, after] [s] around that time (default: the whole replay). One raised alarm answers
+  one expectation only (in file order), so two events cannot be met by the same alarm.
+  ``known_issue`` = "why": the expectation is checked and reported but does not fail the run
+  (a daemon limitation on record, like a strict xfail without the strictness);
+* ``[forbidden]``: daemon alarm ``kinds`` that must not occur at all;
+* ``finite`` (default true): no NaN or infinity in anything published.
+
+Checking reads the replay (truth, references) and the daemon's flight recording, and returns
+one :class:`Check` per expectation with what was measured, so a failure says by how much.
+"""
+
+from __future__ import annotations
+
+import bisect
+import itertools
+import math
+import os
+import statistics
+import tomllib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from tdmon.errors import ConfigError
+
+__all__ = [
+    "VOLVE_ACTIVITY_STATES",
+    "Check",
+    "Expectations",
+    "check_replay",
+    "failed",
+    "find_expectations",
+    "load_expectations",
+]
+
+#: Which tdmon rig states count as agreeing with a Volve activity (the code's last digit's
+#: name). "off bottom" is any of the stationary states: the contractor's code does not say
+#: whether the string turns or mud flows reliably enough to tell them apart.
+VOLVE_ACTIVITY_STATES: dict[str, frozenset[str]] = {
+    "in slips": frozenset({"in_slips"}),
+    "tripping out": frozenset({"pick_up", "back_reaming"}),
+    "tripping in": frozenset({"slack_off", "reaming"}),
+    "reaming": frozenset({"reaming", "back_reaming"}),
+    "off bottom": frozenset({"rotating_off_bottom", "static", "circulating"}),
+    "drilling": frozenset({"drilling"}),
+}
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class InputExpectation(_Model):
+    messages: int | None = Field(default=None, ge=0)
+    rejected: int = Field(default=0, ge=0, description="at most this many rejections")
+
+
+class StatesExpectation(_Model):
+    reference: Literal["truth", "volve"] = "truth"
+    agreement: float = Field(default=0.9, ge=0, le=1)
+    settle: float = Field(default=10.0, ge=0, description="seconds ignored after a change")
+    required: list[str] = Field(default_factory=list)
+
+
+class FrictionExpectation(_Model):
+    operation: str
+    depth: tuple[float, float] | None = None
+    section: str | None = None
+    min: float | None = None
+    max: float | None = None
+    truth_abs: float | None = Field(default=None, gt=0)
+    min_windows: int = Field(default=1, ge=1)
+    include_revised: bool = True
+
+    @model_validator(mode="after")
+    def _something(self) -> FrictionExpectation:
+        if self.min is None and self.max is None and self.truth_abs is None:
+            raise ValueError("give min, max or truth_abs")
+        return self
+
+
+class AlarmExpectation(_Model):
+    event: str | None = None
+    nth: int = Field(default=1, ge=1, description="which /truth/alarm of that kind (1: first)")
+    kinds: list[str] = Field(default_factory=list)
+    at: float | None = None
+    window: tuple[float, float] | None = None
+    known_issue: str | None = None
+
+    @model_validator(mode="after")
+    def _what(self) -> AlarmExpectation:
+        if self.event is None and not self.kinds:
+            raise ValueError("give event (a /truth/alarm kind) or kinds (daemon alarm kinds)")
+        return self
+
+
+class ForbiddenAlarms(_Model):
+    kinds: list[str] = Field(default_factory=list)
+
+
+class Expectations(_Model):
+    """One replay's expectations (see the module docstring)."""
+
+    replay: Path
+    config: Path
+    finite: bool = True
+    input: InputExpectation = Field(default_factory=InputExpectation)
+    states: StatesExpectation | None = None
+    friction: list[FrictionExpectation] = Field(default_factory=list)
+    alarm: list[AlarmExpectation] = Field(default_factory=list)
+    forbidden: ForbiddenAlarms = Field(default_factory=ForbiddenAlarms)
+    source_file: Path | None = Field(default=None, exclude=True)
+
+    def resolve(self, path: Path) -> Path:
+        if path.is_absolute() or self.source_file is None:
+            return path
+        return self.source_file.parent / path
+
+    @property
+    def replay_path(self) -> Path:
+        return self.resolve(self.replay)
+
+    @property
+    def config_path(self) -> Path:
+        return self.resolve(self.config)
+
+
+def load_expectations(path: str | os.PathLike[str]) -> Expectations:
+    """Read and validate an expectations file (paths in it are relative to it).
+
+    Raises
+    ------
+    ConfigError
+        Missing, not TOML, or invalid; the message names the key and the reason.
+    """
+    file = Path(path)
+    try:
+        data = tomllib.loads(file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(str(file), "", "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(str(file), "", f"cannot read: {exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(str(file), "", f"not valid TOML: {exc}") from exc
+    try:
+        expectations = Expectations.model_validate(data)
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        key = ".".join(str(part) for part in error["loc"])
+        reason = "unknown key" if error["type"] == "extra_forbidden" else \
+            error["msg"].removeprefix("Value error, ")
+        raise ConfigError(str(file), key, reason) from exc
+    return expectations.model_copy(update={"source_file": file.resolve()})
+
+
+def find_expectations(replay: str | os.PathLike[str]) -> Path | None:
+    """The expectations of a replay found by its name: ``<dir>/expectations/<stem>.toml``, or
+    ``<dir>/<stem>.expect.toml``."""
+    path = Path(replay)
+    for candidate in (path.parent / "expectations" / f"{path.stem}.toml",
+                      path.parent / f"{path.stem}.expect.toml"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+@dataclass(frozen=True)
+class Check:
+    """One expectation checked: ``measured`` against ``expected``, and by how much it missed."""
+
+    name: str
+    passed: bool
+    measured: str
+    expected: str
+    detail: str = ""
+    known_issue: str | None = None
+
+    @property
+    def fails(self) -> bool:
+        """Fails the run: not met, and not a known issue."""
+        return not self.passed and self.known_issue is None
+
+    def line(self) -> str:
+        mark = "ok  " if self.passed else "FAIL" if self.known_issue is None else "KNOWN"
+        text = f"{mark} {self.name}: {self.measured} (expected {self.expected})"
+        if self.detail:
+            text += f"; {self.detail}"
+        if self.known_issue is not None:
+            text += f" [known issue: {self.known_issue}" + \
+                ("; met now, the note can go]" if self.passed else "]")
+        return text
+
+
+@dataclass
+class _Recorded:
+    """What checking needs from the daemon's recording and the replay."""
+
+    start: float = math.inf
+    states: list[tuple[float, str]] = field(default_factory=list)
+    estimates: list[dict[str, Any]] = field(default_factory=list)
+    alarms: list[dict[str, Any]] = field(default_factory=list)
+    samples: int = 0
+    rejected: int = 0
+    non_finite: int = 0
+    truth_states: list[tuple[float, str]] = field(default_factory=list)
+    truth_friction: list[dict[str, Any]] = field(default_factory=list)
+    truth_alarms: list[dict[str, Any]] = field(default_factory=list)
+    activities: list[tuple[float, str]] = field(default_factory=list)
+
+
+def _non_finite(value: Any) -> bool:
+    if isinstance(value, float):
+        return not math.isfinite(value)
+    if isinstance(value, dict):
+        return any(_non_finite(v) for v in value.values())
+    if isinstance(value, list):
+        return any(_non_finite(v) for v in value)
+    return False
+
+
+def _read(replay: Path, recording: Path) -> _Recorded:
+    from tdmon.record.reader import read_messages
+
+    data = _Recorded()
+    for item in read_messages(replay, ["/truth/state", "/truth/friction", "/truth/alarm",
+                                        "/reference/rig_activity", "/tdmon/raw"]):
+        message = item.message
+        if item.topic == "/tdmon/raw":
+            data.start = min(data.start, float(message.get("receive_time", math.inf)))
+        elif item.topic == "/truth/state":
+            data.truth_states.append((float(message["t"]), str(message["state"])))
+        elif item.topic == "/truth/friction":
+            data.truth_friction.append(message)
+        elif item.topic == "/truth/alarm":
+            data.truth_alarms.append(message)
+        else:
+            data.activities.append((float(message["t"]), str(message["activity"])))
+    recorded_nulls = 0
+    for item in read_messages(recording, ["/tdmon/state", "/tdmon/estimate", "/tdmon/alarm",
+                                           "/tdmon/sample", "/tdmon/rejected", "/tdmon/model"]):
+        message = item.message
+        if item.topic == "/tdmon/sample":
+            data.samples += 1
+            continue
+        if item.topic == "/tdmon/rejected":
+            data.rejected += 1
+            continue
+        if _non_finite(message):
+            recorded_nulls += 1
+        if item.topic == "/tdmon/state":
+            data.states.append((float(message["t"]), str(message["state"])))
+        elif item.topic == "/tdmon/estimate":
+            data.estimates.append(message)
+        elif item.topic == "/tdmon/alarm":
+            data.alarms.append(message)
+    data.non_finite = recorded_nulls
+    data.truth_states.sort()
+    data.activities.sort()
+    if not math.isfinite(data.start):
+        data.start = data.states[0][0] if data.states else 0.0
+    return data
+
+
+def _step_lookup(series: Sequence[tuple[float, str]], t: float) -> tuple[str | None, float]:
+    """The value in force at ``t`` of a step series, and how long since it changed [s]."""
+    times = [s[0] for s in series]
+    index = bisect.bisect_right(times, t) - 1
+    if index < 0:
+        return None, math.inf
+    # walk back over repeats (a reference sampled every 15 s repeats its value)
+    value = series[index][1]
+    first = index
+    while first > 0 and series[first - 1][1] == value:
+        first -= 1
+    return value, t - series[first][0]
+
+
+def _state_agreement(spec: StatesExpectation, data: _Recorded) -> list[Check]:
+    checks: list[Check] = []
+    reference = data.truth_states if spec.reference == "truth" else data.activities
+    if not reference:
+        return [Check("states", False, "no reference in the replay",
+                      f"/truth/state or /reference/rig_activity ({spec.reference})")]
+    times = [s[0] for s in reference]
+    if spec.reference == "volve":
+        # a code holds until the next row: compare only within one sample interval of it
+        gaps = [b - a for a, b in itertools.pairwise(times) if b > a]
+        horizon = 2.0 * statistics.median(gaps) if gaps else math.inf
+    else:
+        horizon = math.inf
+    agree = total = 0
+    confusion: dict[tuple[str, str], int] = {}
+    for t, state in data.states:
+        expected, since = _step_lookup(reference, t)
+        if expected is None or since < spec.settle:
+            continue
+        if spec.reference == "volve":
+            index = bisect.bisect_right(times, t) - 1
+            if t - times[index] > horizon:
+                continue
+            accepted = VOLVE_ACTIVITY_STATES.get(expected)
+            if accepted is None:
+                continue  # "none": the contractor did not say
+            ok = state in accepted
+        else:
+            ok = state == expected
+        total += 1
+        agree += ok
+        if not ok:
+            confusion[(expected, state)] = confusion.get((expected, state), 0) + 1
+    share = agree / total if total else 0.0
+    worst = sorted(confusion.items(), key=lambda item: -item[1])[:3]
+    detail = "; ".join(f"{exp} reported as {got} x{n}" for (exp, got), n in worst)
+    passed = share >= spec.agreement
+    checks.append(Check(
+        f"states vs {spec.reference}", passed, f"{100 * share:.1f} % of {total} state messages",
+        f">= {100 * spec.agreement:.0f} %",
+        (f"{100 * (spec.agreement - share):.1f} points short; " if not passed else "") + detail))
+    seen = {state for _, state in data.states}
+    for state in spec.required:
+        checks.append(Check(f"state {state} reported", state in seen,
+                            "yes" if state in seen else "never", "at least once"))
+    return checks
+
+
+def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
+    windows = [e for e in data.estimates
+               if e.get("kind") == "window" and e.get("operation") == spec.operation
+               and (spec.include_revised or not e.get("revised"))
+               and (spec.section is None or e.get("section") == spec.section)
+               and (spec.depth is None
+                    or spec.depth[0] <= float(e.get("bit_depth_m", math.nan)) <= spec.depth[1])]
+    where = f" {spec.depth[0]:.0f}-{spec.depth[1]:.0f} m" if spec.depth else ""
+    name = f"friction {spec.operation}{where}"
+    if len(windows) < spec.min_windows:
+        return Check(name, False, f"{len(windows)} windows", f">= {spec.min_windows} windows")
+    mus = [float(e["mu"]) for e in windows]
+    median = statistics.median(mus)
+    parts: list[str] = []
+    expected: list[str] = []
+    passed = True
+    if spec.min is not None or spec.max is not None:
+        low = -math.inf if spec.min is None else spec.min
+        high = math.inf if spec.max is None else spec.max
+        expected.append(f"median in [{spec.min}, {spec.max}]")
+        if not low <= median <= high:
+            passed = False
+            off = low - median if median < low else median - high
+            parts.append(f"median off by {off:.3f}")
+    measured = f"median {median:.3f} of {len(windows)} windows (range {min(mus):.3f}-" \
+               f"{max(mus):.3f})"
+    if spec.truth_abs is not None:
+        truth_key = {"pick_up": "mu_pick_up", "slack_off": "mu_slack_off",
+                     "rotating": "mu_rotating"}.get(spec.operation)
+        truth_t = [float(m["t"]) for m in data.truth_friction]
+        errors = []
+        for e in windows:
+            if truth_key is None or not truth_t:
+                break
+            index = min(max(bisect.bisect_left(truth_t, float(e["t"])), 0), len(truth_t) - 1)
+            truth = data.truth_friction[index].get(truth_key)
+            if truth is not None:
+                errors.append(abs(float(e["mu"]) - float(truth)))
+        expected.append(f"median |mu - truth| <= {spec.truth_abs}")
+        if not errors:
+            passed = False
+            parts.append("no truth to compare with")
+        else:
+            error = statistics.median(errors)
+            measured += f", median |error| {error:.3f}"
+            if error > spec.truth_abs:
+                passed = False
+                parts.append(f"error {error - spec.truth_abs:.3f} over")
+    return Check(name, passed, measured, " and ".join(expected), "; ".join(parts))
+
+
+def _alarm(spec: AlarmExpectation, data: _Recorded, used: set[int]) -> Check:
+    kinds = set(spec.kinds)
+    at = None if spec.at is None else data.start + spec.at
+    name = f"alarm {spec.event or '/'.join(spec.kinds)}"
+    if spec.event is not None:
+        name += f" #{spec.nth}" if spec.nth > 1 else ""
+        truth = [a for a in data.truth_alarms if a.get("kind") == spec.event]
+        if len(truth) < spec.nth:
+            return Check(name, False, f"{len(truth)} such events on /truth/alarm",
+                         f"event {spec.event} #{spec.nth}", known_issue=spec.known_issue)
+        event = truth[spec.nth - 1]
+        if not spec.kinds:
+            kinds |= set(event.get("accept") or [])
+        if at is None:
+            at = float(event["t"])
+    if spec.window is not None and at is not None:
+        low, high = at + spec.window[0], at + spec.window[1]
+    else:
+        low, high = -math.inf, math.inf
+    raised = [(i, a) for i, a in enumerate(data.alarms) if a.get("kind") in kinds]
+    inside = [(i, a) for i, a in raised if low <= float(a["t"]) <= high and i not in used]
+    where = "" if not math.isfinite(low) else \
+        f" in [{low - data.start:.0f}, {high - data.start:.0f}] s"
+    expected = f"one of {sorted(kinds)}{where}"
+    if inside:
+        index, first = inside[0]
+        used.add(index)
+        return Check(name, True, f"{first['kind']} at {float(first['t']) - data.start:.0f} s",
+                     expected, known_issue=spec.known_issue)
+    if raised:
+        def distance(item: tuple[int, dict[str, Any]]) -> float:
+            t = float(item[1]["t"])
+            return 0.0 if low <= t <= high else min(abs(t - low), abs(t - high))
+
+        index, nearest = min(raised, key=distance)
+        t = float(nearest["t"])
+        detail = ("already answers an earlier expectation" if index in used
+                  else f"{distance((index, nearest)):.0f} s outside the window")
+        return Check(name, False, f"{nearest['kind']} at {t - data.start:.0f} s", expected,
+                     detail, known_issue=spec.known_issue)
+    return Check(name, False, "not raised", expected, known_issue=spec.known_issue)
+
+
+def _forbidden(spec: ForbiddenAlarms, data: _Recorded) -> list[Check]:
+    checks = []
+    for kind in spec.kinds:
+        times = [float(a["t"]) - data.start for a in data.alarms if a.get("kind") == kind]
+        detail = "" if not times else "first at " + ", ".join(f"{t:.0f} s" for t in times[:3])
+        checks.append(Check(f"no {kind} alarm", not times, f"{len(times)} raised", "none",
+                            detail))
+    return checks
+
+
+def check_replay(expectations: Expectations, recording: str | os.PathLike[str], *,
+                 replay: str | os.PathLike[str] | None = None,
+                 non_finite_published: int = 0) -> list[Check]:
+    """Check the daemon's ``recording`` of ``replay`` (default: the expectations' replay).
+
+    ``non_finite_published`` is the driver's count of results that held NaN or infinity
+    when they were published (the recorder writes those as null, so the file alone cannot
+    show them).
+    """
+    data = _read(Path(replay) if replay is not None else expectations.replay_path,
+                 Path(recording))
+    checks: list[Check] = []
+    spec = expectations.input
+    if spec.messages is not None:
+        checks.append(Check("decoded samples", data.samples == spec.messages,
+                            str(data.samples), str(spec.messages),
+                            f"{data.samples - spec.messages:+d}"
+                            if data.samples != spec.messages else ""))
+    checks.append(Check("rejected", data.rejected <= spec.rejected, str(data.rejected),
+                        f"<= {spec.rejected}"))
+    if expectations.finite:
+        bad = data.non_finite + non_finite_published
+        checks.append(Check("finite results", bad == 0, f"{bad} messages with NaN/inf",
+                            "0"))
+    if expectations.states is not None:
+        checks.extend(_state_agreement(expectations.states, data))
+    checks.extend(_friction(f, data) for f in expectations.friction)
+    used: set[int] = set()
+    checks.extend(_alarm(a, data, used) for a in expectations.alarm)
+    checks.extend(_forbidden(expectations.forbidden, data))
+    return checks
+
+
+def failed(checks: Iterable[Check]) -> list[Check]:
+    """The checks that fail the run (known issues do not)."""
+    return [c for c in checks if c.fails]
