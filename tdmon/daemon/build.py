@@ -56,26 +56,35 @@ def default_steps(config: DaemonConfig, model: LoadModel | None,
     return steps
 
 
-def load_model(config: DaemonConfig) -> LoadModel | None:
+def load_well(config: DaemonConfig) -> Any:
+    """The model layer's ``Well`` for the configured well file (None when there is none)."""
+    if config.well is None:
+        return None
+    from tdmon.config.well import load_well_model
+
+    return load_well_model(config.resolve(config.well))
+
+
+def load_model(config: DaemonConfig, well: Any = None) -> LoadModel | None:
     """The production load model for the configured well (None when no well is configured)."""
     if config.well is None:
         return None
     from tdmon.daemon.wellmodel import grid_model_for_well
 
-    return grid_model_for_well(config)
+    return grid_model_for_well(config, well)
 
 
-def calibration_steps_for(config: DaemonConfig) -> tuple[Step, list[Step]]:
+def calibration_steps_for(config: DaemonConfig, well: Any = None) -> tuple[Step, list[Step]]:
     """The back-calculation's rig-state step and the steps after the monitor
     (docs/back-calculation.md, "Daemon composition"). The mu(T) calibration, which needs the
     well's temperature model and a friction law, is not wired yet."""
     from tdmon.calib.rigstate import RigStateThresholds as CalibThresholds
-    from tdmon.config.well import load_well_model
     from tdmon.daemon.calibrate import AlarmStep, CalibrationStep, RigStateStep
     from tdmon.model.torque_drag import WellModel
 
     assert config.well is not None
-    well = load_well_model(config.resolve(config.well))
+    if well is None:
+        well = load_well(config)
     rs = config.rig_state
     rig_state = RigStateStep(CalibThresholds(
         block_weight=well.block_weight, in_slips_margin=config.calibration.in_slips_margin,
@@ -101,11 +110,14 @@ async def build_daemon(
     rig-state step; ``extra_steps`` run after the monitor (back-calculation, alarms);
     ``extra_sinks`` receive everything (the recorder is added first when enabled).
     """
+    needs_calibration = config.calibration.enabled and rig_state is None
+    # the well file is read once, for the monitor's grid and the back-calculation
+    well = load_well(config) if model is None or needs_calibration else None
     if model is None:
-        model = load_model(config)
+        model = load_model(config, well)
     extra_steps = list(extra_steps)
-    if config.calibration.enabled and rig_state is None:
-        rig_state, calibration_steps = calibration_steps_for(config)
+    if needs_calibration:
+        rig_state, calibration_steps = calibration_steps_for(config, well)
         extra_steps = calibration_steps + extra_steps
     stats = Stats()
     base = config.source_file.parent if config.source_file else None

@@ -94,8 +94,6 @@ class Stats:
     step_errors: int = 0
     sink_errors: int = 0
     last_sample_t: float | None = None
-    last_receive_time: float | None = None
-    max_lag_s: float = 0.0
     rejected_reasons: dict[str, int] = field(default_factory=dict)
 
     def count_drop(self, n: int = 1) -> None:
@@ -169,7 +167,6 @@ class Pipeline:
             return decoded
         stats.samples_in += 1
         stats.last_sample_t = decoded.t
-        stats.last_receive_time = raw.receive_time
         if self._sinks_for("/tdmon/sample"):
             self._write("/tdmon/sample", log_ns, sample_message(decoded))
         frames = self.aligner.push(decoded, self._monotonic())

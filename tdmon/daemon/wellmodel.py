@@ -51,14 +51,16 @@ def grid_model(
     return GridLoadModel(sweep.bit_depth, np.vstack(rows), band_mu)
 
 
-def grid_model_for_well(config: DaemonConfig) -> GridLoadModel:
-    """The grid model for the daemon config's well file and ``[monitor]`` settings."""
+def grid_model_for_well(config: DaemonConfig, well: object | None = None) -> GridLoadModel:
+    """The grid model for the daemon config's well file (or the ``Well`` already read from it)
+    and ``[monitor]`` settings."""
     from tdmon.config.well import load_well_model
 
     assert config.well is not None
     path = config.resolve(config.well)
     started = time.perf_counter()
-    well = load_well_model(path)
+    if well is None:
+        well = load_well_model(path)
     try:
         model = grid_model(well, config.monitor.mu, config.monitor.band_mu,
                            config.monitor.method, config.monitor.grid_step)
