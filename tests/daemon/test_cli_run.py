@@ -15,7 +15,25 @@ import pytest
 from tdmon.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
-VOLVE = Path("/work/shared/data/volve-f4/trip-out-2016-10-04.csv")
+VOLVE_HEADER = ("time_utc,hole_depth_m,bit_depth_m,hookload_kN,surface_torque_kNm,surface_rpm,"
+                "bit_rpm,flow_in_Lpm,flow_out_Lpm,spp_bar,wob_kN,rop_mph,rig_activity_code,"
+                "block_pos_comp_m,block_pos_uncomp_m,rig_heave_m,bit_depth_5s_m")
+
+
+@pytest.fixture
+def volve_csv(tmp_path: Path) -> Path:
+    """100 rows in the layout of the Volve F-4 logs (/work/shared/data/volve-f4): 9 mapped
+    channels each, a pull of 0.5 m per 15 s row."""
+    rows = [VOLVE_HEADER]
+    for i in range(100):
+        minute, second = divmod(15 * i, 60)
+        hour, minute = divmod(minute, 60)
+        rows.append(f"2016-10-04T{17 + hour:02d}:{minute:02d}:{second:02d}Z,3510,"
+                    f"{2500 - 0.5 * i:.1f},{1600 + i % 5},0.0052,0.23,0.23,0,36,-0.4,5.4,0,7,"
+                    f"{12 + 0.5 * (i % 20):.1f},12.8,-0.08,2500")
+    path = tmp_path / "volve-layout.csv"
+    path.write_text("\n".join(rows) + "\n")
+    return path
 TDMON = [sys.executable, "-m", "tdmon"]
 
 
@@ -46,7 +64,8 @@ def _wait_for(path: Path, text: str, timeout: float = 20) -> None:
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_run_publish_and_stop_with_a_signal(tmp_path: Path, sig: signal.Signals,
-                                            free_tcp_port: Callable[[], int]) -> None:
+                                            free_tcp_port: Callable[[], int],
+                                            volve_csv: Path) -> None:
     port = free_tcp_port()
     config = _zenoh_config(tmp_path, port, f"""
 [recorder]
@@ -60,7 +79,7 @@ output = "{tmp_path / 'rec'}"
         try:
             _wait_for(log, "daemon running")
             published = subprocess.run(
-                [*TDMON, "publish", str(VOLVE), "--config", str(config), "--limit", "900"],
+                [*TDMON, "publish", str(volve_csv), "--config", str(config), "--limit", "900"],
                 capture_output=True, text=True, timeout=60)
             assert published.returncode == 0, published.stderr
             assert "published 900 messages" in published.stderr
@@ -82,7 +101,8 @@ output = "{tmp_path / 'rec'}"
     assert len(samples) == 900  # finished and flushed on the signal
 
 
-def test_publish_over_mqtt_to_the_daemon(mosquitto: Any, tmp_path: Path) -> None:
+def test_publish_over_mqtt_to_the_daemon(mosquitto: Any, tmp_path: Path,
+                                         volve_csv: Path) -> None:
     config = tmp_path / "mqtt.toml"
     config.write_text(f"""
 prefix = "rig/F4"
@@ -99,7 +119,7 @@ mqtt = true
             _wait_for(log, "daemon running")
             time.sleep(0.5)
             published = subprocess.run(
-                [*TDMON, "publish", str(VOLVE), "--mqtt", f"127.0.0.1:{mosquitto.port}",
+                [*TDMON, "publish", str(volve_csv), "--mqtt", f"127.0.0.1:{mosquitto.port}",
                  "--prefix", "rig/F4", "--limit", "500", "--speed", "max"],
                 capture_output=True, text=True, timeout=60)
             assert published.returncode == 0, published.stderr
@@ -141,13 +161,13 @@ def test_missing_config_file(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_publish_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                          free_tcp_port: Callable[[], int]) -> None:
-    assert main(["publish", str(VOLVE)]) == 2
+                          free_tcp_port: Callable[[], int], volve_csv: Path) -> None:
+    assert main(["publish", str(volve_csv)]) == 2
     assert "say where to publish" in capsys.readouterr().err
-    assert main(["publish", str(VOLVE), "--mqtt", "127.0.0.1:1", "--columns", "x=y:kN"]) == 2
+    assert main(["publish", str(volve_csv), "--mqtt", "127.0.0.1:1", "--columns", "x=y:kN"]) == 2
     assert "unknown channel 'x'" in capsys.readouterr().err
     port = free_tcp_port()  # nothing listens there
-    assert main(["publish", str(VOLVE), "--mqtt", f"127.0.0.1:{port}", "--limit", "1"]) == 2
+    assert main(["publish", str(volve_csv), "--mqtt", f"127.0.0.1:{port}", "--limit", "1"]) == 2
     assert "cannot connect" in capsys.readouterr().err
 
 

@@ -133,31 +133,17 @@ async def test_recorder_and_rerun_sinks_from_the_config(tmp_path: Path) -> None:
 
 
 async def test_volve_trip_replayed_with_calibration(tmp_path: Path) -> None:
-    """The real Volve F-4 trip out, through the whole pipeline including back-calculation."""
+    """The real Volve F-4 trip out (replays/, imported by `tdmon import volve`), through the
+    whole pipeline including back-calculation."""
     from daemon_support import WELL_FILE
 
-    from tdmon.ingest.publish import csv_messages
-
-    volve = Path("/work/shared/data/volve-f4/trip-out-2016-10-04.csv")
-    path = tmp_path / "volve.mcap"
-    with path.open("wb") as stream:
-        writer = Writer(stream)
-        writer.start()
-        schema = writer.register_schema("any", "jsonschema", b"{}")
-        channels: dict[str, int] = {}
-        count = 0
-        for t, topic, body in csv_messages(volve, "rig/F4"):
-            if topic not in channels:
-                channels[topic] = writer.register_channel(topic, "json", schema)
-            writer.add_message(channels[topic], int(t * 1e9), body, int(t * 1e9))
-            count += 1
-        writer.finish()
+    path = WELL_FILE.parents[2] / "replays" / "volve-f4-trip-out.mcap"
+    count = 1241 * 9  # rows x channels of the source CSV
     config = make_config({
         "prefix": "rig/F4", "sources": {"mcap": {"path": str(path)}},
         "well": str(WELL_FILE.parent / "volve-f4.toml"),
         "calibration": {"enabled": True, "in_slips_margin": "200 kN"},
         "align": {"stale_timeout": "30 s"},  # the log is sampled every 15 s
-        "channels": {"hookload": {"unit": "kN"}},
     }, tmp_path)
     sink = CollectSink()
     stats = await run_daemon(config, extra_sinks=[sink])
