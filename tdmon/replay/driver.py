@@ -39,7 +39,8 @@ from tdmon.daemon.build import build_daemon
 from tdmon.daemon.pipeline import Pipeline, Sink
 from tdmon.errors import RecordError
 
-__all__ = ["ReplayResult", "SummarySink", "raw_message_count", "replay", "replay_config"]
+__all__ = ["ReplayResult", "SummarySink", "raw_message_count", "replay", "replay_config",
+           "summarize_recording"]
 
 #: Housekeeping period used at full speed [s]: long enough never to fire during a replay.
 _NO_TICKS = 10 * 365 * 86400.0
@@ -276,3 +277,24 @@ async def replay(
         if isinstance(rejected, Counter):
             result.windows_rejected += sum(rejected.values())
     return result
+
+
+def summarize_recording(path: str | Path) -> dict[str, Any]:
+    """The replay summary's counts for any flight recording (e.g. a live daemon's): input
+    messages, samples, rejections, estimates and alarms per kind, rig-state shares."""
+    from tdmon.record.reader import read_messages
+
+    summary = SummarySink()
+    counts: Counter[str] = Counter()
+    for item in read_messages(path, allow_unfinished=True):
+        counts[item.topic] += 1
+        if item.topic in summary.topics:
+            summary.write(item.topic, item.log_time_ns, item.message)
+    return {
+        "recording": str(path), "messages_in": counts["/tdmon/raw"],
+        "samples": counts["/tdmon/sample"], "rejected": counts["/tdmon/rejected"],
+        "windows": summary.estimates.get("window", 0),
+        "estimates": dict(sorted(summary.estimates.items())),
+        "alarms": dict(sorted(summary.alarms.items())),
+        "state_shares": dict(sorted(summary.shares().items())),
+    }
