@@ -1,0 +1,306 @@
+"""Replay through the whole daemon pipeline against a bare MCAP read/decode/write; long sessions.
+
+Two measurements, one process (project virtualenv):
+
+1. **Rate ratio.** A simulated session (``--hours`` of rig time, 1 Hz, 8 channels: hook load,
+   torque, bit depth, hole depth, block position, rpm, flow in, standpipe pressure; trips out
+   and in with connections, so that rig states, windows, back-calculation and alarms all do
+   their work) is replayed with ``tdmon.replay.driver.replay`` at full speed (decode, record
+   raw input and samples, align, rig state, monitor, calibration, alarms, MCAP recorder in
+   single-file mode). Side by side, the *bare* path reads the same ``/tdmon/raw`` messages
+   with ``tdmon.ingest.mcap_source.iter_raw``, decodes each payload with ``json.loads`` and
+   writes it to an MCAP file with mcap's ``Writer`` (zstd chunks, as the recorder). Best of
+   ``--repeat`` runs each; the ratio pipeline/bare is the figure (target >= 0.5).
+2. **Long session** (``--days``, default 7; 0 skips): the same programme generated for that
+   long (7 days x 86400 s x 8 channels = 4.84 M messages) into a temporary file, replayed once
+   at full speed; wall time (target < 5 min) and the process's resident memory sampled every
+   ``--sample`` seconds from a thread (``/proc/self/statm``): first and last sample after the
+   first 10 % of the messages, and the peak. With ``--tracemalloc`` the Python heap is traced
+   too (slows the run down by about 2x).
+
+    .venv/bin/python benchmarks/bench_replay.py                 # ratio (2 h) and 7 days
+    .venv/bin/python benchmarks/bench_replay.py --days 0 --hours 4 --repeat 3 --json out.json
+    .venv/bin/python benchmarks/bench_replay.py --profile       # cProfile of one replay
+
+Not part of the test suite (a 7-day replay takes minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import cProfile
+import json
+import os
+import pstats
+import sys
+import tempfile
+import threading
+import time
+import tracemalloc
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from mcap.writer import CompressionType, Writer
+
+REPO = Path(__file__).resolve().parents[1]
+WELL = REPO / "replays" / "scenarios" / "wells" / "example-7-1-glydril.toml"
+CONFIG = REPO / "config" / "daemon" / "replay-sim-trip-out.toml"
+CHANNELS = ["hookload", "torque", "bit_depth", "hole_depth", "block_position", "rpm",
+            "flow_in", "spp"]
+
+
+def scenario_text(seconds: float) -> str:
+    """A scenario of at least ``seconds`` of rig time: trips out to 1500 m and back to 4200 m
+    with circulation and rotation between them (each pair about 6.5 h)."""
+    head = f"""
+[scenario]
+name = "bench-long"
+well = "{WELL}"
+seed = 5
+start = "2024-05-01T00:00:00Z"
+prefix = "sim/trip-out"
+bit_depth = "4200 m"
+hole_depth = "4223.5 m"
+block_position = "2 m"
+
+[sampling]
+interval = "1 s"
+channels = {json.dumps(CHANNELS)}
+
+[noise]
+relative = 0.003
+
+[noise.channels.bit_depth]
+relative = 0.0
+absolute = 0.005
+
+[noise.channels.block_position]
+relative = 0.0
+absolute = 0.005
+"""
+    cycle = """
+[[phase]]
+kind = "circulate"
+duration = "10 min"
+flow = "2000 L/min"
+
+[[phase]]
+kind = "trip_out"
+to = "1500 m"
+speed = "0.5 m/s"
+slips_time = "60 s"
+
+[[phase]]
+kind = "static"
+duration = "10 min"
+
+[[phase]]
+kind = "trip_in"
+to = "4200 m"
+speed = "0.5 m/s"
+slips_time = "60 s"
+
+[[phase]]
+kind = "rotate"
+duration = "10 min"
+rpm = "100 rpm"
+flow = "2000 L/min"
+"""
+    pair = 2 * (2700 / 0.5 + 2700 / 28 * 60) + 30 * 60  # [s] of one cycle, roughly
+    cycles = max(1, int(seconds / pair) + 1)
+    return head + cycle * cycles
+
+
+def make_session(path: Path, seconds: float) -> tuple[int, float]:
+    """Simulate ``seconds`` of rig time into ``path`` (truncated to that length); returns
+    (input messages, seconds it took)."""
+    from tdmon.replay.scenario import load_scenario_model
+    from tdmon.replay.simulate import simulate_to_mcap
+
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory() as folder:
+        scenario_file = Path(folder) / "bench.toml"
+        scenario_file.write_text(scenario_text(seconds))
+        scenario = load_scenario_model(scenario_file)
+        scenario = _truncated(scenario, seconds)
+        _, count = simulate_to_mcap(scenario, path, progress=sys.stderr.isatty())
+    return count, time.perf_counter() - started
+
+
+def _truncated(scenario: Any, seconds: float) -> Any:
+    # whole cycles overshoot the wanted length; phases past it are dropped
+    import dataclasses
+
+    phases = list(scenario.phases)
+    total, kept = 0.0, []
+    for phase in phases:
+        kept.append(phase)
+        total += _phase_seconds(phase)
+        if total >= seconds:
+            break
+    if dataclasses.is_dataclass(scenario):
+        return dataclasses.replace(scenario, phases=tuple(kept))
+    return scenario
+
+
+def _phase_seconds(phase: Any) -> float:
+    duration = getattr(phase, "duration", None)
+    if duration:
+        return float(duration)
+    return 2700 / 0.5 + 2700 / 28 * 60
+
+
+def bare_copy(src: Path, dst: Path) -> int:
+    """Read every input message, decode its payload, write it to MCAP: the floor."""
+    from tdmon.ingest.mcap_source import iter_raw
+
+    count = 0
+    with src.open("rb") as stream, dst.open("wb") as out:
+        writer = Writer(out, compression=CompressionType.ZSTD, chunk_size=4 * 1024 * 1024)
+        writer.start()
+        schema = writer.register_schema("raw", "jsonschema", b"{}")
+        channel = writer.register_channel("/tdmon/raw", "json", schema)
+        for log_ns, raw in iter_raw(stream):
+            payload = json.loads(raw.payload)
+            body = json.dumps({"topic": raw.topic, "receive_time": raw.receive_time,
+                               "payload": payload}, separators=(",", ":")).encode()
+            writer.add_message(channel, log_ns, body, log_ns, sequence=count)
+            count += 1
+        writer.finish()
+    return count
+
+
+def pipeline_replay(src: Path, dst: Path) -> int:
+    from tdmon.config.daemon import load_daemon_config
+    from tdmon.replay.driver import replay
+
+    config = load_daemon_config(CONFIG)
+    result = asyncio.run(replay(src, config, dst))
+    return result.messages_in
+
+
+def best_of(repeat: int, run: Callable[[], int]) -> tuple[float, int]:
+    best, count = float("inf"), 0
+    for _ in range(repeat):
+        started = time.perf_counter()
+        count = run()
+        best = min(best, time.perf_counter() - started)
+    return best, count
+
+
+class MemorySampler:
+    """Resident set size [bytes] (and the traced Python heap) every ``interval`` s."""
+
+    def __init__(self, interval: float, trace: bool) -> None:
+        self.interval = interval
+        self.trace = trace
+        self.samples: list[tuple[float, int, int]] = []  # (t, rss, traced)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._page = os.sysconf("SC_PAGE_SIZE")
+
+    def _rss(self) -> int:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * self._page
+
+    def _run(self) -> None:
+        start = time.perf_counter()
+        while not self._stop.wait(self.interval):
+            traced = tracemalloc.get_traced_memory()[0] if self.trace else 0
+            self.samples.append((time.perf_counter() - start, self._rss(), traced))
+
+    def __enter__(self) -> MemorySampler:
+        if self.trace:
+            tracemalloc.start()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        if self.trace:
+            tracemalloc.stop()
+
+
+def ratio(hours: float, repeat: int, folder: Path) -> dict[str, Any]:
+    src = folder / "session.mcap"
+    _, made = make_session(src, hours * 3600)
+    bare_s, n_bare = best_of(repeat, lambda: bare_copy(src, folder / "bare.mcap"))
+    pipe_s, n_pipe = best_of(repeat, lambda: pipeline_replay(src, folder / "pipe.mcap"))
+    assert n_bare == n_pipe, (n_bare, n_pipe)
+    return {"hours": hours, "messages": n_pipe, "simulate_s": round(made, 1),
+            "bare_s": round(bare_s, 3), "bare_rate": round(n_bare / bare_s),
+            "pipeline_s": round(pipe_s, 3), "pipeline_rate": round(n_pipe / pipe_s),
+            "ratio": round(bare_s / pipe_s, 3), "input_bytes": src.stat().st_size}
+
+
+def long_session(days: float, sample: float, trace: bool, folder: Path) -> dict[str, Any]:
+    src = folder / "long.mcap"
+    _, made = make_session(src, days * 86400)
+    with MemorySampler(sample, trace) as sampler:
+        started = time.perf_counter()
+        count = pipeline_replay(src, folder / "long-out.mcap")
+        wall = time.perf_counter() - started
+    samples = sampler.samples
+    settled = [s for s in samples if s[0] >= 0.1 * wall] or samples
+    mib = 1024 * 1024
+    return {
+        "days": days, "messages": count, "simulate_s": round(made, 1),
+        "replay_s": round(wall, 1), "rate": round(count / wall),
+        "input_bytes": src.stat().st_size,
+        "output_bytes": (folder / "long-out.mcap").stat().st_size,
+        "rss_first_MiB": round(settled[0][1] / mib, 1) if settled else None,
+        "rss_last_MiB": round(settled[-1][1] / mib, 1) if settled else None,
+        "rss_peak_MiB": round(max(s[1] for s in samples) / mib, 1) if samples else None,
+        "traced_first_MiB": round(settled[0][2] / mib, 1) if trace and settled else None,
+        "traced_last_MiB": round(settled[-1][2] / mib, 1) if trace and settled else None,
+        "samples": len(samples),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--hours", type=float, default=2.0, help="session for the ratio [h]")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--days", type=float, default=7.0, help="long session [days]; 0: skip")
+    parser.add_argument("--sample", type=float, default=5.0, help="memory sampling [s]")
+    parser.add_argument("--tracemalloc", action="store_true")
+    parser.add_argument("--profile", action="store_true", help="cProfile one replay (ratio file)")
+    parser.add_argument("--json", type=Path, help="write the figures here")
+    parser.add_argument("--tmp", type=Path, help="folder for the generated files")
+    args = parser.parse_args(argv)
+
+    results: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
+        folder = Path(tmp)
+        if args.profile:
+            src = folder / "session.mcap"
+            make_session(src, args.hours * 3600)
+            profile = cProfile.Profile()
+            profile.runcall(pipeline_replay, src, folder / "pipe.mcap")
+            pstats.Stats(profile).sort_stats("tottime").print_stats(25)
+            return 0
+        results["ratio"] = ratio(args.hours, args.repeat, folder)
+        r = results["ratio"]
+        print(f"| rig time | messages | bare read+decode+write | pipeline | ratio |\n"
+              f"|---|---|---|---|---|\n"
+              f"| {r['hours']:g} h | {r['messages']} | {r['bare_s']} s ({r['bare_rate']} msg/s) "
+              f"| {r['pipeline_s']} s ({r['pipeline_rate']} msg/s) | {r['ratio']} |", flush=True)
+        if args.days > 0:
+            results["long"] = long_session(args.days, args.sample, args.tracemalloc, folder)
+            r = results["long"]
+            print(f"\n{r['days']:g} days: {r['messages']} messages replayed in {r['replay_s']} s "
+                  f"({r['rate']} msg/s; simulated in {r['simulate_s']} s); RSS "
+                  f"{r['rss_first_MiB']} MiB after 10 % -> {r['rss_last_MiB']} MiB at the end "
+                  f"(peak {r['rss_peak_MiB']} MiB)"
+                  + (f"; traced heap {r['traced_first_MiB']} -> {r['traced_last_MiB']} MiB"
+                     if args.tracemalloc else ""))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
