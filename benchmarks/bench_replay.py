@@ -22,6 +22,7 @@ Two measurements, one process (project virtualenv):
     .venv/bin/python benchmarks/bench_replay.py                 # ratio (3.3 h) and 7 days
     .venv/bin/python benchmarks/bench_replay.py --days 0 --hours 4 --repeat 3 --json out.json
     .venv/bin/python benchmarks/bench_replay.py --profile       # cProfile of one replay
+    .venv/bin/python benchmarks/bench_replay.py --blas-threads 1  # single-threaded OpenBLAS
 
 Not part of the test suite (a 7-day replay takes minutes).
 """
@@ -272,11 +273,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sample", type=float, default=5.0, help="memory sampling [s]")
     parser.add_argument("--tracemalloc", action="store_true")
     parser.add_argument("--profile", action="store_true", help="cProfile one replay (ratio file)")
+    parser.add_argument("--blas-threads", type=int, default=None,
+                        help="OPENBLAS_NUM_THREADS for this run (default: OpenBLAS's own)")
     parser.add_argument("--json", type=Path, help="write the figures here")
     parser.add_argument("--tmp", type=Path, help="folder for the generated files")
     args = parser.parse_args(argv)
+    if args.blas_threads is not None:
+        # must precede numpy's import (tdmon is imported lazily below): OpenBLAS's threads
+        # make the friction profile's 141 x 141 covariance products ~16x slower on a busy
+        # 2-core machine
+        if "numpy" in sys.modules:
+            parser.error("--blas-threads: numpy is already imported")
+        os.environ["OPENBLAS_NUM_THREADS"] = str(args.blas_threads)
 
-    results: dict[str, Any] = {}
+    results: dict[str, Any] = {"blas_threads": args.blas_threads}
     with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
         folder = Path(tmp)
         if args.profile:
