@@ -23,6 +23,7 @@ from pydantic import (
     model_validator,
 )
 
+from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.ingest.decode import CHANNEL_UNITS, ChannelSpec
 from tdmon.units import conversion, parse_quantity
@@ -142,7 +143,7 @@ class PublishConfig(_Model):
     mqtt: bool | MqttConfig = False
     zenoh: bool | ZenohConfig = False
     names: list[str] = Field(default_factory=lambda: ["state", "model", "estimate", "alarm",
-                                                      "status"])
+                                                      "status", "well", "profile"])
     qos: Literal[0, 1, 2] = 1
     status_interval: Seconds = Field(default=1.0, gt=0)
 
@@ -207,6 +208,29 @@ class CalibrationConfig(_Model):
     # hook load up to the block weight plus this margin means in slips (replaces
     # [rig_state] in_slips_hookload when calibration is on)
     in_slips_margin: Newtons = Field(default=150e3, ge=0)
+    # live mu(T) calibration (needs the well file's [temperature] table): "family" calibrates
+    # the coefficients of a section's law, "scale" one factor on `lab_fit`, "off" neither
+    mu_t: Literal["off", "family", "scale"] = "family"
+    # the hole section whose law is calibrated (name or index); default the deepest one,
+    # where the bit is and where the temperature range is widest
+    mu_t_section: str | int | None = None
+    # the laboratory law scaled in "scale" mode: a number, a published fit's name or a table
+    lab_fit: FrictionModelConfig | None = None
+    # prior standard deviation of each parameter, in the order of the law's coefficients
+    # (default: max(|coefficient|, 0.01))
+    mu_t_prior_std: list[float] | None = None
+    # /tdmon/profile is sent again when the friction profile changed, at most this often
+    # (rig time, so that replays give the same messages at any speed)
+    profile_interval: Seconds = Field(default=30.0, gt=0)
+
+    @model_validator(mode="after")
+    def _scale_needs_lab_fit(self) -> CalibrationConfig:
+        if self.mu_t == "scale" and self.lab_fit is None:
+            raise ValueError("mu_t = 'scale' needs lab_fit (the laboratory law to scale)")
+        if self.mu_t_prior_std is not None and not all(
+                math.isfinite(s) and s > 0 for s in self.mu_t_prior_std):
+            raise ValueError("mu_t_prior_std must be positive numbers")
+        return self
 
 
 class DaemonConfig(_Model):

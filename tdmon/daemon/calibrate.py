@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -70,7 +71,7 @@ from tdmon.model.well import Fluid
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AlarmStep", "CalibrationSettings", "CalibrationStep", "RigStateStep"]
+__all__ = ["AlarmStep", "CalibrationSettings", "CalibrationStep", "ProfileStep", "RigStateStep"]
 
 
 def _value(values: dict[str, float], name: str) -> float | None:
@@ -180,7 +181,10 @@ class CalibrationStep:
     def __init__(self, model: WellModel, rig_state: RigStateStep,
                  settings: CalibrationSettings | None = None, *,
                  temperature: NDArray[np.float64] | None = None,
-                 friction_law: FrictionModel | None = None) -> None:
+                 friction_law: FrictionModel | None = None,
+                 mu_t_mask: NDArray[np.bool_] | None = None,
+                 mu_t_base: float | NDArray[np.float64] = 0.0,
+                 mu_t_prior_std: Sequence[float] | None = None) -> None:
         self.model = model
         self.rig_state = rig_state
         self.settings = settings or CalibrationSettings()
@@ -193,7 +197,10 @@ class CalibrationStep:
         self.mu_t: MuTCalibrator | None = None
         if temperature is not None and friction_law is not None:
             self.mu_t = MuTCalibrator(model, temperature, friction_law, mode=s.mu_t_mode,
-                                      method=s.method)
+                                      method=s.method, mask=mu_t_mask, base_mu=mu_t_base,
+                                      prior_std=mu_t_prior_std)
+        #: incremented whenever the local friction profile takes a window (ProfileStep)
+        self.profile_updates = 0
         self.shoe = shoe_depth(model)
         self.mu_cased: dict[str, tuple[float, float]] = {}  # state -> (sum w mu, sum w)
         self._cased_count: Counter[str] = Counter()
@@ -271,6 +278,7 @@ class CalibrationStep:
         self._jump(window, estimate, emit)
         self._limits(window, estimate, emit)
         if self.profile.add_window(window):
+            self.profile_updates += 1
             emit("estimate", self._profile_message(window))
             alarm, self._anomalous_bins = profile_anomaly(
                 window.t_end, self.profile.grid.edges, self.profile.state.mu,
@@ -457,3 +465,99 @@ class AlarmStep:
 
     def close(self, emit: Emit) -> None:
         """Nothing buffered."""
+
+
+class ProfileStep:
+    """Step: the well's trajectory and its profiles along MD for the 3D and profile views.
+
+    On the first frame it emits ``well`` (the hole grid's nodes: ``md_m``, ``tvd_m``,
+    ``north_m``, ``east_m``), a ``profile`` (``temperature_C`` of the annulus when the well file
+    has a temperature model, and the friction: the calibration's local profile when one runs,
+    else the well file's friction); the ``well`` message's ``notes`` say why the mu(T)
+    calibration is off when it is. Afterwards a ``profile`` follows whenever the calibration's
+    friction profile has changed, at most every ``interval`` seconds of rig time, and once
+    more at the end.
+    Both are stamped with the frame's time, not the wall clock, so that a replay keeps one time
+    axis and gives the same messages at any speed.
+
+    Parameters
+    ----------
+    well_message : the ``well`` message without ``t``
+    md : MD of the profile points [m]
+    element_index : hole-grid element of each profile point
+    temperature : annulus temperature per hole-grid element [degC], or None
+    friction : the well file's friction per element [-], or None
+    calibration : the calibration step whose profile is reported, or None
+    interval : shortest time between two ``profile`` messages [s]
+    mu_t_note : why the mu(T) calibration is off (None: it runs, or there is nothing to say)
+    """
+
+    name = "profile"
+
+    def __init__(self, well_message: dict[str, Any], md: NDArray[np.float64],
+                 element_index: NDArray[np.int64], *,
+                 temperature: NDArray[np.float64] | None = None,
+                 friction: NDArray[np.float64] | None = None,
+                 calibration: CalibrationStep | None = None, interval: float = 30.0,
+                 mu_t_note: str | None = None) -> None:
+        self.well_message = well_message
+        self.md = np.asarray(md, dtype=np.float64)
+        self.element_index = np.asarray(element_index, dtype=np.int64)
+        self.temperature = temperature
+        self.friction = friction
+        self.calibration = calibration
+        self.interval = interval
+        self.mu_t_note = mu_t_note
+        self._started = False
+        self._sent_updates = 0
+        self._sent_t = -math.inf
+        self._last_t: float | None = None
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        self._last_t = frame.t
+        if not self._started:
+            self._started = True
+            # the note rides on the start-up message rather than an alarm: nothing is wrong
+            # on the rig, and dashboards read the well message once anyway
+            notes = [] if self.mu_t_note is None else [self.mu_t_note]
+            emit("well", {"t": frame.t, **self.well_message, "notes": notes})
+            self._send(frame.t, emit)
+            return
+        calibration = self.calibration
+        if (calibration is not None and calibration.profile_updates != self._sent_updates
+                and frame.t - self._sent_t >= self.interval):
+            self._send(frame.t, emit)
+
+    def close(self, emit: Emit) -> None:
+        calibration = self.calibration
+        if (self._last_t is not None and calibration is not None
+                and calibration.profile_updates != self._sent_updates):
+            self._send(self._last_t, emit)
+
+    def message(self, t: float) -> dict[str, Any] | None:
+        """The ``profile`` message now (None when there is nothing to show)."""
+        message: dict[str, Any] = {"t": t, "md_m": self.md.tolist()}
+        if self.temperature is not None:
+            message["temperature_C"] = self.temperature[self.element_index].tolist()
+        if self.calibration is not None:
+            profile = self.calibration.profile
+            bins = profile.grid.element_bin[self.element_index]
+            message["mu"] = profile.state.mu[bins].tolist()
+            message["mu_std"] = profile.state.std[bins].tolist()
+        elif self.friction is not None:
+            message["mu"] = self.friction[self.element_index].tolist()
+        if "mu" not in message and "temperature_C" not in message:
+            return None
+        # a non-finite value would be written as null and break the arrays' number schema
+        if not all(np.isfinite(message[key]).all() for key in ("temperature_C", "mu", "mu_std")
+                   if key in message):
+            return None
+        return message
+
+    def _send(self, t: float, emit: Emit) -> None:
+        if self.calibration is not None:
+            self._sent_updates = self.calibration.profile_updates
+        self._sent_t = t
+        message = self.message(t)
+        if message is not None:
+            emit("profile", message)
