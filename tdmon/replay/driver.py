@@ -37,7 +37,7 @@ from tdmon.config.daemon import (
 )
 from tdmon.daemon.build import build_daemon
 from tdmon.daemon.pipeline import Pipeline, Sink
-from tdmon.errors import RecordError
+from tdmon.errors import IngestError, RecordError
 
 __all__ = ["ReplayResult", "SummarySink", "raw_message_count", "replay", "replay_config",
            "summarize_recording"]
@@ -150,6 +150,7 @@ class _ProgressSink:
         rest = self.count % self.every
         if rest:
             self.advance(rest)
+            self.count -= rest  # closed twice (daemon, then driver): counted once
 
 
 def raw_message_count(path: str | Path) -> int | None:
@@ -210,8 +211,6 @@ async def replay(
 
     source = Path(path)
     if not source.is_file():
-        from tdmon.errors import IngestError
-
         raise IngestError(f"replay not found: {source}")
     out_path = Path(out)
     rrd_path = None if rrd is None else Path(rrd)

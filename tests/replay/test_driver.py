@@ -113,8 +113,11 @@ def test_paced_replay_ends_by_itself_with_every_sample(tmp_path: Path) -> None:
     """--speed N keeps the live daemon's wall-clock housekeeping and still stops at the end."""
     path = REPO / "replays" / "trip-in-noisy.mcap"  # 16 min of rig time: about 1 s at 1000x
     config = load_daemon_config(REPO / "config" / "daemon" / "replay-sim-trip-in.toml")
-    result = asyncio.run(replay(path, config, tmp_path / "o.mcap", speed=1000.0))
+    advanced: list[int] = []
+    result = asyncio.run(replay(path, config, tmp_path / "o.mcap", speed=1000.0,
+                                progress=advanced.append))
     assert result.samples == 965 and result.dropped == 0 and result.frames > 100
+    assert sum(advanced) == 965  # the progress bar's steps add up to the input
     assert 0.9 < result.wall_s < 30
     statuses = list(read_messages(tmp_path / "o.mcap", "/tdmon/status"))
     assert len(statuses) >= 1 and statuses[-1].message["connections"]["mcap"] == "finished"
