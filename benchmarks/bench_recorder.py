@@ -10,16 +10,30 @@ second of data, of which 3 raw + 3 sample per second of input):
    flush a live rig gives (one flush per second of *data*, i.e. a chunk of ~8 messages);
 2. the recorder's cost inside a pipeline: a stand-in loop (JSON decode of each raw payload,
    latest-value alignment, a small numpy "model" evaluation per frame, building the output
-   messages) timed without a sink and with the recorder as its sink. The daemon's replay is
-   not written yet: this stand-in is NOT the daemon, and the figure must be redone against it;
-3. the Rerun views built from the same stream (messages/s), for scale.
+   messages) timed without a sink and with the recorder as its sink (kept for comparison
+   with earlier figures; item 4 is the real measure);
+3. the Rerun views built from the same stream (messages/s), for scale;
+4. the recorder's cost in the daemon itself: a recording (default the bundled simulated trip
+   out with its daemon config) replayed flat out through ``build_daemon``'s pipeline (MCAP
+   source, no publishing), with and without the folder recorder of ``[recorder]``, runs
+   alternated in one invocation; throughput ratio and bytes per input sample. Twice: with the
+   config as given (calibration on) and with calibration off (rig state and monitor only, the
+   cheapest pipeline, where the recorder weighs most).
 
-Best of ``--repeat`` runs; the machine is shared, so expect noise of 10-20 %.
+Best of ``--repeat`` runs; the machine is shared, so expect noise of 10-20 %. OpenBLAS is held
+to one thread unless OPENBLAS_NUM_THREADS says otherwise: its threads make the calibration's
+small matrix products 5-16 x slower on a busy 2-core machine, which would drown the recorder.
 """
 
 from __future__ import annotations
 
+import os
+
+# before numpy is imported (see the module docstring)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
+import asyncio
 import json
 import tempfile
 import time
@@ -29,9 +43,22 @@ from typing import Any
 
 import numpy as np
 
+from tdmon.config.daemon import (
+    DaemonConfig,
+    McapSourceConfig,
+    PublishConfig,
+    RecorderConfig,
+    RerunConfig,
+    SourcesConfig,
+    load_daemon_config,
+)
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import RecordedMessage
 from tdmon.record.synthetic import synthetic_messages
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the daemon replays this housekeeping-free (tdmon.replay.driver does the same at full speed)
+_NO_TICKS = 10 * 365 * 86400.0
 
 Sink = Callable[[str, int, dict[str, Any]], None]
 
@@ -135,12 +162,101 @@ def rerun_views(stream: list[RecordedMessage]) -> float:
         return time.perf_counter() - start
 
 
+class NullSink:
+    """Takes every message and does nothing: the daemon then builds the raw/sample messages
+    it skips when no sink wants them, so this separates that cost from the recorder's own."""
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def daemon_replay(recording: Path, config: DaemonConfig, folder: Path | None,
+                  null_sink: bool = False) -> tuple[float, int, int]:
+    """Replay ``recording`` flat out through the daemon built from ``config``; with a recorder
+    in ``folder`` (None: no recorder). Returns seconds, input samples, recorded bytes."""
+    from tdmon.daemon.build import build_daemon
+
+    run_config = config.model_copy(update={
+        "sources": SourcesConfig(mcap=McapSourceConfig(path=recording, speed="max")),
+        "publish": PublishConfig(),
+        "recorder": RecorderConfig(enabled=folder is not None,
+                                   output=folder or Path("unused"),
+                                   flush_interval=config.recorder.flush_interval),
+        "rerun": RerunConfig(),
+    })
+
+    async def run() -> tuple[float, int]:
+        extra = [NullSink()] if null_sink else []
+        async with build_daemon(run_config, stop_when_sources_done=True,
+                                extra_sinks=extra) as built:
+            built.daemon.tick_interval = _NO_TICKS  # no wall-clock frames: same work each run
+            start = time.perf_counter()  # the model's start-up sweep is not the recorder's
+            await built.daemon.run(asyncio.Event())
+            return time.perf_counter() - start, built.stats.samples_in
+
+    elapsed, samples = asyncio.run(run())
+    size = 0 if folder is None else sum(p.stat().st_size for p in folder.glob("*.mcap"))
+    return elapsed, samples, size
+
+
+def daemon_cost(recording: Path, config: DaemonConfig, repeat: int, label: str
+                ) -> dict[str, float]:
+    """Best of ``repeat`` alternated runs without and with the recorder; prints one line."""
+    bare: list[float] = []
+    null: list[float] = []
+    recorded: list[float] = []
+    samples = size = 0
+    for _ in range(repeat):
+        elapsed, samples, _ = daemon_replay(recording, config, None)
+        bare.append(elapsed)
+        elapsed, samples, _ = daemon_replay(recording, config, None, null_sink=True)
+        null.append(elapsed)
+        with tempfile.TemporaryDirectory() as folder:
+            elapsed, samples, size = daemon_replay(recording, config, Path(folder))
+        recorded.append(elapsed)
+    fast, slow = samples / min(bare), samples / min(recorded)
+    with_messages = samples / min(null)
+    cost = 1.0 - slow / fast
+    print(f"daemon replay, {label} ({samples} samples): {fast:,.0f} samples/s without the "
+          f"recorder, {with_messages:,.0f} with a do-nothing sink taking every message, "
+          f"{slow:,.0f} with the recorder; the recorder costs {cost * 100:.1f} % of the "
+          f"throughput (target <= 30 %); {size / samples:.1f} B per input sample, all topics")
+    return {"samples": samples, "bare_samples_per_s": fast,
+            "null_sink_samples_per_s": with_messages, "recorded_samples_per_s": slow,
+            "cost": cost, "bytes_per_sample": size / samples}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=int, default=3600, help="seconds of synthetic data")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--no-rerun", action="store_true")
+    parser.add_argument("--recording", type=Path,
+                        default=ROOT / "replays" / "trip-out-tight-spot.mcap",
+                        help="recording replayed through the daemon (item 4)")
+    parser.add_argument("--config", type=Path,
+                        default=ROOT / "config" / "daemon" / "replay-sim-trip-out.toml",
+                        help="daemon config for it (its source, publishing, recorder and "
+                             "Rerun settings are replaced)")
+    parser.add_argument("--daemon-only", action="store_true", help="only item 4")
+    parser.add_argument("--json", type=Path, help="write the daemon figures here")
     args = parser.parse_args()
+
+    config = load_daemon_config(args.config)
+    figures = {"calibration_on": daemon_cost(args.recording.resolve(), config, args.repeat,
+                                             "calibration as configured")}
+    if config.calibration.enabled:
+        monitor_only = config.model_copy(update={
+            "calibration": config.calibration.model_copy(update={"enabled": False})})
+        figures["monitor_only"] = daemon_cost(args.recording.resolve(), monitor_only,
+                                              args.repeat, "rig state and monitor only")
+    if args.json is not None:
+        args.json.write_text(json.dumps(figures, indent=2) + "\n")
+    if args.daemon_only:
+        return
 
     stream = list(synthetic_messages(duration_s=args.seconds))
     messages = len(stream)
