@@ -227,3 +227,41 @@ def test_no_temperature_model_means_no_mu_t_said_once(tmp_path: Path, trip: Path
     profiles = [m for topic, m in messages if topic == "/tdmon/profile"]
     assert profiles and all("temperature_C" not in m and "mu" in m for m in profiles)
     json.dumps(profiles[-1], allow_nan=False)
+
+
+def _parsed(folder: Path, calibration: dict[str, Any]) -> Any:
+    from tdmon.config.daemon import parse_daemon_config
+
+    well = write_well(folder / "well.toml", '"kaarstad-glydril"')
+    data = {"prefix": "sim/mut", "well": str(well), "sources": {"mcap": {"path": "x.mcap"}},
+            "calibration": {"enabled": True, **calibration}}
+    return parse_daemon_config(data, folder / "daemon.toml")
+
+
+def test_scale_mode_and_section_choice(tmp_path: Path) -> None:
+    from tdmon.daemon.build import calibration_steps_for
+    from tdmon.daemon.calibrate import CalibrationStep
+    from tdmon.errors import ConfigError
+
+    config = _parsed(tmp_path, {"mu_t": "scale", "lab_fit": {"family": "linear", "a": 0.2,
+                                                             "b": 0.001}})
+    _, steps = calibration_steps_for(config)
+    [calibration] = [s for s in steps if isinstance(s, CalibrationStep)]
+    assert calibration.mu_t is not None
+    assert calibration.mu_t.parametrisation.names == ("scale",)
+    assert calibration.mu_t.params == {"a": 0.2, "b": 0.001}  # scale 1 to start with
+    # the section by name or index; the deepest by default
+    for section in ("open hole", 0, -1, None):
+        _, steps = calibration_steps_for(_parsed(tmp_path, {"mu_t_section": section}))
+        [calibration] = [s for s in steps if isinstance(s, CalibrationStep)]
+        assert calibration.mu_t is not None and calibration.mu_t.params == {"a": 0.23,
+                                                                            "b": 0.0013}
+    with pytest.raises(ConfigError, match="no hole section named 'cased'"):
+        calibration_steps_for(_parsed(tmp_path, {"mu_t_section": "cased"}))
+    with pytest.raises(ConfigError, match="give 2 values"):
+        calibration_steps_for(_parsed(tmp_path, {"mu_t_prior_std": [0.1]}))
+    with pytest.raises(ConfigError, match="calibration: mu_t = 'scale' needs lab_fit"):
+        _parsed(tmp_path, {"mu_t": "scale"})
+    off = _parsed(tmp_path, {"mu_t": "off"})
+    _, steps = calibration_steps_for(off)
+    assert all(s.mu_t is None for s in steps if isinstance(s, CalibrationStep))
