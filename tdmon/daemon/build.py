@@ -300,9 +300,13 @@ async def build_daemon(
         rig_state, calibration_steps = calibration_steps_for(config, well, well_file)
         extra_steps = calibration_steps[:-1] + extra_steps + calibration_steps[-1:]
     elif well_file is not None:
+        from tdmon.daemon.calibrate import CalibrationStep
         from tdmon.model.well import hole_grid
 
-        extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well)))
+        # a caller composing its own calibration still gets its profile reported
+        calibration = next((s for s in extra_steps if isinstance(s, CalibrationStep)), None)
+        extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well),
+                                        calibration=calibration))
     stats = Stats()
     base = config.source_file.parent if config.source_file else None
     sinks: list[Sink] = []
