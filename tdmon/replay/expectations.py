@@ -17,6 +17,8 @@ daemon configuration and states, all optional:
   one expectation only (in file order), so two events cannot be met by the same alarm.
   ``known_issue`` = "why": the expectation is checked and reported but does not fail the run
   (a daemon limitation on record, like a strict xfail without the strictness);
+* ``[estimates] minimum``: at least so many estimates of each kind (``window``, ``profile``,
+  ``mu_T``);
 * ``[forbidden]``: daemon alarm ``kinds`` that must not occur at all;
 * ``finite`` (default true): no NaN or infinity in anything published.
 
@@ -32,6 +34,7 @@ import math
 import os
 import statistics
 import tomllib
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -112,6 +115,11 @@ class AlarmExpectation(_Model):
         return self
 
 
+class EstimatesExpectation(_Model):
+    minimum: dict[str, int] = Field(default_factory=dict,
+                                    description="at least this many estimates of each kind")
+
+
 class ForbiddenAlarms(_Model):
     kinds: list[str] = Field(default_factory=list)
 
@@ -125,6 +133,7 @@ class Expectations(_Model):
     input: InputExpectation = Field(default_factory=InputExpectation)
     states: StatesExpectation | None = None
     friction: list[FrictionExpectation] = Field(default_factory=list)
+    estimates: EstimatesExpectation = Field(default_factory=EstimatesExpectation)
     alarm: list[AlarmExpectation] = Field(default_factory=list)
     forbidden: ForbiddenAlarms = Field(default_factory=ForbiddenAlarms)
     source_file: Path | None = Field(default=None, exclude=True)
@@ -472,6 +481,10 @@ def check_replay(expectations: Expectations, recording: str | os.PathLike[str], 
     if expectations.states is not None:
         checks.extend(_state_agreement(expectations.states, data))
     checks.extend(_friction(f, data) for f in expectations.friction)
+    kinds = Counter(str(e.get("kind")) for e in data.estimates)
+    for kind, minimum in expectations.estimates.minimum.items():
+        checks.append(Check(f"{kind} estimates", kinds[kind] >= minimum, str(kinds[kind]),
+                            f">= {minimum}"))
     used: set[int] = set()
     checks.extend(_alarm(a, data, used) for a in expectations.alarm)
     checks.extend(_forbidden(expectations.forbidden, data))
