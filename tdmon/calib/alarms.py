@@ -274,13 +274,15 @@ def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.
 
 @dataclass(frozen=True)
 class SensorSettings:
-    """Plausibility settings: hook-load range [N], depth tolerance [m], frozen run [-], and
-    how long a depth inconsistency must last (hole-depth channels are coarse and noisy) [s]."""
+    """Plausibility settings: hook-load range [N], depth tolerance [m], frozen run [-], how
+    long a depth inconsistency must last (hole-depth channels are coarse and noisy) [s], and the
+    rotary speed above which a constant torque is suspicious [rad/s]."""
 
     max_hookload: float = 10e6
     depth_tolerance: float = 5.0
     frozen_samples: int = 30
     persist_time: float = 60.0
+    rotating_speed: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -331,9 +333,12 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
             continue
         runs[channel] = runs.get(channel, 0) + 1 if last.get(channel) == value else 0
         last[channel] = value
-        # bit depth legitimately stands still; a frozen load while moving is suspicious
+        # bit depth legitimately stands still; a frozen load while moving is suspicious, but
+        # surface torque rests at its zero offset whenever the string does not rotate (Volve
+        # F-4 trips: a constant 5.2 N m), so a constant torque counts only while rotating
+        rotating = values.get("rpm", 0.0) > settings.rotating_speed
         if channel != "bit_depth" and moving and runs[channel] >= settings.frozen_samples \
-                and value != 0.0:
+                and value != 0.0 and (channel != "torque" or rotating):
             conditions.add(f"{channel}_frozen")
     texts = {
         "hookload_implausible": ("critical", "hook load is negative or implausibly large",
@@ -341,7 +346,7 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
         "bit_below_hole": ("warning", "bit depth is below the hole depth", bit, hole),
         "hookload_frozen": ("warning", "hook load has not changed while the string moves",
                             hookload, None),
-        "torque_frozen": ("warning", "torque has not changed while the string moves",
+        "torque_frozen": ("warning", "torque has not changed while the string rotates",
                           values.get("torque"), None),
     }
     for condition in sorted(conditions - state.active):

@@ -114,6 +114,24 @@ def test_sensor_alarms() -> None:
     assert kinds == [(6, "sensor_bit_below_hole")]
 
 
+def test_constant_torque_is_frozen_only_while_rotating() -> None:
+    # Volve F-4 trips: surface torque rests at its zero offset (5.2 N m) while the string moves
+    # without rotation; that must not read as a stuck sensor, the same value while rotating must.
+    s = SensorSettings(frozen_samples=5)
+    values = {"torque": 5.2, "rpm": 0.0}
+    state, kinds = SensorState(), []
+    for k in range(10):
+        state, alarms = sensor_alarms(state, float(k), values, (), True, s)
+        kinds += [a.kind for a in alarms]
+    assert kinds == []
+    state, kinds = SensorState(), []
+    for k in range(10):
+        state, alarms = sensor_alarms(state, float(k), {"torque": 5.2e3, "rpm": 12.0}, (), True,
+                                      s)
+        kinds += [a.kind for a in alarms]
+    assert kinds == ["sensor_torque_frozen"]
+
+
 def _frames(session: Any) -> list[Frame]:
     frames = []
     for i in range(session.t.size):
