@@ -80,6 +80,12 @@ def _num(value: Any) -> float:
     return math.nan
 
 
+def _legend(axes: Any, **options: Any) -> None:
+    # an empty recording leaves a panel without labelled lines: no legend then (matplotlib warns)
+    if axes.get_legend_handles_labels()[0]:
+        axes.legend(**options)
+
+
 def write_estimates_csv(estimates: Sequence[dict[str, Any]], path: Path) -> int:
     """One row per window estimate (scalar kind-specific fields become extra columns)."""
     windows = [e for e in estimates if e.get("kind") == "window"]
@@ -165,7 +171,7 @@ def hookload_figure(data: ReportData, path: Path) -> Path | None:
             state, "k"), label=f"measured, {state}", zorder=3)
     _depth_axis(axes, "Hook load against depth (broomstick: solid pick-up, dashed slack-off)",
                 "Hook load [kN]")
-    axes.legend(fontsize=7, loc="best")
+    _legend(axes, fontsize=7, loc="best")
     return _save(figure, path)
 
 
@@ -182,7 +188,7 @@ def torque_figure(data: ReportData, path: Path) -> Path | None:
     axes.scatter(np.array([_num(m["measured"]["torque_Nm"]) for m in models]) / 1e3, depth,
                  s=5, color="C3", label="measured")
     _depth_axis(axes, "Surface torque against depth", "Torque [kN m]")
-    axes.legend(fontsize=8)
+    _legend(axes, fontsize=8)
     return _save(figure, path)
 
 
@@ -212,7 +218,7 @@ def friction_figure(data: ReportData, path: Path) -> Path | None:
                       color=f"C{i}", capsize=2, label=f"window, {operation}")
     _depth_axis(axes, "Friction factor against depth", "Friction factor mu [-]",
                 "Depth [m MD] (bit depth for windows)")
-    axes.legend(fontsize=8)
+    _legend(axes, fontsize=8)
     return _save(figure, path)
 
 
@@ -239,7 +245,7 @@ def mu_t_figure(data: ReportData, path: Path) -> Path | None:
     axes.set_ylabel("Friction factor mu [-]")
     axes.set_title("Temperature dependence of friction, mu(T)")
     axes.grid(True, alpha=0.3)
-    axes.legend(fontsize=7)
+    _legend(axes, fontsize=7)
     return _save(figure, path)
 
 
