@@ -99,8 +99,8 @@ def read_toml(path: Path | str) -> dict[str, Any]:
         raise ConfigError(str(path), "", "is a folder, not a TOML file") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), "", f"not valid TOML: {exc}") from exc
-    except OSError as exc:
-        raise ConfigError(str(path), "", f"cannot be read: {exc.strerror}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(str(path), "", f"cannot be read: {exc}") from exc
 
 
 def load_model(

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -23,6 +22,7 @@ from pydantic import (
     model_validator,
 )
 
+from tdmon.config.common import read_toml
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.ingest.decode import CHANNEL_UNITS, ChannelSpec
@@ -297,14 +297,7 @@ def load_daemon_config(path: str | os.PathLike[str]) -> DaemonConfig:
         The file is missing, not TOML, or invalid; the message names the key and reason.
     """
     file = Path(path)
-    try:
-        data = tomllib.loads(file.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(str(file), "", "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(str(file), "", f"cannot read: {exc}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(file), "", f"not valid TOML: {exc}") from exc
+    data = read_toml(file)
     return parse_daemon_config(data, file)
 
 

@@ -33,7 +33,6 @@ import itertools
 import math
 import os
 import statistics
-import tomllib
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -42,6 +41,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from tdmon.config.common import read_toml
 from tdmon.errors import ConfigError
 
 __all__ = [
@@ -161,14 +161,7 @@ def load_expectations(path: str | os.PathLike[str]) -> Expectations:
         Missing, not TOML, or invalid; the message names the key and the reason.
     """
     file = Path(path)
-    try:
-        data = tomllib.loads(file.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(str(file), "", "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(str(file), "", f"cannot read: {exc}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(file), "", f"not valid TOML: {exc}") from exc
+    data = read_toml(file)
     try:
         expectations = Expectations.model_validate(data)
     except ValidationError as exc:

@@ -157,7 +157,7 @@ def test_config_mistakes_are_one_line_and_exit_2(
 
 def test_missing_config_file(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", "--config", "/nonexistent/d.toml"]) == 2
-    assert "file not found" in capsys.readouterr().err
+    assert "no such file" in capsys.readouterr().err
 
 
 def test_publish_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[str],
