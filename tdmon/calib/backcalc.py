@@ -34,6 +34,7 @@ __all__ = [
     "back_calculate_window",
     "motion_angle",
     "shoe_depth",
+    "window_measurement",
 ]
 
 Quantity = Literal["hookload", "torque"]
@@ -44,6 +45,31 @@ OPERATION_FOR_STATE: dict[str, tuple[str, Quantity]] = {
     "rotating_off_bottom": ("rotating", "torque"),
 }
 """Which model operation and measured quantity a window of a rig state calibrates."""
+
+@dataclass(frozen=True)
+class WindowMeasurement:
+    """What a steady window offers a friction estimator: the model operation it calibrates, the
+    quantity (index 0 hook load [N], 1 surface torque [N m] in ``WellModel.evaluate``'s result),
+    the measured mean and its standard error."""
+
+    operation: str
+    quantity_index: int
+    value: float
+    standard_error: float
+
+
+def window_measurement(window: Window) -> WindowMeasurement | None:
+    """The measurement a window carries for the friction estimators; None when it has none
+    (rejected, a state that calibrates nothing, or a missing/non-finite mean or error)."""
+    if window.rejected is not None or window.state not in OPERATION_FOR_STATE:
+        return None
+    operation, quantity = OPERATION_FOR_STATE[window.state]
+    measured = window.torque if quantity == "torque" else window.hookload
+    se = window.torque_se if quantity == "torque" else window.hookload_se
+    if measured is None or se is None or not (math.isfinite(measured) and math.isfinite(se)):
+        return None
+    return WindowMeasurement(operation, 1 if quantity == "torque" else 0, measured, se)
+
 
 REAMING_OPERATIONS: dict[str, str] = {"reaming": "slack_off", "back_reaming": "pick_up"}
 """Axial operation of the combined-motion states; their friction comes from the torque with

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tdmon.calib.backcalc import OPERATION_FOR_STATE
+from tdmon.calib.backcalc import window_measurement
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
 from tdmon.model.friction import FrictionModel
@@ -328,14 +328,11 @@ class MuTCalibrator:
 
     def add_window(self, window: Window, *, iterations: int = 3) -> bool:
         """Update with one window; False when it cannot be used (state unchanged)."""
-        if window.rejected is not None or window.state not in OPERATION_FOR_STATE:
+        observed = window_measurement(window)
+        if observed is None:
             return False
-        operation, quantity = OPERATION_FOR_STATE[window.state]
-        index = 1 if quantity == "torque" else 0
-        measured = window.torque if quantity == "torque" else window.hookload
-        se = window.torque_se if quantity == "torque" else window.hookload_se
-        if measured is None or se is None or not (math.isfinite(measured) and math.isfinite(se)):
-            return False
+        operation, index = observed.operation, observed.quantity_index
+        measured, se = observed.value, observed.standard_error
         prior = predict(self.state, self.process_std)
         estimate = prior.theta
         posterior = prior
