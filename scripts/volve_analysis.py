@@ -39,7 +39,7 @@ from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Well
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("TDMON_VOLVE_DATA", "/work/shared/data/volve-f4"))
+DATA = Path(os.environ.get("TDMON_VOLVE_DATA", str(ROOT / "data" / "volve-f4")))
 WELL_FILE = ROOT / "config" / "wells" / "volve-f4.toml"
 TRIP_OUT = "trip-out-2016-10-04.csv"
 TRIP_IN = "trip-in-2016-10-05.csv"

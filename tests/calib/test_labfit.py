@@ -20,7 +20,7 @@ from tdmon.calib.labfit import (
 from tdmon.errors import FitError
 from tdmon.model.friction import FrictionModel
 
-LAB_CSV = Path("/work/shared/data/lab/glydril-tribometer.csv")
+LAB_CSV = Path(__file__).resolve().parents[2] / "data" / "lab" / "glydril-tribometer.csv"
 TEMPERATURES = np.array([30.0, 40.0, 50.0, 60.0, 70.0])
 # the "Average" row of Table 14 as printed (0.283 is printed "0,.283")
 PRINTED_AVERAGES = np.array([0.279, 0.287, 0.283, 0.3185, 0.306])

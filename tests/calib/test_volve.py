@@ -3,7 +3,7 @@ licence partners"): detected states against the rig's activity codes, block weig
 pick-up friction, the modelled band around the measured loads, and the trip-in depth-tracking
 artefact. The numbers come from scripts/volve_analysis.py, the code behind
 docs/back-calculation.md; the data folder is TDMON_VOLVE_DATA (default
-/work/shared/data/volve-f4), and without it the committed replays/volve-f4-*.mcap."""
+data/volve-f4 in the repository), and without it the committed replays/volve-f4-*.mcap."""
 
 from __future__ import annotations
 

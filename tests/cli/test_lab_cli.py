@@ -16,7 +16,7 @@ from tdmon.calib.labfit import (
 )
 from tdmon.cli import main
 
-DATA = Path("/work/shared/data/lab/glydril-tribometer.csv")  # as tests/calib/test_labfit.py
+DATA = Path(__file__).resolve().parents[2] / "data" / "lab" / "glydril-tribometer.csv"
 
 # Table 14's printed "Average" row (not the means of the printed runs at 30 and 40 degC)
 PRINTED_AVERAGES = "temperature_C,friction_coefficient\n30,0.279\n40,0.287\n50,0.283\n" \

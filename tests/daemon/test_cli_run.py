@@ -22,7 +22,7 @@ VOLVE_HEADER = ("time_utc,hole_depth_m,bit_depth_m,hookload_kN,surface_torque_kN
 
 @pytest.fixture
 def volve_csv(tmp_path: Path) -> Path:
-    """100 rows in the layout of the Volve F-4 logs (/work/shared/data/volve-f4): 9 mapped
+    """100 rows in the layout of the Volve F-4 logs (data/volve-f4): 9 mapped
     channels each, a pull of 0.5 m per 15 s row."""
     rows = [VOLVE_HEADER]
     for i in range(100):

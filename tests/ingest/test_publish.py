@@ -19,7 +19,7 @@ from tdmon.ingest.publish import (
 )
 from tdmon.ingest.types import RawMessage, Sample, raw_message
 
-# the first rows of /work/shared/data/volve-f4/trip-in-2016-10-05.csv (Equinor Open Data
+# the first rows of data/volve-f4/trip-in-2016-10-05.csv (Equinor Open Data
 # Licence, "Equinor and the former Volve licence partners"), mapped columns only kept whole
 VOLVE_HEAD = """time_utc,hole_depth_m,bit_depth_m,hookload_kN,surface_torque_kNm,surface_rpm,\
 bit_rpm,flow_in_Lpm,flow_out_Lpm,spp_bar,wob_kN,rop_mph,rig_activity_code,block_pos_comp_m,\

@@ -17,7 +17,7 @@ from tdmon.model.survey import (
     ratio_factor,
 )
 
-VOLVE_TRAJECTORY = Path("/work/shared/data/volve-f4/trajectory.csv")
+VOLVE_TRAJECTORY = Path(__file__).resolve().parents[2] / "data" / "volve-f4" / "trajectory.csv"
 
 # Example 7.1 (Aadnoy, Mechanics of Drilling): KOP 1500 m, R = 500 m to 60 deg, 2000 m + 200 m
 KOP = 1500.0

@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 
 REPO = Path(__file__).resolve().parents[2]
 SCENARIO_WELL = REPO / "replays" / "scenarios" / "wells" / "example-7-1-glydril.toml"
-VOLVE_DATA = Path("/work/shared/data/volve-f4")
+VOLVE_DATA = Path(__file__).resolve().parents[2] / "data" / "volve-f4"
 
 #: Every rig state in a few minutes, no noise: static, circulating, rotating off bottom,
 #: reaming (with a connection), drilling, back-reaming, pick-up and slack-off with connections.

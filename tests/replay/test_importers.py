@@ -30,9 +30,6 @@ VOLVE_COLUMNS = [
     ("flow_in_Lpm", "flow_in", 1e-3 / 60), ("spp_bar", "spp", 1e5), ("wob_kN", "wob", 1e3),
 ]
 
-needs_volve = pytest.mark.skipif(not VOLVE_DATA.exists(), reason="shared Volve data not here")
-
-
 def _rows(path: Path) -> list[dict[str, str]]:
     with path.open(newline="") as handle:
         return list(csv.DictReader(handle))
@@ -42,7 +39,6 @@ def _unix(text: str) -> float:
     return datetime.strptime(text, "%Y-%m-%dT%H:%M:%SZ").replace(tzinfo=UTC).timestamp()
 
 
-@needs_volve
 @pytest.mark.parametrize("name", VOLVE_FILES)
 def test_volve_import_counts_units_and_times(name: str, tmp_path: Path) -> None:
     source = VOLVE_DATA / name
@@ -71,7 +67,6 @@ def test_volve_import_counts_units_and_times(name: str, tmp_path: Path) -> None:
     assert all(r.log_time == round(r.message["receive_time"] * 1e9) for r in raw)
 
 
-@needs_volve
 def test_volve_hand_values_and_replay(tmp_path: Path) -> None:
     out = tmp_path / "trip-in.mcap"
     assert main(["import", "volve", str(VOLVE_DATA / "trip-in-2016-10-05.csv"), "--out",

@@ -66,7 +66,6 @@ def test_committed_simulation_is_current(scenario: Path, tmp_path: Path) -> None
         np.testing.assert_allclose(fresh[topic], values, rtol=1e-6, atol=1e-9, err_msg=topic)
 
 
-@pytest.mark.skipif(not VOLVE_DATA.exists(), reason="shared Volve data not here")
 @pytest.mark.parametrize(("replay", "csv_name"), VOLVE_REPLAYS.items())
 def test_volve_replays_are_the_import(replay: str, csv_name: str, tmp_path: Path) -> None:
     out = tmp_path / "again.mcap"
