@@ -589,3 +589,21 @@ def fit_friction_models(temperature: ArrayLike, friction: ArrayLike,
 
 def _with_rank(fit: FrictionFit, rank: int) -> FrictionFit:
     return replace(fit, rank=rank)
+
+
+def confidence_band(fit: FrictionFit, temperature: ArrayLike, at: ArrayLike) -> Array | None:
+    """Half-width of the 95 % confidence band of the mean of a linear or polynomial fit.
+
+    t(0.975, n - p) s sqrt(x0' (X'X)^-1 x0), X the fit's design matrix on ``temperature``
+    [degC] (the data the fit was made on), evaluated at ``at`` [degC]; None for the
+    nonlinear families or without degrees of freedom.
+    """
+    if fit.family not in ("linear", "polynomial") or fit.stderr is None:
+        return None
+    columns = fit.n_parameters
+    design = np.vander(np.asarray(temperature, dtype=np.float64), columns, increasing=True)
+    unscaled = np.linalg.inv(design.T @ design)
+    rows = np.vander(np.asarray(at, dtype=np.float64), columns, increasing=True)
+    spread = np.sqrt(np.einsum("ij,jk,ik->i", rows, unscaled, rows))
+    t_crit = float(stats.t.ppf(0.975, fit.n - columns))
+    return np.asarray(t_crit * fit.stderr * spread, dtype=np.float64)

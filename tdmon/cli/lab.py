@@ -175,27 +175,9 @@ def _print(fits: _Fits, path: Path) -> None:
               "level: with these data a constant friction factor explains them as well.")
 
 
-def _ols_band(fit: FrictionFit, temperature: Array, at: Array) -> Array | None:
-    """Half-width of the 95 % confidence band of the mean of a linear or polynomial fit.
-
-    t(0.975, n - p) s sqrt(x0' (X'X)^-1 x0), X the fit's design matrix on ``temperature``
-    [degC]; None for the nonlinear families or without degrees of freedom.
-    """
-    from scipy import stats
-
-    if fit.family not in ("linear", "polynomial") or fit.stderr is None:
-        return None
-    columns = fit.n_parameters
-    design = np.vander(temperature, columns, increasing=True)
-    unscaled = np.linalg.inv(design.T @ design)
-    rows = np.vander(at, columns, increasing=True)
-    spread = np.sqrt(np.einsum("ij,jk,ik->i", rows, unscaled, rows))
-    t_crit = float(stats.t.ppf(0.975, fit.n - columns))
-    return np.asarray(t_crit * fit.stderr * spread, dtype=np.float64)
-
-
 def _plot(fits: _Fits, path: Path, source: Path) -> None:
     """Runs, averages, fitted laws and the 95 % bands of the best linear/polynomial fits."""
+    from tdmon.calib.labfit import confidence_band
     from tdmon.cli.plots import _figure, save
 
     figure = _figure(2)
@@ -221,7 +203,7 @@ def _plot(fits: _Fits, path: Path, source: Path) -> None:
             axis.plot(grid, curve, color=colour, linestyle=style[kind],
                       label=f"{fit.model} ({kind}): {fit.friction_model().describe()}, "
                       f"R^2 {fit.r2:.3f}")
-            band = None if banded else _ols_band(fit, points[kind], grid)
+            band = None if banded else confidence_band(fit, points[kind], grid)
             if band is not None:
                 axis.fill_between(grid, curve - band, curve + band, color=colour,
                                   alpha=0.15 if kind == "averages" else 0.08,

@@ -11,6 +11,7 @@ import pytest
 from scipy import stats
 
 from tdmon.calib.labfit import (
+    confidence_band,
     fit_friction,
     fit_friction_models,
     read_tribometer_csv,
@@ -260,3 +261,20 @@ def test_too_few_points_and_bad_models() -> None:
         fit_friction([0.0, 20.0, 40.0], [0.2, 0.25, 0.3], "power")
     with pytest.raises(FitError, match="none of the models"):
         fit_friction_models([30.0, 40.0], [0.2, 0.3], models=["poly-3"])
+
+
+def test_confidence_band_of_a_line_at_the_mean_temperature(
+        lab: tuple[np.ndarray, np.ndarray]) -> None:
+    # For a straight line, x0' (X'X)^-1 x0 = 1/n at the mean of the fitted temperatures, so the
+    # band's half-width there is t(0.975, n - 2) s / sqrt(n) (hand formula, no matrix algebra).
+    temperature, friction = lab
+    fit = fit_friction(temperature, friction, "linear", data="raw")
+    assert fit.stderr is not None
+    centre = float(np.mean(temperature))
+    band = confidence_band(fit, temperature, [centre, 30.0, 70.0])
+    assert band is not None
+    expected = stats.t.ppf(0.975, temperature.size - 2) * fit.stderr / np.sqrt(temperature.size)
+    assert band[0] == pytest.approx(expected, rel=1e-9)
+    assert band[1] > band[0] and band[2] > band[0]  # wider away from the data's centre
+    nonlinear = fit_friction(temperature, friction, "exponential", data="raw")
+    assert confidence_band(nonlinear, temperature, [centre]) is None
