@@ -7,7 +7,9 @@ Two measurements, one process (project virtualenv):
    standpipe pressure; trips out and in with connections, so that rig states, windows,
    back-calculation and alarms all do their work) is replayed with
    ``tdmon.replay.driver.replay`` at full speed (decode, record raw input and samples, align,
-   rig state, monitor, calibration, alarms, MCAP recorder in single-file mode). Side by side,
+   rig state, monitor, calibration, alarms, MCAP recorder in single-file mode; the recorder runs
+   in a child process, as ``tdmon replay`` does, and the same replay with the recorder in the
+   replaying process is printed beside it). Side by side,
    the *bare* path reads the same ``/tdmon/raw`` messages with
    ``tdmon.ingest.mcap_source.iter_raw``, decodes each payload with ``json.loads`` and writes
    it to an MCAP file with mcap's ``Writer`` (zstd chunks, as the recorder). Best of
@@ -15,7 +17,8 @@ Two measurements, one process (project virtualenv):
 2. **Long session** (``--days``, default 7; 0 skips): the same programme generated for that
    long (7 days x 86400 s x 8 channels = 4.84 M messages) into a temporary file, replayed once
    at full speed; wall time (target < 5 min) and the process's resident memory sampled every
-   ``--sample`` seconds from a thread (``/proc/self/statm``): first and last sample after the
+   ``--sample`` seconds from a thread (``/proc/<pid>/statm`` of this process plus its
+   children, i.e. the recorder's process): first and last sample after the
    first 10 % of the run, and the peak. With ``--tracemalloc`` the Python heap is traced
    too (slows the run down by about 2x).
 
@@ -174,12 +177,12 @@ def bare_copy(src: Path, dst: Path) -> int:
     return count
 
 
-def pipeline_replay(src: Path, dst: Path) -> int:
+def pipeline_replay(src: Path, dst: Path, separate_writer: bool = True) -> int:
     from tdmon.config.daemon import load_daemon_config
     from tdmon.replay.driver import replay
 
     config = load_daemon_config(CONFIG)
-    result = asyncio.run(replay(src, config, dst))
+    result = asyncio.run(replay(src, config, dst, separate_writer=separate_writer))
     return result.messages_in
 
 
@@ -193,7 +196,8 @@ def best_of(repeat: int, run: Callable[[], int]) -> tuple[float, int]:
 
 
 class MemorySampler:
-    """Resident set size [bytes] (and the traced Python heap) every ``interval`` s."""
+    """Resident set size [bytes] of this process and its children (and the traced Python
+    heap of this one) every ``interval`` s."""
 
     def __init__(self, interval: float, trace: bool) -> None:
         self.interval = interval
@@ -204,8 +208,16 @@ class MemorySampler:
         self._page = os.sysconf("SC_PAGE_SIZE")
 
     def _rss(self) -> int:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * self._page
+        import multiprocessing
+
+        total = 0
+        for pid in ["self", *(str(c.pid) for c in multiprocessing.active_children())]:
+            try:
+                with open(f"/proc/{pid}/statm") as f:
+                    total += int(f.read().split()[1]) * self._page
+            except OSError:
+                pass  # a child that just ended
+        return total
 
     def _run(self) -> None:
         start = time.perf_counter()
@@ -231,13 +243,17 @@ def ratio(hours: float, repeat: int, folder: Path) -> dict[str, Any]:
     _, made = make_session(src, hours * 3600)
     bare_s, n_bare = best_of(repeat, lambda: bare_copy(src, folder / "bare.mcap"))
     pipe_s, n_pipe = best_of(repeat, lambda: pipeline_replay(src, folder / "pipe.mcap"))
-    assert n_bare == n_pipe, (n_bare, n_pipe)
+    inline_s, n_inline = best_of(
+        repeat, lambda: pipeline_replay(src, folder / "inline.mcap", separate_writer=False))
+    assert n_bare == n_pipe == n_inline, (n_bare, n_pipe, n_inline)
     # whole trips: the session is longer than asked for (a trip out alone is ~3 h)
     return {"hours": round(n_pipe / len(CHANNELS) / 3600, 2), "messages": n_pipe,
             "simulate_s": round(made, 1),
             "bare_s": round(bare_s, 3), "bare_rate": round(n_bare / bare_s),
             "pipeline_s": round(pipe_s, 3), "pipeline_rate": round(n_pipe / pipe_s),
-            "ratio": round(bare_s / pipe_s, 3), "input_bytes": src.stat().st_size}
+            "ratio": round(bare_s / pipe_s, 3),
+            "inline_s": round(inline_s, 3), "inline_rate": round(n_inline / inline_s),
+            "inline_ratio": round(bare_s / inline_s, 3), "input_bytes": src.stat().st_size}
 
 
 def long_session(days: float, sample: float, trace: bool, folder: Path) -> dict[str, Any]:
@@ -293,15 +309,19 @@ def main(argv: list[str] | None = None) -> int:
             src = folder / "session.mcap"
             make_session(src, args.hours * 3600)
             profile = cProfile.Profile()
-            profile.runcall(pipeline_replay, src, folder / "pipe.mcap")
+            # in-process recorder: a child process's work would be invisible to cProfile
+            profile.runcall(pipeline_replay, src, folder / "pipe.mcap", False)
             pstats.Stats(profile).sort_stats("tottime").print_stats(25)
             return 0
         results["ratio"] = ratio(args.hours, args.repeat, folder)
         r = results["ratio"]
-        print(f"| rig time | messages | bare read+decode+write | pipeline | ratio |\n"
-              f"|---|---|---|---|---|\n"
+        print(f"| rig time | messages | bare read+decode+write | pipeline | ratio "
+              f"| pipeline, recorder in-process | ratio |\n"
+              f"|---|---|---|---|---|---|---|\n"
               f"| {r['hours']:g} h | {r['messages']} | {r['bare_s']} s ({r['bare_rate']} msg/s) "
-              f"| {r['pipeline_s']} s ({r['pipeline_rate']} msg/s) | {r['ratio']} |", flush=True)
+              f"| {r['pipeline_s']} s ({r['pipeline_rate']} msg/s) | {r['ratio']} "
+              f"| {r['inline_s']} s ({r['inline_rate']} msg/s) | {r['inline_ratio']} |",
+              flush=True)
         if args.days > 0:
             results["long"] = long_session(args.days, args.sample, args.tracemalloc, folder)
             r = results["long"]

@@ -339,7 +339,7 @@ class McapRecorder:
             self._file = self._open_next()
         except OSError as exc:
             raise RecordError(
-                f"cannot record to {self.folder}: {exc.strerror or exc}"
+                f"cannot record to {exc.filename or self.folder}: {exc.strerror or exc}"
             ) from exc
 
         self._stop = threading.Event()
@@ -404,6 +404,12 @@ class McapRecorder:
                 self._stats.lost += 1
             log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
             return
+        self.write_encoded(topic, log_time_ns, data, replaced)
+
+    def write_encoded(self, topic: str, log_time_ns: int, data: bytes,
+                      replaced: bool = False) -> None:
+        """Record one message already encoded as JSON bytes (``replaced``: a NaN/inf in it was
+        written as ``null``). Never raises for I/O problems, like ``write``."""
         with self._lock:
             if self._closed:
                 self._stats.lost += 1

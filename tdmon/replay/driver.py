@@ -189,6 +189,7 @@ async def replay(
     speed: float | None = None,
     progress: Callable[[int], None] | None = None,
     extra_sinks: Sequence[Sink] = (),
+    separate_writer: bool = True,
 ) -> ReplayResult:
     """Run ``path`` through the daemon built from ``config``; record everything to ``out``.
 
@@ -201,6 +202,9 @@ async def replay(
     speed : real time x ``speed``; None: as fast as the pipeline goes (deterministic)
     progress : called with the number of input messages handled since the last call
     extra_sinks : more sinks (tests)
+    separate_writer : record from a child process
+        (:class:`~tdmon.record.writer_process.RecorderProcess`: encoding and writing on a
+        second core); False: in this process (:class:`McapRecorder`; e.g. to profile it)
 
     Raises
     ------
@@ -208,6 +212,7 @@ async def replay(
         The replay cannot be read, an output cannot be written, the configuration is unusable.
     """
     from tdmon.record.mcap_recorder import McapRecorder
+    from tdmon.record.writer_process import RecorderProcess
 
     source = Path(path)
     if not source.is_file():
@@ -225,8 +230,9 @@ async def replay(
 
     summary = SummarySink()
     sinks: list[Any] = []
-    recorder = McapRecorder(path=out_path, overwrite=True, on_alarm=on_alarm,
-                            flush_interval_s=5.0)
+    recorder_type = RecorderProcess if separate_writer else McapRecorder
+    recorder = recorder_type(path=out_path, overwrite=True, on_alarm=on_alarm,
+                             flush_interval_s=5.0)
     sinks.append(recorder)
     try:
         if rrd_path is not None:

@@ -96,16 +96,20 @@ def test_replays_cover_every_state_and_alarm_kind(
 
 
 def test_same_replay_twice_gives_identical_estimates(tmp_path: Path) -> None:
+    """Twice, once recording from a child process (the default) and once in-process: the
+    estimate streams, and every other recorded message bar the wall-clock status, agree."""
     path = REPO / "replays" / "trip-out-tight-spot.mcap"
     expectations = load_expectations(find_expectations(path))  # type: ignore[arg-type]
     config = load_daemon_config(expectations.config_path)
     streams = []
-    for run in ("a", "b"):
+    for run, separate in (("a", True), ("b", False)):
         out = tmp_path / f"{run}.mcap"
-        asyncio.run(replay(path, config, out))
-        streams.append([(m.log_time_ns, m.message)
-                        for m in read_messages(out, "/tdmon/estimate")])
-    assert len(streams[0]) > 50
+        asyncio.run(replay(path, config, out, separate_writer=separate))
+        streams.append([(m.topic, m.log_time_ns, m.message) for m in read_messages(out)
+                        if m.topic != "/tdmon/status"])
+    estimates = [item for item in streams[0] if item[0] == "/tdmon/estimate"]
+    assert len(estimates) > 50
+    assert estimates == [item for item in streams[1] if item[0] == "/tdmon/estimate"]
     assert streams[0] == streams[1]
 
 

@@ -1,0 +1,469 @@
+"""The flight recorder on a second core: :class:`McapRecorder` in a child process.
+
+At full replay speed the pipeline is CPU-bound, and the recorder (JSON encoding and mcap's
+pure-Python record framing of ~2.25 records per input message) took about 40 % of it on one
+core. :class:`RecorderProcess` is a :class:`~tdmon.record.sink.Sink` with the recorder's
+interface whose ``write`` only appends the message to a batch; batches are pickled (about
+0.75 us per message, a quarter of a JSON encoding) and sent over a pipe to a child process,
+which runs an ordinary :class:`McapRecorder`. Encoding, framing, compression and disk I/O then
+happen on the other core, and a slow disk never stalls the event loop.
+
+Behaviour kept from :class:`McapRecorder`:
+
+* A message is in the file at most ``flush_interval_s`` after ``write``: a batch is sent when
+  it is full or half a flush interval old (a background thread sends it when the pipeline is
+  quiet), and the child flushes as the in-process recorder does.
+* Nothing raises into the pipeline: a failure in the child is reported through ``on_alarm``
+  (``recorder_failed`` / ``recorder_resumed``, on the caller's thread) and counted; if the
+  child process itself dies, every message from then on is counted as lost and one
+  ``recorder_failed`` alarm says so.
+* Start-up problems (output folder missing, unwritable, full) raise
+  :class:`~tdmon.errors.RecordError` from the constructor, with the child's message.
+* The child ignores SIGINT (Ctrl-C in a terminal reaches the whole process group): it keeps
+  writing until the parent closes it. If the parent dies, the child sees the pipe close and
+  finishes the file (summary and footer) with everything it received.
+
+Messages must not be changed after ``write``: they are pickled when the batch is sent.
+The pipe is bounded, so a child that falls behind slows ``write`` down rather than letting
+memory grow.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import logging
+import multiprocessing
+import multiprocessing.connection
+import multiprocessing.util  # its exit handler must be registered before ours
+import os
+import pickle
+import signal
+import threading
+import time
+import weakref
+from collections.abc import Mapping
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from tdmon.errors import RecordError
+from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
+from tdmon.record.sink import AlarmHook, Message
+
+__all__ = ["RecorderProcess"]
+
+log = logging.getLogger(__name__)
+
+#: Messages per batch: large enough that pickling and the pipe cost little per message, small
+#: enough (~100-250 kB) that the pipe applies back-pressure early.
+BATCH_SIZE = 512
+
+_PICKLE = pickle.HIGHEST_PROTOCOL
+
+
+class RecorderProcess:
+    """A :class:`McapRecorder` running in a child process (same parameters and interface).
+
+    Parameters
+    ----------
+    folder, **options
+        Passed to :class:`McapRecorder` in the child (``path``, ``overwrite``, ``prefix``,
+        ``rotate_s``, ``flush_interval_s``, ``extra_topics``, ...).
+    on_alarm
+        As for :class:`McapRecorder`; called on the caller's thread from ``write``, ``flush``,
+        ``retry`` and ``close``.
+    batch_size
+        Messages sent to the child at once.
+    start_timeout_s, close_timeout_s
+        How long to wait for the child to start (and open its first file) and to finish.
+    """
+
+    def __init__(
+        self,
+        folder: str | os.PathLike[str] | None = None,
+        *,
+        on_alarm: AlarmHook | None = None,
+        batch_size: int = BATCH_SIZE,
+        start_timeout_s: float = 60.0,
+        close_timeout_s: float = 300.0,
+        **options: Any,
+    ) -> None:
+        self.on_alarm = on_alarm
+        self.flush_interval_s = float(options.get("flush_interval_s", 1.0))
+        if not self.flush_interval_s > 0:
+            raise RecordError(f"flush interval must be positive, got {self.flush_interval_s}")
+        self.batch_size = max(1, int(batch_size))
+        self.close_timeout_s = close_timeout_s
+        self._send_every = self.flush_interval_s / 2
+        self._lock = threading.RLock()
+        self._batch: list[tuple[str, int, Message]] = []
+        self._send_at = time.monotonic() + self._send_every
+        self._pending_alarms: list[dict[str, Any]] = []
+        self._error: RecordError | None = None
+        self._path: Path | None = None
+        self._dead = False
+        self._closed = False
+        # counted here: what never reached the child (unpicklable, or the child was gone)
+        self._lost_here = 0
+        self._unencodable_here = 0
+        self._last_stats = RecorderStats()
+        self._final_stats: RecorderStats | None = None
+        self.recovered: list[Any] = []
+
+        context = multiprocessing.get_context("spawn")
+        self._conn, child_end = context.Pipe(duplex=True)
+        self._process = context.Process(
+            target=_serve, args=(child_end, folder, options, logging.getLogger().level),
+            name="tdmon-recorder", daemon=True,
+        )
+        self._process.start()
+        child_end.close()
+        try:
+            ready = self._wait_for("ready", start_timeout_s)
+        except RecordError:
+            self._stop_child()
+            raise
+        self._path = None if ready[0] is None else Path(ready[0])
+        self.recovered = list(ready[1])
+        _OPEN.add(self)
+
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, name="tdmon-recorder-send",
+                                         daemon=True)
+        self._flusher.start()
+
+    # -- the recorder's interface -----------------------------------------------------------
+
+    @property
+    def error(self) -> RecordError | None:
+        """The failure the recorder is in (as last reported by the child)."""
+        with self._lock:
+            self._drain()
+        return self._error
+
+    @property
+    def path(self) -> Path | None:
+        """The file being written (as last reported by the child)."""
+        return self._path
+
+    @property
+    def stats(self) -> RecorderStats:
+        """Counters of the child's recorder plus what was lost on the way to it."""
+        with self._lock:
+            if self._final_stats is None and not self._dead:
+                self._send_batch()
+                reply = self._request("stats")
+                if reply is not None:
+                    self._last_stats = reply
+            base = self._final_stats or self._last_stats
+            snapshot = RecorderStats(**vars(base))
+            snapshot.files = list(base.files)
+            snapshot.per_topic = dict(base.per_topic)
+            snapshot.lost += self._lost_here
+            snapshot.unencodable += self._unencodable_here
+            return snapshot
+
+    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+        """Queue one message for the child; never raises for recording problems."""
+        with self._lock:
+            if self._closed or self._dead:
+                self._lost_here += 1
+                return
+            batch = self._batch
+            batch.append((topic, log_time_ns, message))
+            if len(batch) >= self.batch_size or time.monotonic() >= self._send_at:
+                self._send_batch()
+        if self._pending_alarms:
+            self._fire_alarms()
+
+    def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
+        """Add a topic with its JSON Schema (see :meth:`McapRecorder.register_topic`)."""
+        with self._lock:
+            self._send_batch()
+            problem = self._request("register_topic", topic, dict(schema))
+        self._fire_alarms()
+        if problem:
+            raise RecordError(problem)
+
+    def flush(self) -> None:
+        """Send what is queued and have the child flush its file."""
+        with self._lock:
+            self._send_batch()
+            self._request("flush")
+        self._fire_alarms()
+
+    def retry(self) -> bool:
+        """In the failure state, have the child try a new file now; whether it records."""
+        with self._lock:
+            self._send_batch()
+            recording = bool(self._request("retry"))
+        self._fire_alarms()
+        return recording
+
+    def close(self) -> None:
+        """Send what is queued, let the child finish its file, wait for it; idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._stop.set()
+        if threading.current_thread() is not self._flusher:
+            self._flusher.join()
+        with self._lock:
+            self._send_batch(closing=True)
+            if not self._dead:
+                try:
+                    self._conn.send(("close",))
+                    final = self._wait_for("closed", self.close_timeout_s)
+                    self._final_stats = final[0]
+                except RecordError as exc:
+                    self._child_gone(str(exc))
+                except (OSError, ValueError) as exc:
+                    self._child_gone(f"the recorder process could not be reached: {exc}")
+            self._stop_child()
+            self._path = None
+        _OPEN.discard(self)
+        self._fire_alarms()
+
+    def __enter__(self) -> RecorderProcess:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # -- internals (call with the lock held) ----------------------------------------------
+
+    def _send_batch(self, closing: bool = False) -> None:
+        batch = self._batch
+        self._send_at = time.monotonic() + self._send_every
+        if not batch:
+            if not closing:
+                self._drain()
+            return
+        self._batch = []
+        if self._dead:
+            self._lost_here += len(batch)
+            return
+        try:
+            payload = pickle.dumps(batch, protocol=_PICKLE)
+        except Exception:
+            payload = self._picklable(batch)
+        try:
+            self._conn.send_bytes(payload)
+        except (OSError, ValueError) as exc:
+            self._lost_here += len(batch)
+            self._child_gone(f"the recorder process stopped taking messages ({exc})")
+            return
+        self._drain()
+
+    def _picklable(self, batch: list[tuple[str, int, Message]]) -> bytes:
+        # one message in the batch is not data at all: keep the others, count that one
+        kept = []
+        for item in batch:
+            try:
+                pickle.dumps(item, protocol=_PICKLE)
+            except Exception as exc:
+                self._unencodable_here += 1
+                self._lost_here += 1
+                log.error("message on %s cannot be recorded: %s", item[0], exc)
+            else:
+                kept.append(item)
+        return pickle.dumps(kept, protocol=_PICKLE)
+
+    def _drain(self) -> None:
+        """Take in the events the child sent (alarms, file and error changes)."""
+        if self._dead or self._conn.closed:
+            return
+        try:
+            while self._conn.poll():
+                self._handle(self._conn.recv())
+        except (EOFError, OSError) as exc:
+            self._child_gone(f"the recorder process stopped ({exc or 'pipe closed'})")
+
+    def _handle(self, event: tuple[Any, ...]) -> tuple[Any, ...] | None:
+        kind = event[0]
+        if kind == "alarm":
+            self._pending_alarms.append(event[1])
+        elif kind == "state":
+            error, path = event[1], event[2]
+            self._error = None if error is None else RecordError(error)
+            self._path = None if path is None else Path(path)
+        else:
+            return event
+        return None
+
+    def _wait_for(self, kind: str, timeout: float) -> tuple[Any, ...]:
+        """Handle events until the child's ``kind`` reply arrives; its fields."""
+        deadline = time.monotonic() + timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            try:
+                if remaining <= 0 or not self._conn.poll(remaining):
+                    raise RecordError(f"the recorder process did not answer within {timeout:g} s")
+                event = self._conn.recv()
+            except (EOFError, OSError) as exc:
+                self._process.join(timeout=1.0)
+                code = self._process.exitcode
+                raise RecordError(
+                    f"the recorder process exited (code {code}) before answering: "
+                    f"{exc or 'pipe closed'}"
+                ) from None
+            other = self._handle(event)
+            if other is None:
+                continue
+            if other[0] == "error":
+                raise RecordError(other[1])
+            if other[0] == kind:
+                return other[1:]
+            log.debug("unexpected message from the recorder process: %r", other[0])
+
+    def _request(self, command: str, *args: Any) -> Any:
+        """Ask the child something and wait for the answer (None when it is gone)."""
+        if self._dead:
+            return None
+        try:
+            self._conn.send((command, *args))
+            return self._wait_for(command, self.close_timeout_s)[0]
+        except RecordError as exc:
+            self._child_gone(str(exc))
+        except (OSError, ValueError) as exc:
+            self._child_gone(f"the recorder process could not be reached: {exc}")
+        return None
+
+    def _child_gone(self, why: str) -> None:
+        if self._dead:
+            return
+        self._dead = True
+        self._lost_here += len(self._batch)
+        self._batch = []
+        error = RecordError(f"{why}; messages are counted as lost from now on")
+        first = self._error is None
+        self._error = error
+        log.error("%s", error)
+        if first:
+            self._pending_alarms.append({
+                "t": time.time(), "kind": "recorder_failed", "severity": "critical",
+                "message": str(error), "value": float(self._lost_here),
+            })
+
+    def _stop_child(self) -> None:
+        with contextlib.suppress(OSError):
+            self._conn.close()
+        self._process.join(timeout=self.close_timeout_s)
+        if self._process.is_alive():
+            log.error("the recorder process did not stop; terminating it")
+            self._process.terminate()
+            self._process.join(timeout=5.0)
+
+    def _fire_alarms(self) -> None:
+        with self._lock:
+            alarms, self._pending_alarms = self._pending_alarms, []
+        if self.on_alarm is None:
+            return
+        for alarm in alarms:
+            try:
+                self.on_alarm(alarm)
+            except Exception:
+                log.exception("recorder alarm hook failed")
+
+    def _flush_loop(self) -> None:
+        # a quiet pipeline: what waits in the batch still reaches the file in time
+        tick = min(self._send_every / 2, 0.25)
+        while not self._stop.wait(tick):
+            with self._lock:
+                if self._closed:
+                    return
+                if self._batch and time.monotonic() >= self._send_at:
+                    self._send_batch()
+
+
+#: recorders not closed yet: closed at interpreter exit before multiprocessing's own exit
+#: handler (registered earlier, so run later) terminates daemonic children
+_OPEN: weakref.WeakSet[RecorderProcess] = weakref.WeakSet()
+
+
+@atexit.register
+def _close_open_recorders() -> None:
+    for recorder in list(_OPEN):
+        with contextlib.suppress(Exception):
+            recorder.close()
+
+
+# -- the child --------------------------------------------------------------------------------
+
+def _serve(conn: multiprocessing.connection.Connection, folder: Any, options: dict[str, Any],
+           log_level: int) -> None:
+    """The child's main loop: a McapRecorder fed from the pipe until ``close`` or EOF."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.basicConfig(level=log_level or logging.WARNING,
+                        format="%(levelname)s tdmon-recorder: %(message)s")
+    alarms: list[dict[str, Any]] = []
+    try:
+        recorder = McapRecorder(folder, on_alarm=alarms.append, **options)
+    except Exception as exc:  # RecordError, or options the recorder refuses
+        with contextlib.suppress(OSError):
+            conn.send(("error", str(exc) if isinstance(exc, RecordError)
+                       else f"cannot start the recorder: {exc}"))
+        conn.close()
+        return
+    path = recorder.path
+    conn.send(("ready", None if path is None else str(path), recorder.recovered))
+    state: tuple[str | None, str | None] = (None, None if path is None else str(path))
+    try:
+        while True:
+            try:
+                data = conn.recv_bytes()
+            except (EOFError, OSError):
+                break  # the parent is gone: finish the file with what arrived
+            item = pickle.loads(data)
+            if type(item) is list:
+                write = recorder.write
+                for topic, log_time_ns, message in item:
+                    write(topic, log_time_ns, message)
+            elif item[0] == "close":
+                break
+            else:
+                reply = _command(recorder, item)
+                for alarm in alarms:
+                    conn.send(("alarm", alarm))
+                alarms.clear()
+                conn.send((item[0], reply))
+            for alarm in alarms:
+                conn.send(("alarm", alarm))
+            alarms.clear()
+            error, path = recorder.error, recorder.path
+            now = (None if error is None else str(error), None if path is None else str(path))
+            if now != state:
+                state = now
+                conn.send(("state", *now))
+    finally:
+        recorder.close()
+        with contextlib.suppress(OSError, ValueError):
+            for alarm in alarms:
+                conn.send(("alarm", alarm))
+            conn.send(("closed", recorder.stats))
+        conn.close()
+
+
+def _command(recorder: McapRecorder, item: tuple[Any, ...]) -> Any:
+    command = item[0]
+    if command == "stats":
+        return recorder.stats
+    if command == "flush":
+        recorder.flush()
+        return True
+    if command == "retry":
+        return recorder.retry()
+    if command == "register_topic":
+        try:
+            recorder.register_topic(item[1], item[2])
+        except RecordError as exc:
+            return str(exc)
+        return None
+    return None
