@@ -33,20 +33,22 @@ from __future__ import annotations
 import atexit
 import contextlib
 import logging
-import multiprocessing
-import multiprocessing.connection
-import multiprocessing.util  # its exit handler must be registered before ours
 import os
 import pickle
 import signal
+import socket
+import subprocess
+import sys
 import threading
 import time
 import weakref
 from collections.abc import Mapping
+from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import tdmon
 from tdmon.errors import RecordError
 from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
 from tdmon.record.sink import AlarmHook, Message
@@ -111,15 +113,9 @@ class RecorderProcess:
         self._final_stats: RecorderStats | None = None
         self.recovered: list[Any] = []
 
-        context = multiprocessing.get_context("spawn")
-        self._conn, child_end = context.Pipe(duplex=True)
-        self._process = context.Process(
-            target=_serve, args=(child_end, folder, options, logging.getLogger().level),
-            name="tdmon-recorder", daemon=True,
-        )
-        self._process.start()
-        child_end.close()
+        self._conn, self._process = _start_child()
         try:
+            self._conn.send((folder, options, logging.getLogger().level))
             ready = self._wait_for("ready", start_timeout_s)
         except RecordError:
             self._stop_child()
@@ -308,8 +304,9 @@ class RecorderProcess:
                     raise RecordError(f"the recorder process did not answer within {timeout:g} s")
                 event = self._conn.recv()
             except (EOFError, OSError) as exc:
-                self._process.join(timeout=1.0)
-                code = self._process.exitcode
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    self._process.wait(timeout=1.0)
+                code = self._process.returncode
                 raise RecordError(
                     f"the recorder process exited (code {code}) before answering: "
                     f"{exc or 'pipe closed'}"
@@ -355,11 +352,13 @@ class RecorderProcess:
     def _stop_child(self) -> None:
         with contextlib.suppress(OSError):
             self._conn.close()
-        self._process.join(timeout=self.close_timeout_s)
-        if self._process.is_alive():
+        try:
+            self._process.wait(timeout=self.close_timeout_s)
+        except subprocess.TimeoutExpired:
             log.error("the recorder process did not stop; terminating it")
             self._process.terminate()
-            self._process.join(timeout=5.0)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self._process.wait(timeout=5.0)
 
     def _fire_alarms(self) -> None:
         with self._lock:
@@ -383,8 +382,7 @@ class RecorderProcess:
                     self._send_batch()
 
 
-#: recorders not closed yet: closed at interpreter exit before multiprocessing's own exit
-#: handler (registered earlier, so run later) terminates daemonic children
+#: recorders not closed yet: closed at interpreter exit (the child then finishes its file)
 _OPEN: weakref.WeakSet[RecorderProcess] = weakref.WeakSet()
 
 
@@ -397,10 +395,43 @@ def _close_open_recorders() -> None:
 
 # -- the child --------------------------------------------------------------------------------
 
-def _serve(conn: multiprocessing.connection.Connection, folder: Any, options: dict[str, Any],
-           log_level: int) -> None:
-    """The child's main loop: a McapRecorder fed from the pipe until ``close`` or EOF."""
+def _start_child() -> tuple[Connection, subprocess.Popen[bytes]]:
+    """A fresh interpreter running :func:`child_main` on one end of a socket pair.
+
+    Not multiprocessing's "spawn": that re-imports the parent's ``__main__`` script in the
+    child, which fails (or runs the script again) for any script without an
+    ``if __name__ == "__main__"`` guard. Its own session: Ctrl-C in the terminal does not
+    reach it.
+    """
+    ours, theirs = socket.socketpair()
+    with ours, theirs:
+        env = dict(os.environ)
+        # the same tdmon as this process, whatever the child's working directory
+        package_root = str(Path(tdmon.__file__).resolve().parents[1])
+        env["PYTHONPATH"] = os.pathsep.join(
+            [package_root, *filter(None, [env.get("PYTHONPATH")])])
+        fd = theirs.fileno()
+        process = subprocess.Popen(
+            [sys.executable, "-c",
+             f"from tdmon.record.writer_process import child_main; child_main({fd})"],
+            pass_fds=[fd], stdin=subprocess.DEVNULL, env=env, start_new_session=True,
+        )
+        return Connection(ours.detach()), process
+
+
+def child_main(fd: int) -> None:
+    """Entry point of the recorder's process: ``fd`` is its end of the socket pair."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    conn = Connection(fd)
+    try:
+        folder, options, log_level = conn.recv()
+    except (EOFError, OSError):
+        return
+    _serve(conn, folder, options, log_level)
+
+
+def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: int) -> None:
+    """The child's main loop: a McapRecorder fed from the pipe until ``close`` or EOF."""
     logging.basicConfig(level=log_level or logging.WARNING,
                         format="%(levelname)s tdmon-recorder: %(message)s")
     alarms: list[dict[str, Any]] = []

@@ -82,7 +82,7 @@ def test_killed_child_alarms_once_and_counts_the_rest_as_lost(tmp_path: Path) ->
     recorder.flush()
     assert recorder.stats.written == 50
     os.kill(recorder._process.pid, signal.SIGKILL)
-    recorder._process.join(10)
+    recorder._process.wait(10)
     for i in range(50, 250):
         recorder.write("/tdmon/raw", i, _raw(i))  # must not raise
     assert recorder.error is not None and "lost" in str(recorder.error)
