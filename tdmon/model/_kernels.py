@@ -8,7 +8,9 @@ element and a run-break flag per node) and the string as cumulative component to
 the bit, with a buoyed weight and a friction radius per component. The march goes from the bit up
 to the top of the hole in *pieces*: a piece is the part of a grid element between the bit, the
 element's nodes and the string's component boundaries, so each piece has one weight, one radius,
-one friction factor and lies on one circular arc.
+one friction factor and lies on one circular arc. `march_gradient` is the same march for one
+operation followed by its adjoint: the value and its gradient with respect to every element's
+friction factor.
 """
 
 from __future__ import annotations
@@ -359,3 +361,232 @@ def sweep(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
             forces[c, d, :] = f
             torques[c, d, :] = t
     return forces, torques
+
+
+# --- adjoint: the march's value and its gradient with respect to every element's friction ---
+#
+# One operation, one output ``q = force_seed * F_top + torque_seed * T_top``. The forward pass
+# is the march above (same operations in the same order, so the value is the march's to the
+# bit); it keeps what the backward pass needs, the state at the bottom of each piece (soft
+# string) or run (Aadnoy). The backward pass carries the adjoints ``lam_F = dq/dF`` and
+# ``lam_T = dq/dT`` from the top down to the bit and adds each piece's or run's ``dq/dmu`` to its
+# element. Where the march has a kink (the contact force at N = 0, |F| in Aadnoy's torque) the
+# derivative is that of the branch the forward pass took.
+
+
+@njit(cache=True)
+def _normal_force_slope(force, weight, kk, ke, ee):
+    """dN/dF of `_normal_force` (0 where the forward pass clips N to 0)."""
+    squared = force * force * kk + 2.0 * force * weight * ke + weight * weight * ee
+    if squared > 0.0:
+        return (force * kk + weight * ke) / math.sqrt(squared)
+    return 0.0
+
+
+@njit(cache=True)
+def _soft_string_piece_adjoint(force, kk, ke, ee, dtvd, weight, radius, mu, axial_factor,
+                               torque_factor, lam_force, lam_torque):
+    """Backward step over one `_soft_string_piece`: from the adjoints at the piece's top and the
+    force at its bottom, returns (adjoint of the bottom force, dq/dmu of the piece)."""
+    axial_mu = axial_factor * mu
+    n_bottom = _normal_force(force, weight, kk, ke, ee)
+    predicted = force + weight * dtvd + axial_mu * n_bottom
+    n_top = _normal_force(predicted, weight, kk, ke, ee)
+    normal = 0.5 * (n_bottom + n_top)
+    lam_normal = lam_force * axial_mu + lam_torque * torque_factor * mu * radius
+    lam_predicted = 0.5 * lam_normal * _normal_force_slope(predicted, weight, kk, ke, ee)
+    lam_n_bottom = 0.5 * lam_normal + lam_predicted * axial_mu
+    d_mu = ((lam_force * axial_factor + lam_torque * torque_factor * radius) * normal
+            + lam_predicted * axial_factor * n_bottom)
+    lam_bottom = (lam_force + lam_predicted
+                  + lam_n_bottom * _normal_force_slope(force, weight, kk, ke, ee))
+    return lam_bottom, d_mu
+
+
+@njit(cache=True)
+def _slack_off_k(a, weight_radius, m):
+    """``K(a) = w R ((1 - m^2) sin a - 2 m cos a) / (1 + m^2)`` of the slack-off build formula
+    and its derivative in m."""
+    q = 1.0 + m * m
+    g = (1.0 - m * m) * math.sin(a) - 2.0 * m * math.cos(a)
+    dg = -2.0 * m * math.sin(a) - 2.0 * math.cos(a)
+    return weight_radius * g / q, weight_radius * (dg * q - 2.0 * m * g) / (q * q)
+
+
+@njit(cache=True)
+def _build_slack_off_term(sweep_angle, weight_radius, m, top_inc, bottom_inc):
+    """d/dm of ``K(a2) e^(-m s) - K(a1)`` in the slack-off build formula (the part of dF2/dm
+    without F1); returns (that, e^(-m s))."""
+    decay = math.exp(-m * sweep_angle)
+    k_bottom, dk_bottom = _slack_off_k(bottom_inc, weight_radius, m)
+    _, dk_top = _slack_off_k(top_inc, weight_radius, m)
+    return dk_bottom * decay - sweep_angle * k_bottom * decay - dk_top, decay
+
+
+@njit(cache=True)
+def _aadnoy_run_adjoint(force, top_inc, bottom_inc, length, theta, kind, mu, axial_factor,
+                        torque_factor, weight, radius, lam_force, lam_torque):
+    """Backward step over one `_aadnoy_run` (same branches): from the adjoints at the run's
+    top and the force at its bottom, returns (adjoint of the bottom force, dq/d(run friction)).
+    The bottom torque's adjoint is the top's (torque adds)."""
+    mu_axial = axial_factor * mu
+    mu_torque = torque_factor * mu
+    if theta < _STRAIGHT_DOGLEG:
+        a = 0.5 * (top_inc + bottom_inc)
+        d_mu = (lam_force * axial_factor * weight * length * math.sin(a)
+                + lam_torque * torque_factor * weight * length * radius * math.sin(a))
+        return lam_force, d_mu
+    if kind == PLANAR_BUILD and bottom_inc > top_inc:
+        sweep_angle = bottom_inc - top_inc
+        wr = weight * length / sweep_angle
+        lift = wr * (math.sin(bottom_inc) - math.sin(top_inc))
+        # at mu = 0 the branch friction moves into: the formulas meet there
+        if mu_axial > 0.0 or (mu_axial == 0.0 and axial_factor > 0.0):
+            growth = math.exp(mu_axial * sweep_angle)
+            d_force = (force + lift) * growth * sweep_angle * axial_factor
+        elif mu_axial < 0.0 or (mu_axial == 0.0 and axial_factor < 0.0):
+            d_force_dm, growth = _build_slack_off_term(sweep_angle, wr, -mu_axial, top_inc,
+                                                       bottom_inc)
+            d_force = -axial_factor * (d_force_dm - sweep_angle * force * growth)
+        else:
+            growth = 1.0
+            d_force = 0.0
+        torque_arm = (force + lift) * sweep_angle + 2.0 * wr * (
+            math.cos(top_inc) - math.cos(bottom_inc))
+        d_mu = lam_force * d_force + lam_torque * torque_factor * radius * torque_arm
+        return lam_force * growth + lam_torque * mu_torque * radius * sweep_angle, d_mu
+    growth = math.exp(mu_axial * theta)
+    sign = 1.0 if force >= 0.0 else -1.0
+    d_mu = (lam_force * axial_factor * theta * force * growth
+            + lam_torque * torque_factor * radius * abs(force) * theta)
+    return lam_force * growth + lam_torque * mu_torque * radius * sign * theta, d_mu
+
+
+@njit(cache=True)
+def march_gradient(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind,
+                   run_break, mu, comp_top, comp_weight, comp_radius, bit_depth, bit_force,
+                   bit_torque, axial_factor, torque_factor, force_seed, torque_seed):
+    """`march` of one operation with the gradient of ``force_seed F_top + torque_seed T_top``.
+
+    Returns (top force, top torque, gradient per element of ``mu``); elements the string does
+    not reach get 0. One forward march and one backward sweep over its pieces (soft string) or
+    runs (Aadnoy). The forward loop is `march`'s, written out again because a helper taking the
+    geometry arrays costs more per piece than the piece's physics; tests compare the values
+    with `march`'s bit for bit.
+    """
+    n_comp = comp_top.size
+    size = node_md.size + n_comp
+    # per piece: element, component, force at its bottom; soft string: (kk, ke, ee, dtvd),
+    # Aadnoy: its length in column 0
+    piece_element = np.empty(size, dtype=np.int64)
+    piece_comp = np.empty(size, dtype=np.int64)
+    piece_force = np.empty(size)
+    piece_values = np.empty((size, 4))
+    # per Aadnoy run: first piece, curve kind, component, force at its bottom, and
+    # (top inclination, bottom inclination, length, dogleg, friction)
+    run_first = np.empty(size + 1, dtype=np.int64)
+    run_kind = np.empty(size, dtype=np.int64)
+    run_comp = np.empty(size, dtype=np.int64)
+    run_force = np.empty(size)
+    run_values = np.empty((size, 5))
+    j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
+    comp = 0
+    lower = bit_depth
+    tb = _tangent_at(node_md, tangents, dogleg, j, lower)
+    force = bit_force
+    torque = bit_torque
+    run_md = lower
+    run_tan = tb
+    run_mu_length = 0.0
+    n = 0
+    n_runs = 0
+    run_first[0] = 0
+    while True:
+        element_top = node_md[j]
+        component_top = bit_depth - comp_top[comp]
+        while comp < n_comp - 1 and component_top >= lower - _MD_TOLERANCE:
+            comp += 1
+            component_top = bit_depth - comp_top[comp]
+        at_component_top = comp < n_comp - 1 and component_top > element_top + _MD_TOLERANCE
+        if at_component_top:
+            upper = component_top
+            tt = _tangent_at(node_md, tangents, dogleg, j, upper)
+        else:
+            upper = element_top
+            tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
+        length = lower - upper
+        piece_element[n] = j
+        piece_comp[n] = comp
+        piece_force[n] = force
+        if method == SOFT_STRING:
+            if at_component_top or lower < node_md[j + 1]:
+                kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
+            else:
+                kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
+            piece_values[n, 0] = kk
+            piece_values[n, 1] = ke
+            piece_values[n, 2] = ee
+            piece_values[n, 3] = dtvd
+            force, normal = _soft_string_piece(force, kk, ke, ee, dtvd, comp_weight[comp],
+                                               axial_factor * mu[j])
+            torque += torque_factor * mu[j] * normal * comp_radius[comp]
+        else:
+            run_mu_length += mu[j] * length
+            piece_values[n, 0] = length
+            component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
+            at_node = not at_component_top
+            if component_ends or (at_node and (run_break[j] or j == 0)):
+                run_length = run_md - upper
+                run_mu = run_mu_length / run_length
+                bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
+                top_inc = _inclination(tt[0], tt[1], tt[2])
+                theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1],
+                                       run_tan[2])
+                run_kind[n_runs] = curve_kind[j]
+                run_comp[n_runs] = comp
+                run_force[n_runs] = force
+                run_values[n_runs, 0] = top_inc
+                run_values[n_runs, 1] = bottom_inc
+                run_values[n_runs, 2] = run_length
+                run_values[n_runs, 3] = theta
+                run_values[n_runs, 4] = run_mu
+                force, torque = _aadnoy_run(force, torque, top_inc, bottom_inc, run_length,
+                                            theta, curve_kind[j], run_mu, axial_factor,
+                                            torque_factor, comp_weight[comp], comp_radius[comp])
+                n_runs += 1
+                run_first[n_runs] = n + 1
+                run_md = upper
+                run_tan = tt
+                run_mu_length = 0.0
+        n += 1
+        lower = upper
+        tb = tt
+        if at_component_top:
+            comp += 1
+        elif j == 0:
+            break
+        else:
+            j -= 1
+    gradient = np.zeros(mu.size)
+    lam_force = force_seed
+    if method == SOFT_STRING:
+        for p in range(n - 1, -1, -1):
+            c = piece_comp[p]
+            e = piece_element[p]
+            lam_force, d_mu = _soft_string_piece_adjoint(
+                piece_force[p], piece_values[p, 0], piece_values[p, 1], piece_values[p, 2],
+                piece_values[p, 3], comp_weight[c], comp_radius[c], mu[e], axial_factor,
+                torque_factor, lam_force, torque_seed)
+            gradient[e] += d_mu
+    else:
+        for r in range(n_runs - 1, -1, -1):
+            c = run_comp[r]
+            lam_force, d_run_mu = _aadnoy_run_adjoint(
+                run_force[r], run_values[r, 0], run_values[r, 1], run_values[r, 2],
+                run_values[r, 3], run_kind[r], run_values[r, 4], axial_factor, torque_factor,
+                comp_weight[c], comp_radius[c], lam_force, torque_seed)
+            # the run's friction is the length-weighted mean of its pieces' elements'
+            scale = d_run_mu / run_values[r, 2]
+            for p in range(run_first[r], run_first[r + 1]):
+                gradient[piece_element[p]] += scale * piece_values[p, 0]
+    return force, torque, gradient

@@ -44,6 +44,7 @@ METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
 
 # numba dispatchers, typed loosely: mypy cannot see through their signatures
 _march: Any = _kernels.march
+_march_gradient: Any = _kernels.march_gradient
 
 # Bit depths this close [m] outside the string or the hole are taken as on the limit.
 _DEPTH_TOLERANCE = 1e-6
@@ -279,6 +280,71 @@ class WellModel:
             _EMPTY, _EMPTY_2D, _EMPTY_2D, _EMPTY_INT, _EMPTY_TANGENT,
         )
         return float(force[0]) + self.well.block_weight, float(torque[0])
+
+    def evaluate_gradient(
+        self,
+        operation: Operation | str,
+        bit_depth: float,
+        mu: float | ArrayLike | None = None,
+        *,
+        quantity_index: int = 0,
+        method: Method | str = "soft-string",
+        wob: float = 0.0,
+        bit_torque: float = 0.0,
+        psi: float | None = None,
+    ) -> tuple[float, NDArray[np.float64]]:
+        """Hook load [N] or surface torque [N m] and its gradient with respect to the friction
+        factor of every hole-grid element, from one march up and one sweep back down.
+
+        Parameters
+        ----------
+        operation, bit_depth, mu, method, wob, bit_torque, psi : as in `evaluate`
+        quantity_index : 0 for the hook load, 1 for the surface torque (`evaluate`'s order)
+
+        Returns
+        -------
+        value : as `evaluate` returns it [N or N m]
+        gradient : d value / d mu per element, shape (n_elements,) [N or N m]; 0 for elements
+            the string does not reach
+
+        Notes
+        -----
+        Reverse-mode (adjoint) differentiation of the march. With ``lam_F = dq/dF`` and
+        ``lam_T = dq/dT`` (q the chosen quantity; ``lam_T`` is constant since torque only adds),
+        seeded at the top with (1, 0) for the hook load or (0, 1) for the torque, each soft-string
+        piece of `torque_drag` (Notes) is stepped back from the top to the bit::
+
+            N_b = N(F),  F_p = F + w dTVD + mu_a N_b,  N_t = N(F_p),  N = (N_b + N_t) / 2
+            lam_N   = lam_F mu_a + lam_T mu_t r
+            lam_F_p = lam_N N'(F_p) / 2
+            dq/dmu += (lam_F a + lam_T t r) N + lam_F_p a N_b
+            lam_F   = lam_F + lam_F_p + (lam_N / 2 + lam_F_p mu_a) N'(F)
+
+        with ``mu_a = a mu``, ``mu_t = t mu`` (a, t the operation's axial and tangential
+        friction multipliers) and ``N'(F) = (F kk + w ke) / N``, F being the force at the
+        piece's bottom kept from the forward march. For ``"aadnoy"`` the same is done run by
+        run with the derivatives of its closed forms; a run's friction is the length-weighted
+        mean of its elements', so ``dq/dmu_element = dq/dmu_run * piece length / run length``.
+        Where the march has a kink (N clipped at 0, |F| in the 2010 torque formula, the
+        pick-up/slack-off build formulas meeting at mu = 0) the derivative is that of the
+        branch the forward march takes. The value equals `evaluate`'s.
+        """
+        if quantity_index not in (0, 1):
+            raise ModelError(f"quantity index must be 0 (hook load) or 1 (torque), "
+                             f"got {quantity_index}")
+        kernel_method = _check_method(method)
+        depth = self.check_bit_depth(bit_depth)
+        friction = self.friction(mu)
+        bit_force, bit_torque_term, axial_factor, torque_factor = operation_terms(
+            operation, wob=wob, bit_torque=bit_torque, psi=psi)
+        force, torque, gradient = _march_gradient(
+            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth,
+            bit_force, bit_torque_term, axial_factor, torque_factor,
+            1.0 - quantity_index, float(quantity_index),
+        )
+        if quantity_index == 0:
+            return float(force) + self.well.block_weight, gradient
+        return float(torque), gradient
 
     def profiles(
         self,
