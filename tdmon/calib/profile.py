@@ -2,11 +2,12 @@
 
 State: the friction factor of each depth bin, mu_k, with covariance P. Each steady window is a
 measurement of the hook load (or torque) h(mu) of its operation at its bit depth; its Jacobian
-``H_k = dh/dmu_k`` comes from finite differences on the torque-and-drag model (one evaluation
-per bin above the bit). A window sees the friction of every bin along the string at once; what
-locates friction along the hole is the sequence of bit depths: once the bit has passed above a
-stretch, later windows no longer see it, and the filter's cross-covariances move the part of
-the earlier misfit that the shallower bins cannot explain onto the bins the bit has left.
+``H_k = dh/dmu_k`` is the sum over the bin's elements of the model's adjoint gradient
+(`WellModel.evaluate_gradient`: one march up and one sweep back, whatever the number of bins).
+A window sees the friction of every bin along the string at once; what locates friction along
+the hole is the sequence of bit depths: once the bit has passed above a stretch, later windows
+no longer see it, and the filter's cross-covariances move the part of the earlier misfit that
+the shallower bins cannot explain onto the bins the bit has left.
 
 Between windows friction may drift (cuttings beds build up, mud changes): ``predict`` adds
 process noise. Pure ``predict``/``update`` on a frozen :class:`ProfileState` (STYLE.md item 6),
@@ -157,28 +158,36 @@ def update(state: ProfileState, measured: float, predicted: float, jacobian: Arr
 
 def measurement_jacobian(model: WellModel, grid: ProfileGrid, mu_bins: Array, operation: str,
                          bit_depth: float, *, quantity_index: int = 0,
-                         method: str = "soft-string", step: float = 0.01
-                         ) -> tuple[float, Array]:
+                         method: str = "soft-string") -> tuple[float, Array]:
     """Modelled value and its derivative with respect to each bin's friction.
 
-    Forward differences of ``step`` [-]; bins wholly below the bit are skipped (zero).
+    Parameters
+    ----------
+    model : prepared well
+    grid : the profile's bins
+    mu_bins : friction per bin [-] (negative values are taken as 0)
+    operation : model operation
+    bit_depth : [m]
+    quantity_index : 0 hook load, 1 surface torque
+    method : torque-and-drag method
 
     Returns
     -------
     predicted : [N or N m]
-    jacobian : shape (n_bins,)
+    jacobian : shape (n_bins,) [N or N m]; 0 for bins wholly below the bit
+
+    Notes
+    -----
+    ``H_k = sum over the elements e of bin k of dh/dmu_e``, the element gradient coming from the
+    model's adjoint (`WellModel.evaluate_gradient`), exact to rounding where the forward
+    differences used before had an error of the order of their step.
     """
     friction = np.maximum(mu_bins[grid.element_bin], 0.0)
-    predicted = model.evaluate(operation, bit_depth, friction, method=method)[quantity_index]
-    jacobian = np.zeros(grid.n_bins)
-    for k in range(grid.n_bins):
-        if grid.edges[k] >= bit_depth:
-            break
-        members = grid.element_bin == k
-        bumped = friction.copy()
-        bumped[members] += step
-        value = model.evaluate(operation, bit_depth, bumped, method=method)[quantity_index]
-        jacobian[k] = (value - predicted) / step
+    predicted, gradient = model.evaluate_gradient(operation, bit_depth, friction,
+                                                  quantity_index=quantity_index, method=method)
+    jacobian = np.asarray(np.bincount(grid.element_bin, weights=gradient,
+                                      minlength=grid.n_bins), dtype=np.float64)
+    jacobian[grid.edges[:-1] >= bit_depth] = 0.0
     return predicted, jacobian
 
 

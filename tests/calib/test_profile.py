@@ -1,5 +1,6 @@
-"""Friction profile along MD (EKF): the update by hand, a missing measurement keeps the prior,
-and a local anomaly (+0.1 over 100 m) located within +/-50 m after the bit passed it once."""
+"""Friction profile along MD (EKF): the update by hand, the adjoint bin Jacobian against central
+differences, a missing measurement keeps the prior, and a local anomaly (+0.1 over 100 m)
+located within +/-50 m after the bit passed it once."""
 
 from __future__ import annotations
 
@@ -63,6 +64,33 @@ def test_jacobian_matches_a_uniform_change(model_open: WellModel) -> None:
     # the vertical part above the kick-off point carries no friction
     assert np.all(jacobian[grid.mid_md < 1400.0] == 0.0)
     assert np.all(jacobian[grid.edges[:-1] >= 4000.0] == 0.0)
+
+
+@pytest.mark.parametrize("method", ["soft-string", "aadnoy"])
+@pytest.mark.parametrize(("operation", "quantity"),
+                         [("pick_up", 0), ("slack_off", 0), ("rotating", 1)])
+def test_adjoint_jacobian_matches_central_differences_per_bin(
+    model_open: WellModel, method: str, operation: str, quantity: int,
+) -> None:
+    # the finite differences the filter used before, made central (forward differences of
+    # 0.01 are off by O(step)): every element of a bin moved together; bit mid-bin
+    grid = profile_grid(model_open, 30.0)
+    depth = 4012.0
+    mu = np.random.default_rng(2).uniform(0.15, 0.35, grid.n_bins)
+    predicted, jacobian = measurement_jacobian(model_open, grid, mu, operation, depth,
+                                               quantity_index=quantity, method=method)
+    friction = mu[grid.element_bin]
+    assert predicted == model_open.evaluate(operation, depth, friction, method=method)[quantity]
+    step = 1e-5
+    expected = np.zeros(grid.n_bins)
+    for k in np.flatnonzero(grid.edges[:-1] < depth):
+        bump = np.where(grid.element_bin == k, step, 0.0)
+        high = model_open.evaluate(operation, depth, friction + bump, method=method)[quantity]
+        low = model_open.evaluate(operation, depth, friction - bump, method=method)[quantity]
+        expected[k] = (high - low) / (2 * step)
+    # central differences: rounding ~ 1e-5 N / 1e-5 against bin sensitivities of ~1e4 N
+    assert np.abs(jacobian - expected).max() <= 1e-6 * np.abs(expected).max()
+    assert np.all(jacobian[grid.edges[:-1] >= depth] == 0.0)
 
 
 def test_anomaly_located_within_50_m(model_open: WellModel, trip: Any, windows_of: Any) -> None:
