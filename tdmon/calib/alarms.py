@@ -23,7 +23,7 @@ Each detector is a pure function, with a small frozen state where it needs memor
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -102,7 +102,9 @@ def update_band_trend(state: BandTrendState, t: float, measured: float, low: flo
     Non-finite inputs keep the state. Returns the new state and an alarm when the trend first
     crosses the threshold (one alarm per excursion).
     """
-    if not all(math.isfinite(x) for x in (t, measured, low, high, noise_std)) or noise_std <= 0:
+    isfinite = math.isfinite
+    if not (isfinite(t) and isfinite(measured) and isfinite(low) and isfinite(high)
+            and isfinite(noise_std)) or noise_std <= 0:
         return state, None
     low, high = min(low, high), max(low, high)
     excess = ((measured - high) if measured > high else (measured - low) if measured < low
@@ -312,8 +314,10 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     """
     alarms: list[Alarm] = []
     new_stale = frozenset(stale)
-    for channel in sorted(new_stale - state.stale):
-        alarms.append(Alarm(t, "sensor_stale", "warning", f"channel {channel} is stale"))
+    started = new_stale - state.stale
+    if started:
+        for channel in sorted(started):
+            alarms.append(Alarm(t, "sensor_stale", "warning", f"channel {channel} is stale"))
     conditions: set[str] = set()
     hookload = values.get("hookload")
     if hookload is not None and (not math.isfinite(hookload) or hookload < 0.0
@@ -327,32 +331,36 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     below_since = (state.below_since if state.below_since is not None else t) if below else None
     if below_since is not None and t - below_since >= settings.persist_time:
         conditions.add("bit_below_hole")
+    # bit depth legitimately stands still; a frozen load while moving is suspicious, but
+    # surface torque rests at its zero offset whenever the string does not rotate (Volve
+    # F-4 trips: a constant 5.2 N m), so a constant torque counts only while rotating
+    rotating = values.get("rpm", 0.0) > settings.rotating_speed
     for channel in ("hookload", "torque", "bit_depth"):
         value = values.get(channel)
         if value is None:
             continue
-        runs[channel] = runs.get(channel, 0) + 1 if last.get(channel) == value else 0
+        run = runs.get(channel, 0) + 1 if last.get(channel) == value else 0
+        runs[channel] = run
         last[channel] = value
-        # bit depth legitimately stands still; a frozen load while moving is suspicious, but
-        # surface torque rests at its zero offset whenever the string does not rotate (Volve
-        # F-4 trips: a constant 5.2 N m), so a constant torque counts only while rotating
-        rotating = values.get("rpm", 0.0) > settings.rotating_speed
-        if channel != "bit_depth" and moving and runs[channel] >= settings.frozen_samples \
+        if channel != "bit_depth" and moving and run >= settings.frozen_samples \
                 and value != 0.0 and (channel != "torque" or rotating):
             conditions.add(f"{channel}_frozen")
-    texts = {
-        "hookload_implausible": ("critical", "hook load is negative or implausibly large",
-                                 hookload, settings.max_hookload),
-        "bit_below_hole": ("warning", "bit depth is below the hole depth", bit, hole),
-        "hookload_frozen": ("warning", "hook load has not changed while the string moves",
-                            hookload, None),
-        "torque_frozen": ("warning", "torque has not changed while the string rotates",
-                          values.get("torque"), None),
-    }
-    for condition in sorted(conditions - state.active):
-        severity, text, value, limit = texts[condition]
-        alarms.append(Alarm(t, f"sensor_{condition}", severity, text, value, limit))
-    new_state = replace(state, stale=new_stale, last=tuple(last.items()),
-                        runs=tuple(runs.items()), active=frozenset(conditions),
-                        below_since=below_since)
+    new_conditions = conditions - state.active
+    if new_conditions:
+        texts = {
+            "hookload_implausible": ("critical", "hook load is negative or implausibly large",
+                                     hookload, settings.max_hookload),
+            "bit_below_hole": ("warning", "bit depth is below the hole depth", bit, hole),
+            "hookload_frozen": ("warning", "hook load has not changed while the string moves",
+                                hookload, None),
+            "torque_frozen": ("warning", "torque has not changed while the string rotates",
+                              values.get("torque"), None),
+        }
+        for condition in sorted(new_conditions):
+            severity, text, value, limit = texts[condition]
+            alarms.append(Alarm(t, f"sensor_{condition}", severity, text, value, limit))
+    # built directly: dataclasses.replace on every frame cost more than the checks
+    new_state = SensorState(stale=new_stale, last=tuple(last.items()),
+                            runs=tuple(runs.items()), active=frozenset(conditions),
+                            below_since=below_since)
     return new_state, alarms

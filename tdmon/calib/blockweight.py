@@ -3,7 +3,10 @@
 In slips the hook carries only the travelling equipment (block, top drive, elevators), so the
 hook load then *is* the block weight (REFERENCE.md section 5; Volve F-4: about 655 kN). Samples
 where the empty block is hoisted or lowered carry inertia and guide friction, so only steady
-in-slips samples count, and a running median keeps the pulls of the empty block out.
+in-slips samples count, and a running median keeps the pulls of the empty block out. The daemon
+keeps that median with :class:`BlockWeightTracker` (a sorted window, updated per sample in
+O(log n) plus a memory move), which gives the numbers of :func:`update_block_weight` (the pure
+reference, which sorts the whole window again on every sample).
 
 Static and rotating-off-bottom hook loads carry no axial friction: the string's weight less the
 block weight checks the weights and the buoyancy the model uses. Static hook load is linear in
@@ -14,6 +17,8 @@ modelled weight in air gives the buoyancy factor and the fluid density the rig a
 from __future__ import annotations
 
 import math
+from bisect import bisect_left, insort
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +30,7 @@ from tdmon.model.string import STEEL_DENSITY
 __all__ = [
     "BlockWeightEstimate",
     "BlockWeightState",
+    "BlockWeightTracker",
     "BuoyancyCheck",
     "block_weight_from_samples",
     "buoyancy_check",
@@ -82,6 +88,106 @@ def update_block_weight(state: BlockWeightState, hookload: float, *, keep: int =
         return state
     recent = ((*state.recent, float(hookload)))[-keep:]
     return BlockWeightState(recent, block_weight_from_samples(recent))
+
+
+class BlockWeightTracker:
+    """Running block weight over the last ``keep`` steady in-slips hook loads.
+
+    The stateful, incremental form of :func:`update_block_weight`: the same window and the same
+    estimate (median and MAD computed from a sorted copy of the window, so equal to NumPy's to
+    the last bit), at O(log n) comparisons and one memory move per sample instead of a sort of
+    the whole window. ``estimate`` is None until a finite hook load has been added.
+
+    Parameters
+    ----------
+    keep : samples in the window [-]
+    """
+
+    def __init__(self, keep: int = 400) -> None:
+        if keep < 1:
+            raise ValueError("keep must be at least 1")
+        self.keep = keep
+        self._window: deque[float] = deque()
+        self._sorted: list[float] = []
+        self.estimate: BlockWeightEstimate | None = None
+
+    @property
+    def recent(self) -> tuple[float, ...]:
+        """The hook loads in the window, oldest first [N]."""
+        return tuple(self._window)
+
+    def add(self, hookload: float) -> BlockWeightEstimate | None:
+        """Add one steady in-slips hook load [N]; a non-finite one keeps the prior estimate."""
+        if not math.isfinite(hookload):
+            return self.estimate
+        value = float(hookload)
+        window, ordered = self._window, self._sorted
+        window.append(value)
+        insort(ordered, value)
+        if len(window) > self.keep:
+            _remove_sorted(ordered, window.popleft())
+        self.estimate = _estimate_of_sorted(ordered)
+        return self.estimate
+
+
+def _remove_sorted(ordered: list[float], value: float) -> None:
+    index = bisect_left(ordered, value)
+    if value == 0.0:
+        # 0.0 and -0.0 compare equal: take out the one that went in
+        sign = math.copysign(1.0, value)
+        while math.copysign(1.0, ordered[index]) != sign:
+            index += 1
+    del ordered[index]
+
+
+def _estimate_of_sorted(ordered: list[float]) -> BlockWeightEstimate:
+    """`block_weight_from_samples` of a sorted, finite, non-empty list, without sorting it.
+
+    The absolute deviations from the median are two sorted runs (the values below the median
+    read downwards, those above it read upwards), so their middle order statistics come from a
+    binary search over the two runs; each deviation is computed as NumPy computes it
+    (``|x - m|`` is ``m - x`` or ``x - m`` exactly), and even counts average the two middle
+    values as ``np.median`` does.
+    """
+    n = len(ordered)
+    half = n // 2
+    if n % 2:
+        median = ordered[half]
+        mad = _middle_deviations(ordered, median, half)[0]
+    else:
+        median = (ordered[half - 1] + ordered[half]) / 2
+        lower, upper = _middle_deviations(ordered, median, half - 1)
+        mad = (lower + upper) / 2
+    spread = 1.4826 * mad
+    return BlockWeightEstimate(median, 1.2533 * spread / math.sqrt(n), n)
+
+
+def _middle_deviations(ordered: list[float], median: float, k: int) -> tuple[float, float]:
+    """The k-th and (k + 1)-th smallest (from 0) of ``|x - median|`` over ``ordered`` (sorted
+    ascending, ``median`` its median); the second is inf when there are only k + 1 values.
+
+    Run ``below[i] = median - ordered[half - 1 - i]`` and run ``above[j] = ordered[half + j] -
+    median`` (``half = n // 2``) are both ascending; the k + 1 smallest deviations are the first
+    ``a`` of ``below`` and the first ``k + 1 - a`` of ``above`` for the smallest ``a`` at which
+    ``below[a]`` is not below ``above[k - a]``; the next one is the smaller of the two runs'
+    next values.
+    """
+    n = len(ordered)
+    half = n // 2
+    lo, hi = max(0, k + 1 - (n - half)), min(k + 1, half)
+    while lo < hi:
+        a = (lo + hi) // 2
+        b = k + 1 - a  # >= 1 here since a < k + 1
+        if median - ordered[half - 1 - a] < ordered[half + b - 1] - median:
+            lo = a + 1
+        else:
+            hi = a
+    a, b = lo, k + 1 - lo
+    kth = max(median - ordered[half - a] if a > 0 else -math.inf,
+              ordered[half + b - 1] - median if b > 0 else -math.inf)
+    following = min(median - ordered[half - 1 - a] if a < half else math.inf,
+                    ordered[half + b] - median if half + b < n else math.inf)
+    return kth, following
 
 
 @dataclass(frozen=True)

@@ -89,7 +89,7 @@ class RigStateThresholds:
     on_bottom_with_wob: float = 30.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RigSample:
     """One aligned sample of the rig's channels, SI; None where a channel is missing.
 
@@ -124,7 +124,7 @@ class RigSample:
     bit_time: float | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class DetectorState:
     """What the detector remembers between samples."""
 
@@ -140,7 +140,7 @@ class DetectorState:
     state_since: float = -math.inf
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Detection:
     """Result for one sample: ``state``, ``steady``, axial ``velocity`` [m/s] (> 0 deeper)."""
 
@@ -210,7 +210,10 @@ def _channel_velocity(value: float | None, time: float, prior_value: float | Non
 
 
 def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
-              thresholds: RigStateThresholds) -> tuple[float | None, DetectorState]:
+              thresholds: RigStateThresholds
+              ) -> tuple[float | None, float | None, float, float | None, float, bool]:
+    """(velocity, then the channel memory: bit depth, its time, block position, its time,
+    whether the block was loaded)."""
     # Two measures of the string's axial speed. The bit depth is what the rig reports for the
     # string, but it can jump (depth-tracking resets, Volve trip in); the block moves with the
     # string only while the hook carries it (in slips it travels empty) and its encoder can be
@@ -220,10 +223,15 @@ def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
     # repeats a channel's last sample keeps that channel's last velocity, except across the
     # slips.
     block, bit = _finite(sample.block_position), _finite(sample.bit_depth)
-    block_time = sample.t if sample.block_time is None else sample.block_time
-    bit_time = sample.t if sample.bit_time is None else sample.bit_time
+    t = sample.t
+    block_time = t if sample.block_time is None else sample.block_time
+    bit_time = t if sample.bit_time is None else sample.bit_time
     carry = prior.velocity if prior.state != "in_slips" else None
-    memory = prior
+    # the channel memory is kept in locals and the new state built once by `detect` (a
+    # dataclasses.replace per channel cost more than the rest of the detector)
+    memory_block, memory_block_time, memory_loaded = (prior.block_position, prior.block_time,
+                                                      prior.block_loaded)
+    memory_bit, memory_bit_time = prior.bit_depth, prior.bit_time
     v_block: float | None = None
     if block is not None and block_time == prior.block_time and block == prior.block_position:
         v_block = carry if prior.block_loaded else None
@@ -232,8 +240,7 @@ def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
             v_block, _ = _channel_velocity(block, block_time, prior.block_position,
                                            prior.block_time, -1.0, thresholds)
         if block_time > prior.block_time:
-            memory = replace(memory, block_position=block, block_time=block_time,
-                             block_loaded=loaded)
+            memory_block, memory_block_time, memory_loaded = block, block_time, loaded
     frozen_bit = False
     if bit is not None and bit_time == prior.bit_time and bit == prior.bit_depth:
         v_bit = carry
@@ -244,14 +251,17 @@ def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
         v_bit, fresh = _channel_velocity(bit, bit_time, prior.bit_depth, prior.bit_time, 1.0,
                                          thresholds)
         if fresh and bit is not None:
-            memory = replace(memory, bit_depth=bit, bit_time=bit_time)
+            memory_bit, memory_bit_time = bit, bit_time
     if v_block is None or v_bit is None:
-        return (v_bit if v_bit is not None else v_block), memory
-    if frozen_bit and abs(v_block) > thresholds.moving_speed:
-        return v_block, memory
-    if abs(v_block - v_bit) <= thresholds.velocity_disagreement or carry is None:
-        return v_bit, memory
-    return (v_block if abs(v_block - carry) < abs(v_bit - carry) else v_bit), memory
+        velocity = v_bit if v_bit is not None else v_block
+    elif frozen_bit and abs(v_block) > thresholds.moving_speed:
+        velocity = v_block
+    elif abs(v_block - v_bit) <= thresholds.velocity_disagreement or carry is None:
+        velocity = v_bit
+    else:
+        velocity = v_block if abs(v_block - carry) < abs(v_bit - carry) else v_bit
+    return (velocity, memory_bit, memory_bit_time, memory_block, memory_block_time,
+            memory_loaded)
 
 
 def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThresholds
@@ -269,13 +279,15 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     (DetectorState, Detection)
     """
     hookload = _finite(sample.hookload)
-    if not math.isfinite(sample.t):
+    t = sample.t
+    if not math.isfinite(t):
         return replace(prior, state="unknown"), Detection("unknown", False, None)
-    dt = sample.t - prior.t
+    dt = t - prior.t
     fresh = not (math.isfinite(dt) and 0.0 < dt <= thresholds.max_gap)
     loaded = hookload is not None and (
         hookload >= thresholds.block_weight + thresholds.in_slips_margin)
-    velocity, memory = _velocity(prior, sample, loaded, thresholds)
+    velocity, bit_depth, bit_time, block_position, block_time, block_loaded = _velocity(
+        prior, sample, loaded, thresholds)
     if fresh:
         velocity = None
     rpm = _finite(sample.rpm)
@@ -291,19 +303,22 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     else:
         on_bottom = off_bottom is not None and off_bottom <= thresholds.on_bottom
     state = classify(hookload, velocity, rpm, circulating, on_bottom, thresholds)
-    since = prior.state_since if (state == prior.state and not fresh) else sample.t
-    steady = (state != "unknown" and not fresh and sample.t - since >= thresholds.settle_time
-              and hookload is not None and prior.hookload is not None)
+    since = prior.state_since if (state == prior.state and not fresh) else t
+    prior_hookload = prior.hookload
+    steady = (state != "unknown" and not fresh and t - since >= thresholds.settle_time
+              and hookload is not None and prior_hookload is not None)
     if steady and velocity is not None and prior.velocity is not None:
         steady = abs(velocity - prior.velocity) / dt <= thresholds.max_acceleration
-    if steady and hookload is not None and prior.hookload is not None:
+    if steady and hookload is not None and prior_hookload is not None:
         step = max(thresholds.max_hookload_step,
                    thresholds.max_hookload_step_fraction * abs(hookload))
-        steady = abs(hookload - prior.hookload) <= step
+        steady = abs(hookload - prior_hookload) <= step
     if steady and state in MOVING_STATES and velocity is None:
         steady = False
-    new = replace(memory, t=sample.t, velocity=velocity, hookload=hookload, state=state,
-                  state_since=since)
+    new = DetectorState(t=t, bit_depth=bit_depth, bit_time=bit_time,
+                        block_position=block_position, block_time=block_time,
+                        block_loaded=block_loaded, velocity=velocity, hookload=hookload,
+                        state=state, state_since=since)
     return new, Detection(state, bool(steady), velocity)
 
 

@@ -46,12 +46,7 @@ from tdmon.calib.alarms import (
     update_band_trend,
 )
 from tdmon.calib.backcalc import FrictionEstimate, back_calculate_window, shoe_depth
-from tdmon.calib.blockweight import (
-    BlockWeightState,
-    BuoyancyCheck,
-    buoyancy_check,
-    update_block_weight,
-)
+from tdmon.calib.blockweight import BlockWeightTracker, BuoyancyCheck, buoyancy_check
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import (
@@ -84,16 +79,20 @@ def _sampled_at(frame: Frame, channel: str) -> float | None:
     return frame.t - age if age is not None and math.isfinite(age) else None
 
 
+#: Frame channels of a RigSample, in the order of its fields after ``t``.
+_SAMPLE_CHANNELS = ("hookload", "bit_depth", "block_position", "rpm", "flow_in", "spp",
+                    "hole_depth", "torque", "wob")
+
+
 def _sample(frame: Frame) -> RigSample:
-    v = frame.values
-    return RigSample(
-        t=frame.t, hookload=_value(v, "hookload"), bit_depth=_value(v, "bit_depth"),
-        block_position=_value(v, "block_position"), rpm=_value(v, "rpm"),
-        flow=_value(v, "flow_in"), spp=_value(v, "spp"), hole_depth=_value(v, "hole_depth"),
-        torque=_value(v, "torque"), wob=_value(v, "wob"),
-        block_time=_sampled_at(frame, "block_position"),
-        bit_time=_sampled_at(frame, "bit_depth"),
-    )
+    # once per frame: one comprehension and positional arguments rather than a helper call
+    # and a keyword per channel
+    hookload, bit_depth, block_position, rpm, flow, spp, hole_depth, torque, wob = [
+        float(x) if x is not None and math.isfinite(x) else None
+        for x in map(frame.values.get, _SAMPLE_CHANNELS)]
+    return RigSample(frame.t, hookload, bit_depth, block_position, rpm, flow, spp, hole_depth,
+                     torque, wob, _sampled_at(frame, "block_position"),
+                     _sampled_at(frame, "bit_depth"))
 
 
 class RigStateStep:
@@ -190,7 +189,7 @@ class CalibrationStep:
         self.settings = settings or CalibrationSettings()
         s = self.settings
         self.accumulator = WindowAccumulator()
-        self.block_weight = BlockWeightState()
+        self.block_weight = BlockWeightTracker()
         self.profile = FrictionProfile(model, bin_length=s.profile_bin, prior_mu=s.prior_mu,
                                        prior_std=s.prior_std, process_std=s.process_std,
                                        method=s.method)
@@ -380,13 +379,13 @@ class CalibrationStep:
         return np.full(self.model.n_elements, estimate.mu)
 
     def _learn_block_weight(self, t: float, hookload: float, emit: Emit) -> None:
-        self.block_weight = update_block_weight(self.block_weight, hookload)
-        estimate = self.block_weight.estimate
+        estimate = self.block_weight.add(hookload)
         if estimate is None or estimate.n < 20 or not self.settings.learn_block_weight:
             return
         configured = self.model.well.block_weight
-        self.rig_state.thresholds = replace(self.rig_state.thresholds,
-                                            block_weight=estimate.value)
+        thresholds = self.rig_state.thresholds
+        if thresholds.block_weight != estimate.value:  # the running median often stays put
+            self.rig_state.thresholds = replace(thresholds, block_weight=estimate.value)
         if (configured > 0 and not self._block_alarmed
                 and abs(estimate.value - configured) > self.settings.block_weight_tolerance
                 * configured):
@@ -440,26 +439,30 @@ class AlarmStep:
         self.sensor_state = SensorState()
 
     def on_frame(self, frame: Frame, emit: Emit) -> None:
+        rig_state = frame.state
         self.sensor_state, alarms = sensor_alarms(
             self.sensor_state, frame.t, frame.values, frame.stale,
-            frame.state in MOVING_STATES, self.sensors)
+            rig_state in MOVING_STATES, self.sensors)
         for sensor_alarm in alarms:
             emit("alarm", sensor_alarm.to_message())
+        if not frame.steady or rig_state not in ("pick_up", "slack_off"):
+            return
         model = frame.results.get("model")
         hookload = _value(frame.values, "hookload")
-        if (model is None or hookload is None or not frame.steady
-                or frame.state not in ("pick_up", "slack_off")):
+        if model is None or hookload is None:
             return
         band = model.get("band", {})
-        curve = band.get("pick_up_N" if frame.state == "pick_up" else "slack_off_N") or []
+        curve = band.get("pick_up_N" if rig_state == "pick_up" else "slack_off_N") or []
         values = [float(x) for x in curve if x is not None and math.isfinite(x)]
         if not values:
             return
         noise = max(self.windows.noise_floor, self.windows.noise_floor_fraction * hookload)
-        state = self.trend.get(frame.state, BandTrendState())
+        state = self.trend.get(rig_state)
+        if state is None:
+            state = BandTrendState()
         state, alarm = update_band_trend(state, frame.t, hookload, min(values), max(values),
-                                         noise, self.band, what=f"{frame.state} hook load")
-        self.trend[frame.state] = state
+                                         noise, self.band, what=f"{rig_state} hook load")
+        self.trend[rig_state] = state
         if alarm is not None:
             emit("alarm", alarm.to_message())
 

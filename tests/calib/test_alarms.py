@@ -132,6 +132,34 @@ def test_constant_torque_is_frozen_only_while_rotating() -> None:
     assert kinds == ["sensor_torque_frozen"]
 
 
+def test_sensor_state_carried_between_frames() -> None:
+    s = SensorSettings(frozen_samples=2, persist_time=1.0)
+    frames = [
+        ({"hookload": 1e6, "torque": 0.0, "rpm": 10.0}, ("spp",)),
+        ({"hookload": 1e6, "torque": 0.0, "bit_depth": 3010.0, "hole_depth": 3000.0}, ()),
+        ({"hookload": 1e6, "bit_depth": 3010.0, "hole_depth": 3000.0}, ("spp", "rpm")),
+        ({"hookload": 1.1e6, "bit_depth": 3010.0}, ("rpm",)),
+    ]
+    state, kinds = SensorState(), []
+    states = []
+    for k, (values, stale) in enumerate(frames):
+        state, alarms = sensor_alarms(state, float(k), values, stale, True, s)
+        kinds.append([a.kind for a in alarms])
+        states.append(state)
+    assert kinds == [["sensor_stale"], [], ["sensor_stale", "sensor_stale",
+                                            "sensor_bit_below_hole", "sensor_hookload_frozen"],
+                     []]
+    # runs count repeats of the last value per channel, in the order channels were first seen
+    assert states[0].last == (("hookload", 1e6), ("torque", 0.0))
+    assert states[2].runs == (("hookload", 2), ("torque", 1), ("bit_depth", 1))
+    assert states[2].active == frozenset({"hookload_frozen", "bit_below_hole"})
+    assert states[1].below_since == 1.0 and states[2].below_since == 1.0
+    assert states[3].runs == (("hookload", 0), ("torque", 1), ("bit_depth", 2))
+    assert states[3].last == (("hookload", 1.1e6), ("torque", 0.0), ("bit_depth", 3010.0))
+    assert states[3].stale == frozenset({"rpm"}) and states[3].active == frozenset()
+    assert states[3].below_since is None
+
+
 def _frames(session: Any) -> list[Frame]:
     frames = []
     for i in range(session.t.size):
@@ -190,6 +218,10 @@ def test_daemon_steps_emit_valid_estimates(model_cased: WellModel, trip: Any,
     calibrate = steps[1]
     assert calibrate.block_weight.estimate is not None
     assert calibrate.block_weight.estimate.value == pytest.approx(400e3, rel=0.01)
+    # the learnt block weight is the rig-state detector's, the median of the last in-slips
+    # hook loads (the tracker's window)
+    assert steps[0].thresholds.block_weight == calibrate.block_weight.estimate.value
+    assert calibrate.block_weight.estimate.value == np.median(calibrate.block_weight.recent)
 
 
 def test_friction_rise_raises_a_jump_alarm(model_open: WellModel, trip: Any) -> None:

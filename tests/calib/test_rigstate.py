@@ -184,6 +184,44 @@ def test_single_sample_window_has_the_noise_floor() -> None:
     assert window.hookload_se == pytest.approx(0.005 * 1.6e6)
 
 
+def test_detector_memory_of_each_channel() -> None:
+    # (sample, then the state after it: bit depth, its time, block position, its time, whether
+    # the block was loaded, velocity, state): the aligner repeats a channel's last sample on
+    # frames between its samples, samples arrive out of order, the block travels empty in slips
+    steps = [
+        (RigSample(0.0, 1.4e6, 3000.0, block_position=20.0),
+         (3000.0, 0.0, 20.0, 0.0, True, None, "static")),
+        (RigSample(1.0, 1.4e6, 2999.5, block_position=20.5),
+         (2999.5, 1.0, 20.5, 1.0, True, -0.5, "pick_up")),
+        # both channels repeated from t = 1: memory kept, the last velocity carried
+        (RigSample(2.0, 1.4e6, 2999.5, block_position=20.5, block_time=1.0, bit_time=1.0),
+         (2999.5, 1.0, 20.5, 1.0, True, -0.5, "pick_up")),
+        # a block sample older than the one held: no velocity from it, memory kept
+        (RigSample(3.0, 1.4e6, 2999.0, block_position=20.3, block_time=0.5),
+         (2999.0, 3.0, 20.5, 1.0, True, -0.25, "pick_up")),
+        # in slips: the empty block's position is remembered as unloaded
+        (RigSample(4.0, 450e3, 2999.0, block_position=21.0),
+         (2999.0, 4.0, 21.0, 4.0, False, 0.0, "in_slips")),
+        # out of the slips: no block velocity across them, the bit depth's counts
+        (RigSample(5.0, 1.4e6, 2998.5, block_position=21.5),
+         (2998.5, 5.0, 21.5, 5.0, True, -0.5, "pick_up")),
+        # a gap longer than max_gap: the channels are remembered, no velocity
+        (RigSample(100.0, 1.4e6, 2990.0, block_position=30.0),
+         (2990.0, 100.0, 30.0, 100.0, True, None, "static")),
+    ]
+    prior = DetectorState()
+    for sample, expected in steps:
+        prior, detection = detect(prior, sample, TH)
+        assert (prior.bit_depth, prior.bit_time, prior.block_position, prior.block_time,
+                prior.block_loaded, prior.velocity, prior.state) == expected
+        assert prior.t == sample.t and prior.hookload == sample.hookload
+        assert (detection.state, detection.velocity) == (expected[6], expected[5])
+    assert prior.state_since == 100.0
+    bad_time, detection = detect(prior, RigSample(math.nan, 1.4e6, 2990.0), TH)
+    assert detection.state == "unknown" and bad_time.state == "unknown"
+    assert bad_time.bit_depth == prior.bit_depth and bad_time.t == prior.t
+
+
 def test_nan_channels_give_unknown_and_no_window() -> None:
     samples = [RigSample(float(k), math.nan, math.nan) for k in range(20)]
     prior = DetectorState()

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import numpy as np
 import pytest
 from daemon_support import CollectSink, linear_model
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tdmon.daemon.aligner import Aligner
 from tdmon.daemon.monitor import GridLoadModel, MonitorStep
@@ -125,6 +128,50 @@ class TestMonitor:
             GridLoadModel(np.array([0.0, 0.0]), np.zeros((4, 2)), [])
         with pytest.raises(ValueError):
             GridLoadModel(np.array([0.0, 1.0]), np.zeros((5, 2)), [])
+
+    @settings(max_examples=200, deadline=None)
+    @given(seed=st.integers(0, 2**32 - 1), start=st.floats(min_value=-10.0, max_value=1010.0),
+           moves=st.lists(st.one_of(st.just(0.0), st.floats(-2.0, 2.0),
+                                    st.floats(-500.0, 500.0)), min_size=1, max_size=12))
+    def test_grid_loads_are_numpy_interpolation_exactly_also_when_reused(
+            self, seed: int, start: float, moves: list[float]) -> None:
+        depths = np.cumsum([start, *moves]).tolist()  # standing still, creeping, jumping
+        rng = np.random.default_rng(seed)
+        grid = np.cumsum(rng.uniform(1.0, 100.0, 20))  # uneven, from ~1 m to ~1000 m
+        band = (0.1, 0.2, 0.3)
+        curves = rng.uniform(-1e6, 3e6, (4 + 2 * len(band), grid.size))
+        model = GridLoadModel(grid, curves, band)
+        for depth in [*depths, depths[-1], *depths[::-1]]:  # repeats: the reused result
+            loads = model.loads(depth)
+            fresh = GridLoadModel(grid, curves, band).loads(depth)
+            assert loads == fresh  # the same numbers, bit for bit
+            if not grid[0] <= depth <= grid[-1]:
+                assert loads is None
+                continue
+            assert loads is not None
+            # the NumPy interpolation the grid model was written with
+            i = min(int(np.searchsorted(grid, depth, side="right")) - 1, grid.size - 2)
+            w = (depth - grid[i]) / (grid[i + 1] - grid[i])
+            column = (curves[:, i] * (1.0 - w) + curves[:, i + 1] * w).tolist()
+            assert (loads.pick_up, loads.slack_off, loads.rotating,
+                    loads.torque_rotating) == tuple(column[:4])
+            assert loads.band_pick_up == tuple(column[4:7])
+            assert loads.band_slack_off == tuple(column[7:10])
+            assert loads.bit_depth == depth and loads.band_mu == band
+        assert model.loads(math.nan) is None
+
+    def test_same_depth_reuses_the_evaluation(self) -> None:
+        model = linear_model()
+        first = model.loads(1234.5)
+        assert model.loads(1234.5) is first  # in slips: nothing to interpolate again
+        other = model.loads(1234.6)
+        assert other is not first and other is not None
+        assert other.pick_up != first.pick_up
+        again = model.loads(1234.5)
+        assert again == first and again is not first
+        by_int = model.loads(1234)  # an int depth stays an int in the message
+        assert by_int is not None and type(by_int.bit_depth) is int
+        assert type(model.loads(1234.0).bit_depth) is float  # type: ignore[union-attr]
 
     def test_message_shape_and_residuals(self) -> None:
         step = MonitorStep(linear_model())
