@@ -155,3 +155,53 @@ def test_fuzz_decoder_never_raises_and_only_passes_clean_samples(topic: str, bod
     assert isinstance(obj, dict) and not isinstance(obj["value"], bool)
     parsed = parse_payload(data)
     assert not isinstance(parsed, str) and parsed[0] == result.t
+
+
+# -- the plain-object fast path ---------------------------------------------------------
+
+def _loads_outcome(text: str) -> tuple[str, object]:
+    """What json.loads makes of ``text``, an error as the decoder words it."""
+    try:
+        return "value", json.loads(text)
+    except ValueError as exc:
+        message = str(exc)
+        return "error", "malformed JSON: " + (message if len(message) <= 80
+                                              else message[:77] + "...")
+
+
+@settings(max_examples=500, deadline=None)
+@given(body=json_values | st.builds(lambda t, v: {"t": t, "value": v}, times, values),
+       before=st.sampled_from(["", " ", "\n", "\ufeff", "x", "{"]),
+       after=st.sampled_from(["", " ", "\r\n", "}", "{}", "x", "]"]))
+def test_payload_parsing_is_json_loads_whatever_surrounds_the_object(
+        body: object, before: str, after: str) -> None:
+    text = before + _encode(body).decode() + after
+    kind, expected = _loads_outcome(text)
+    parsed = parse_payload(text.encode())
+    if kind == "error":
+        assert parsed == expected  # json's own message
+        return
+    if not isinstance(expected, dict) or "t" not in expected or "value" not in expected:
+        assert isinstance(parsed, str)
+        return
+    if not isinstance(parsed, str):  # the rules on t, value and unit are tested above
+        assert parsed == (parse_time(expected["t"]), float(expected["value"]),
+                          expected.get("unit"))
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    (' {"t": 1, "value": 2}', (1.0, 2.0, None)),  # whitespace around: json.loads accepts it
+    ('{"t": 1, "value": 2}\n', (1.0, 2.0, None)),
+    ('{"t": 0.0, "value": 2}', (0.0, 2.0, None)),  # the first second of 1970 is in range
+    ('{"t": 7258118399.5, "value": -0.0, "unit": "N"}', (7258118399.5, -0.0, "N")),
+    ('{"t": 7258118400.0, "value": 2}', "'t' out of range (7.25812e+09 s)"),
+    ('{"t": NaN, "value": 2}', "'t' is not finite (nan)"),
+    ('{"t": -Infinity, "value": 2}', "'t' is not finite (-inf)"),
+    ('{"t": 1, "value": 2}{}', "malformed JSON: Extra data: line 1 column 21 (char 20)"),
+    ("\ufeff{}", "malformed JSON: Unexpected UTF-8 BOM (decode using utf-8-sig): line 1 "
+                 "column 1 (char 0)"),
+    ('{"t": 1, "value": 2', "malformed JSON: Expecting ',' delimiter: line 1 column 20 "
+                            "(char 19)"),
+])
+def test_payload_edge_cases(text: str, expected: object) -> None:
+    assert parse_payload(text.encode()) == expected
