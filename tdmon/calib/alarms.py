@@ -22,6 +22,7 @@ Each detector is a pure function, with a small frozen state where it needs memor
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -242,25 +243,30 @@ def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.
     n = mu.size
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     touched = np.isfinite(mu) & (std < 0.8 * prior_std)
-    starts = [k for k in range(n - width + 1) if touched[k:k + width].all()]
+    # in Python: one NumPy call per candidate stretch cost more than the products below
+    flags = touched.tolist()
+    starts = [k for k in range(n - width + 1) if all(flags[k:k + width])]
     if len(starts) < 3:
         return None, known
+    touched_before = [0, *itertools.accumulate(flags)]  # touched bins in [0, k)
     best: tuple[float, int, float, float, float] | None = None
     for first in starts:
         # contrast: this stretch's mean minus the mean of the other touched bins (leaving a
         # bin out on each side); its variance c P c is small even where single bins are not
-        rest = touched.copy()
-        rest[max(0, first - 1):first + width + 1] = False
-        if rest.sum() < width:
+        lo, hi = max(0, first - 1), min(n, first + width + 1)
+        rest_count = touched_before[n] - (touched_before[hi] - touched_before[lo])
+        if rest_count < width:
             continue
-        contrast = np.zeros(n)
+        contrast = np.where(touched, -1.0 / rest_count, 0.0)
+        contrast[lo:hi] = 0.0
         contrast[first:first + width] = 1.0 / width
-        contrast[rest] = -1.0 / rest.sum()
         excess = float(contrast @ mu)
         spread = math.sqrt(max(float(contrast @ covariance @ contrast), 0.0))
         limit = max(settings.min_step, settings.sigmas * spread)
         if excess > limit and not (frozenset(range(first, first + width)) & known) and (
                 best is None or excess - limit > best[0]):
+            rest = touched.copy()
+            rest[lo:hi] = False
             best = (excess - limit, first, excess, limit, float(np.mean(mu[rest])))
     if best is None:
         return None, known

@@ -287,6 +287,63 @@ def test_profile_anomaly_on_the_contrast() -> None:
     assert profile_anomaly(1.0, edges, mu, np.eye(20) * 0.1**2, 0.1, jump)[0] is None
 
 
+def _anomaly_by_masks(mu: np.ndarray, covariance: np.ndarray, prior_std: float,
+                      settings: JumpSettings, width: int, known: frozenset[int]
+                      ) -> tuple[float, int, float, float, float] | None:
+    """profile_anomaly's search written plainly, one boolean mask per candidate stretch."""
+    n = mu.size
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    touched = np.isfinite(mu) & (std < 0.8 * prior_std)
+    starts = [k for k in range(n - width + 1) if touched[k:k + width].all()]
+    if len(starts) < 3:
+        return None
+    best = None
+    for first in starts:
+        rest = touched.copy()
+        rest[max(0, first - 1):first + width + 1] = False
+        if rest.sum() < width:
+            continue
+        contrast = np.zeros(n)
+        contrast[first:first + width] = 1.0 / width
+        contrast[rest] = -1.0 / rest.sum()
+        excess = float(contrast @ mu)
+        spread = math.sqrt(max(float(contrast @ covariance @ contrast), 0.0))
+        limit = max(settings.min_step, settings.sigmas * spread)
+        if excess > limit and not (set(range(first, first + width)) & known) and (
+                best is None or excess - limit > best[0]):
+            best = (excess - limit, first, excess, limit, float(np.mean(mu[rest])))
+    return best
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 40), width=st.integers(1, 4),
+       untouched=st.floats(0.0, 0.6), known=st.sets(st.integers(0, 39), max_size=6))
+def test_profile_anomaly_equals_the_masked_search(seed: int, n: int, width: int,
+                                                  untouched: float, known: set[int]) -> None:
+    rng = np.random.default_rng(seed)
+    mu = 0.25 + 0.05 * rng.standard_normal(n)
+    mu[rng.integers(0, n)] += rng.choice([0.0, 0.2])  # sometimes a bump
+    factor = rng.standard_normal((n, n)) * 0.01
+    covariance = factor @ factor.T / n + np.diag(rng.uniform(1e-5, 2e-3, n))
+    wide = rng.random(n) < untouched  # bins the data have not touched: prior uncertainty
+    covariance[wide, wide] = 0.1**2
+    if rng.random() < 0.2:
+        mu[rng.integers(0, n)] = math.nan
+    jump = JumpSettings(min_step=float(rng.choice([0.0, 0.05])), sigmas=3.0)
+    edges = np.arange(n + 1) * 30.0
+    alarm, reported = profile_anomaly(1.0, edges, mu, covariance, 0.1, jump, width=width,
+                                      known=frozenset(known))
+    best = _anomaly_by_masks(mu, covariance, 0.1, jump, width, frozenset(known))
+    if best is None:
+        assert alarm is None and reported == frozenset(known)
+        return
+    _, first, excess, limit, reference = best
+    assert alarm is not None
+    assert (alarm.value, alarm.limit) == (reference + excess, reference + limit)  # exactly
+    assert f"between {edges[first]:.0f} and {edges[first + width]:.0f} m MD" in alarm.message
+    assert reported == frozenset(known) | frozenset(range(first, first + width))
+
+
 def test_replay_trip_out_tight_spot_alarms(replayed: Any) -> None:
     result = replayed("trip-out-tight-spot")
     _check(result.messages)
