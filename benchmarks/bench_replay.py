@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import cProfile
+import gc
 import json
 import os
 import pstats
@@ -158,9 +159,22 @@ def _phase_seconds(phase: Any) -> float:
 
 
 def bare_copy(src: Path, dst: Path) -> int:
-    """Read every input message, decode its payload, write it to MCAP: the floor."""
-    from tdmon.ingest.mcap_source import iter_raw
+    """Read every input message, decode its payload, write it to MCAP: the floor.
 
+    Under the same garbage-collector setting as a full-speed replay (``replay`` raises the
+    young-generation threshold for the run; ~4 % faster here too)."""
+    from tdmon.ingest.mcap_source import iter_raw
+    from tdmon.replay.driver import FULL_SPEED_GC_YOUNG
+
+    previous = gc.get_threshold()
+    gc.set_threshold(FULL_SPEED_GC_YOUNG, *previous[1:])
+    try:
+        return _bare_copy(src, dst, iter_raw)
+    finally:
+        gc.set_threshold(*previous)
+
+
+def _bare_copy(src: Path, dst: Path, iter_raw: Callable[..., Any]) -> int:
     count = 0
     with src.open("rb") as stream, dst.open("wb") as out:
         writer = Writer(out, compression=CompressionType.ZSTD, chunk_size=4 * 1024 * 1024)
