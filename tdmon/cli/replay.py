@@ -40,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                              "name, replays/expectations/<name>.toml)")
     replay.add_argument("--no-progress", action="store_true", help="no progress bar")
     replay.add_argument("--json", action="store_true", help="print the summary as JSON")
+    replay.add_argument("--recorder", choices=("process", "inline"), default="process",
+                        help="where the MCAP recorder runs: 'process' (default) in a child "
+                             "process, on a second core; 'inline' in this one (better when "
+                             "many replays already run side by side on every core)")
     replay.set_defaults(func=_replay)
 
     simulate = subparsers.add_parser(
@@ -190,7 +194,8 @@ def _replay(args: argparse.Namespace) -> int:
                    desc=args.replay.name)
     try:
         result = asyncio.run(replay(args.replay, config, args.out, rrd=args.rrd, speed=speed,
-                                    progress=bar.update if bar is not None else None))
+                                    progress=bar.update if bar is not None else None,
+                                    separate_writer=args.recorder == "process"))
     finally:
         if bar is not None:
             bar.close()

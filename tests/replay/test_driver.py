@@ -13,7 +13,7 @@ import pytest
 
 from tdmon.cli import main
 from tdmon.config.daemon import load_daemon_config
-from tdmon.record.reader import read_messages
+from tdmon.record.reader import read_messages, topic_counts
 from tdmon.replay.driver import ReplayResult, replay
 from tdmon.replay.expectations import (
     Check,
@@ -136,6 +136,11 @@ def test_cli_replay_check_summary_and_rrd(tmp_path: Path,
     summary = json.loads(capsys.readouterr().out)
     assert code == 0
     assert summary["messages_in"] == summary["samples"] == 965
+    inline = tmp_path / "inline.mcap"
+    assert main(["replay", str(path), "--out", str(inline), "--recorder", "inline",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["messages_in"] == 965
+    assert topic_counts(inline) == topic_counts(out)
     assert summary["estimates"]["window"] > 0 and summary["alarms"]["sensor_stale"] > 0
     assert abs(sum(summary["state_shares"].values()) - 1.0) < 1e-3
     assert all(c["passed"] or c["known_issue"] for c in summary["checks"])
