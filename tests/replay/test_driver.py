@@ -137,8 +137,9 @@ def test_cli_replay_check_summary_and_rrd(tmp_path: Path,
     assert code == 0
     assert summary["messages_in"] == summary["samples"] == 965
     inline = tmp_path / "inline.mcap"
-    assert main(["replay", str(path), "--out", str(inline), "--recorder", "inline",
-                 "--json"]) == 0
+    config = REPO / "config" / "daemon" / "replay-sim-trip-in.toml"
+    assert main(["replay", str(path), "--config", str(config), "--out", str(inline),
+                 "--recorder", "inline", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["messages_in"] == 965
     assert topic_counts(inline) == topic_counts(out)
     assert summary["estimates"]["window"] > 0 and summary["alarms"]["sensor_stale"] > 0
