@@ -209,6 +209,24 @@ def best_of(repeat: int, run: Callable[[], int]) -> tuple[float, int]:
     return best, count
 
 
+def _children() -> list[str]:
+    """Process ids of this process's children (e.g. the recorder's process), from /proc."""
+    me = str(os.getpid())
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                # "pid (comm) state ppid ...": comm may hold spaces, so split after its ")"
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[1] == me:
+            found.append(entry)
+    return found
+
+
 class MemorySampler:
     """Resident set size [bytes] of this process and its children (and the traced Python
     heap of this one) every ``interval`` s."""
@@ -222,10 +240,8 @@ class MemorySampler:
         self._page = os.sysconf("SC_PAGE_SIZE")
 
     def _rss(self) -> int:
-        import multiprocessing
-
         total = 0
-        for pid in ["self", *(str(c.pid) for c in multiprocessing.active_children())]:
+        for pid in [str(os.getpid()), *_children()]:
             try:
                 with open(f"/proc/{pid}/statm") as f:
                     total += int(f.read().split()[1]) * self._page

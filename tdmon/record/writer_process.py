@@ -61,6 +61,9 @@ log = logging.getLogger(__name__)
 #: enough (~100-250 kB) that the pipe applies back-pressure early.
 BATCH_SIZE = 512
 
+#: Bytes in flight to the child [bytes]: ~40 batches of raw input and samples.
+PIPE_BUFFER = 4 * 1024 * 1024
+
 _PICKLE = pickle.HIGHEST_PROTOCOL
 
 
@@ -405,6 +408,9 @@ def _start_child() -> tuple[Connection, subprocess.Popen[bytes]]:
     """
     ours, theirs = socket.socketpair()
     with ours, theirs:
+        # room for bursts: while the child compresses a chunk (tens of ms) the parent goes on
+        # sending instead of waiting (the kernel caps this at net.core.wmem_max)
+        ours.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, PIPE_BUFFER)
         env = dict(os.environ)
         # the same tdmon as this process, whatever the child's working directory
         package_root = str(Path(tdmon.__file__).resolve().parents[1])
