@@ -101,9 +101,12 @@ class Daemon:
                 waiters.append(asyncio.ensure_future(asyncio.gather(*source_tasks,
                                                                     return_exceptions=True)))
             await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
-            for waiter in waiters:
-                if waiter is not consumer and not waiter.done():
+            others = [waiter for waiter in waiters if waiter is not consumer]
+            for waiter in others:
+                if not waiter.done():
                     waiter.cancel()
+            # collect the cancelled waiters' outcome (else "exception was never retrieved")
+            await asyncio.gather(*others, return_exceptions=True)
             if consumer.done():
                 consumer.result()  # a bug in the pipeline: surface it
         finally:

@@ -22,6 +22,7 @@ import asyncio
 import contextlib
 import gc
 import math
+import signal
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
@@ -39,6 +40,7 @@ from tdmon.config.daemon import (
 )
 from tdmon.daemon.build import build_daemon
 from tdmon.daemon.pipeline import Pipeline, Sink
+from tdmon.daemon.runner import stop_on_signals
 from tdmon.errors import IngestError, RecordError
 
 __all__ = ["FULL_SPEED_GC_YOUNG", "ReplayResult", "SummarySink", "raw_message_count", "replay",
@@ -88,6 +90,9 @@ class ReplayResult:
     state_shares: dict[str, float] = field(default_factory=dict)
     non_finite: int = 0
     wall_s: float = 0.0
+    interrupted: bool = False
+    """Stopped by SIGINT/SIGTERM before the end of the replay (the recording is finished and
+    holds what was read up to then)."""
 
     @property
     def rate(self) -> float:
@@ -105,7 +110,7 @@ class ReplayResult:
             "estimates": dict(sorted(self.estimates.items())),
             "alarms": dict(sorted(self.alarms.items())),
             "state_shares": dict(sorted(self.state_shares.items())),
-            "non_finite": self.non_finite,
+            "non_finite": self.non_finite, "interrupted": self.interrupted,
             "wall_s": round(self.wall_s, 3), "rate_msg_per_s": round(self.rate, 1),
         }
 
@@ -265,13 +270,15 @@ async def replay(
             sinks.append(_ProgressSink(progress))
         sinks.extend(extra_sinks)
         started = time.perf_counter()
-        with _young_collections_every(FULL_SPEED_GC_YOUNG if speed is None else None):
+        stop, signals = asyncio.Event(), list[signal.Signals]()
+        with (_young_collections_every(FULL_SPEED_GC_YOUNG if speed is None else None),
+              stop_on_signals(stop, signals.append)):
             async with build_daemon(run_config, extra_sinks=sinks,
                                     stop_when_sources_done=True) as built:
                 pipeline = built.pipeline
                 if speed is None:
                     built.daemon.tick_interval = _NO_TICKS
-                await built.daemon.run(asyncio.Event())
+                await built.daemon.run(stop)
         wall = time.perf_counter() - started
     finally:
         # idempotent: the daemon closed them unless building failed half-way
@@ -286,7 +293,7 @@ async def replay(
         frames=stats.frames, step_errors=stats.step_errors, sink_errors=stats.sink_errors,
         estimates=dict(summary.estimates), alarms=dict(summary.alarms),
         state_shares=summary.shares(), wall_s=wall,
-        non_finite=recorder.stats.nonfinite_replaced,
+        non_finite=recorder.stats.nonfinite_replaced, interrupted=bool(signals),
     )
     result.windows = summary.estimates.get("window", 0)
     for step in built.steps:

@@ -179,3 +179,35 @@ def test_cli_replay_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert "replay not found" in capsys.readouterr().err
     assert main(["replay", str(path), "--out", str(tmp_path / "o.mcap")]) == 2
     assert "--config" in capsys.readouterr().err
+
+
+def test_ctrl_c_stops_a_replay_with_a_finished_recording(tmp_path: Path) -> None:
+    """SIGINT (Ctrl-C): what was read is processed and recorded, the file is finished, the
+    summary says so, exit 130."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "o.mcap"
+    path = REPO / "replays" / "trip-in-noisy.mcap"  # 16 min of rig time: ~16 s at 60x
+    process = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from tdmon.cli import main; sys.exit(main())",
+         "replay", str(path), "--config",
+         str(REPO / "config" / "daemon" / "replay-sim-trip-in.toml"), "--out", str(out),
+         "--speed", "60", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    deadline = time.monotonic() + 60
+    while not out.exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.5)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert "replay interrupted after" in stderr
+    summary = json.loads(stdout)
+    assert summary["interrupted"] is True
+    assert 0 < summary["messages_in"] < 965
+    counts = topic_counts(out)  # a finished file: no recovery needed
+    assert counts["/tdmon/raw"] == summary["messages_in"]
+    assert "Traceback" not in stderr and "never retrieved" not in stderr
