@@ -41,7 +41,7 @@ from mcap.writer import CompressionType, Writer
 from tdmon import __version__
 from tdmon.errors import RecordError
 from tdmon.record import schemas
-from tdmon.record.sink import AlarmHook, Message
+from tdmon.record.sink import AlarmHook, Message, call_alarm_hook
 
 if TYPE_CHECKING:
     from tdmon.record.recover import RecoveryResult
@@ -619,13 +619,7 @@ class McapRecorder:
     def _fire_alarms(self) -> None:
         with self._lock:
             alarms, self._pending_alarms = self._pending_alarms, []
-        if self.on_alarm is None:
-            return
-        for alarm in alarms:
-            try:
-                self.on_alarm(alarm)
-            except Exception:
-                log.exception("recorder alarm hook failed")
+        call_alarm_hook(self.on_alarm, alarms)
 
     def _flush_loop(self) -> None:
         # Wakes several times per interval so that a quiet pipeline is still flushed on time.

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
+
+log = logging.getLogger(__name__)
 
 #: A message as the daemon produces it: a JSON object (dict) of the shapes in schemas.py.
 Message = Mapping[str, Any]
@@ -21,3 +24,15 @@ class Sink(Protocol):
 
     def close(self) -> None:
         """Flush and release everything; idempotent."""
+
+
+def call_alarm_hook(hook: AlarmHook | None, alarms: list[dict[str, Any]]) -> None:
+    """Hand each alarm to ``hook`` in order; a hook that raises is logged, never propagated
+    (a sink's health report must not break the pipeline that writes to it)."""
+    if hook is None:
+        return
+    for alarm in alarms:
+        try:
+            hook(alarm)
+        except Exception:
+            log.exception("recorder alarm hook failed")

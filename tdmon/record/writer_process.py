@@ -51,7 +51,7 @@ from typing import Any
 import tdmon
 from tdmon.errors import RecordError
 from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
-from tdmon.record.sink import AlarmHook, Message
+from tdmon.record.sink import AlarmHook, Message, call_alarm_hook
 
 __all__ = ["RecorderProcess"]
 
@@ -366,13 +366,7 @@ class RecorderProcess:
     def _fire_alarms(self) -> None:
         with self._lock:
             alarms, self._pending_alarms = self._pending_alarms, []
-        if self.on_alarm is None:
-            return
-        for alarm in alarms:
-            try:
-                self.on_alarm(alarm)
-            except Exception:
-                log.exception("recorder alarm hook failed")
+        call_alarm_hook(self.on_alarm, alarms)
 
     def _flush_loop(self) -> None:
         # a quiet pipeline: what waits in the batch still reaches the file in time
