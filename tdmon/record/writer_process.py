@@ -58,7 +58,7 @@ __all__ = ["RecorderProcess"]
 log = logging.getLogger(__name__)
 
 #: Messages per batch: large enough that pickling and the pipe cost little per message, small
-#: enough (~100-250 kB) that the pipe applies back-pressure early.
+#: enough (~100-250 kB pickled) that sending one is a short pause for the pipeline.
 BATCH_SIZE = 512
 
 #: Bytes in flight to the child [bytes]: ~40 batches of raw input and samples.
@@ -116,13 +116,18 @@ class RecorderProcess:
         self._final_stats: RecorderStats | None = None
         self.recovered: list[Any] = []
 
-        self._conn, self._process = _start_child()
+        try:
+            self._conn, self._process = _start_child()
+        except OSError as exc:
+            raise RecordError(f"cannot start the recorder's process: {exc}") from exc
         try:
             self._conn.send((folder, options, logging.getLogger().level))
             ready = self._wait_for("ready", start_timeout_s)
-        except RecordError:
+        except (RecordError, OSError) as exc:
             self._stop_child()
-            raise
+            if isinstance(exc, RecordError):
+                raise
+            raise RecordError(f"the recorder's process did not start: {exc}") from exc
         self._path = None if ready[0] is None else Path(ready[0])
         self.recovered = list(ready[1])
         _OPEN.add(self)
