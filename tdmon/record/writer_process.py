@@ -215,7 +215,7 @@ class RecorderProcess:
         if threading.current_thread() is not self._flusher:
             self._flusher.join()
         with self._lock:
-            self._send_batch(closing=True)
+            self._send_batch()
             if not self._dead:
                 try:
                     self._conn.send(("close",))
@@ -243,12 +243,11 @@ class RecorderProcess:
 
     # -- internals (call with the lock held) ----------------------------------------------
 
-    def _send_batch(self, closing: bool = False) -> None:
+    def _send_batch(self) -> None:
         batch = self._batch
         self._send_at = time.monotonic() + self._send_every
         if not batch:
-            if not closing:
-                self._drain()
+            self._drain()
             return
         self._batch = []
         if self._dead:
@@ -451,6 +450,19 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
     path = recorder.path
     conn.send(("ready", None if path is None else str(path), recorder.recovered))
     state: tuple[str | None, str | None] = (None, None if path is None else str(path))
+
+    def report() -> None:
+        """Send the recorder's alarms and, when they changed, its error and file."""
+        nonlocal state
+        for alarm in alarms:
+            conn.send(("alarm", alarm))
+        alarms.clear()
+        error, path = recorder.error, recorder.path
+        now = (None if error is None else str(error), None if path is None else str(path))
+        if now != state:
+            state = now
+            conn.send(("state", *now))
+
     try:
         while True:
             try:
@@ -462,27 +474,17 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
                 write = recorder.write
                 for topic, log_time_ns, message in item:
                     write(topic, log_time_ns, message)
+                report()
             elif item[0] == "close":
                 break
             else:
                 reply = _command(recorder, item)
-                for alarm in alarms:
-                    conn.send(("alarm", alarm))
-                alarms.clear()
+                report()  # before the reply: the parent sees the command's effects with it
                 conn.send((item[0], reply))
-            for alarm in alarms:
-                conn.send(("alarm", alarm))
-            alarms.clear()
-            error, path = recorder.error, recorder.path
-            now = (None if error is None else str(error), None if path is None else str(path))
-            if now != state:
-                state = now
-                conn.send(("state", *now))
     finally:
         recorder.close()
         with contextlib.suppress(OSError, ValueError):
-            for alarm in alarms:
-                conn.send(("alarm", alarm))
+            report()
             conn.send(("closed", recorder.stats))
         conn.close()
 

@@ -16,7 +16,7 @@ daemon configuration and states, all optional:
   [before, after] [s] around that time (default: the whole replay). One raised alarm answers
   one expectation only (in file order), so two events cannot be met by the same alarm.
   ``known_issue`` = "why": the expectation is checked and reported but does not fail the run
-  (a daemon limitation on record, like a strict xfail without the strictness);
+  (a daemon limitation on record: reported in the summary, never failing the run);
 * ``[estimates] minimum``: at least so many estimates of each kind (``window``, ``profile``,
   ``mu_T``);
 * ``[forbidden]``: daemon alarm ``kinds`` that must not occur at all;
