@@ -1,0 +1,153 @@
+"""The words tdmon's messages are made of: rig states, operations, alarm kinds, severities.
+
+Every layer names these things the same way, and the JSON Schemas of the recorded messages
+(`tdmon.record.schemas`) take their enumerations from here, so that a name the code can emit is
+a name the schema lists. The members are ``StrEnum``: they compare equal to, hash like and
+serialise as their plain string values, so a recorded or published message is unchanged.
+
+This module imports nothing of tdmon: every layer, the physics included, may use it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from enum import StrEnum
+from types import MappingProxyType
+from typing import Final
+
+__all__ = [
+    "CALIBRATING_STATES",
+    "CURVE_FOR_STATE",
+    "MOVING_STATES",
+    "OPERATION_FOR_STATE",
+    "REAMING_AXIAL_OPERATION",
+    "ROTATING_STATES",
+    "AlarmKind",
+    "ConnectionState",
+    "EstimateKind",
+    "Operation",
+    "RigState",
+    "Severity",
+]
+
+
+class RigState(StrEnum):
+    """What the rig is doing, as the rig-state detector classifies a sample (docs/back-calculation.md)."""
+
+    IN_SLIPS = "in_slips"
+    PICK_UP = "pick_up"
+    SLACK_OFF = "slack_off"
+    ROTATING_OFF_BOTTOM = "rotating_off_bottom"
+    REAMING = "reaming"
+    BACK_REAMING = "back_reaming"
+    DRILLING = "drilling"
+    CIRCULATING = "circulating"
+    STATIC = "static"
+    UNKNOWN = "unknown"
+
+
+class Operation(StrEnum):
+    """A load case of the torque-and-drag model.
+
+    static: hanging still (no friction); rotating: rotating off bottom (no axial friction);
+    pick_up: pulling out; slack_off: lowering; on_bottom: rotating with weight on the bit.
+    """
+
+    STATIC = "static"
+    ROTATING = "rotating"
+    PICK_UP = "pick_up"
+    SLACK_OFF = "slack_off"
+    ON_BOTTOM = "on_bottom"
+
+
+class Severity(StrEnum):
+    """How urgent an alarm is."""
+
+    INFO = "info"
+    WARNING = "warning"
+    CRITICAL = "critical"
+
+
+class EstimateKind(StrEnum):
+    """What an ``estimate`` message holds: one window's friction, the friction profile along
+    MD, or the live mu(T) calibration."""
+
+    WINDOW = "window"
+    PROFILE = "profile"
+    MU_T = "mu_T"
+
+
+MOVING_STATES: Final = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.REAMING,
+                                  RigState.BACK_REAMING})
+"""States in which the string moves axially."""
+
+ROTATING_STATES: Final = frozenset({RigState.ROTATING_OFF_BOTTOM, RigState.REAMING,
+                                    RigState.BACK_REAMING, RigState.DRILLING})
+"""States in which the string rotates."""
+
+OPERATION_FOR_STATE: Final[Mapping[RigState, Operation]] = MappingProxyType({
+    RigState.PICK_UP: Operation.PICK_UP,
+    RigState.BACK_REAMING: Operation.PICK_UP,
+    RigState.SLACK_OFF: Operation.SLACK_OFF,
+    RigState.REAMING: Operation.SLACK_OFF,
+    RigState.ROTATING_OFF_BOTTOM: Operation.ROTATING,
+    RigState.DRILLING: Operation.ON_BOTTOM,
+    RigState.CIRCULATING: Operation.STATIC,
+    RigState.STATIC: Operation.STATIC,
+})
+"""The model's load case for each rig state that hangs the string from the hook (in slips and
+unknown have none). Reaming and back-reaming combine rotation with the axial motion: their
+axial load case is the one of their direction of motion."""
+
+REAMING_AXIAL_OPERATION: Final[Mapping[RigState, Operation]] = MappingProxyType({
+    RigState.REAMING: Operation.SLACK_OFF,
+    RigState.BACK_REAMING: Operation.PICK_UP,
+})
+"""Axial operation of the combined-motion states, whose friction comes from the torque with the
+friction split by the motion angle psi (Aadnoy, Fazaelizadeh and Hareland 2010)."""
+
+CURVE_FOR_STATE: Final[Mapping[RigState, Operation]] = MappingProxyType({
+    state: (operation if operation in (Operation.PICK_UP, Operation.SLACK_OFF)
+            else Operation.ROTATING)
+    for state, operation in OPERATION_FOR_STATE.items()
+})
+"""Which modelled hook-load curve of the monitor (pick-up, slack-off or rotating) a measured
+hook load is compared with, per rig state: the static and on-bottom hook loads are read
+against the rotating (friction-free axial) curve."""
+
+CALIBRATING_STATES: Final = frozenset({RigState.PICK_UP, RigState.SLACK_OFF,
+                                       RigState.ROTATING_OFF_BOTTOM})
+"""States whose steady windows calibrate a friction factor directly: pick-up and slack-off
+hook load, rotating-off-bottom torque."""
+
+
+class ConnectionState(StrEnum):
+    """The state of a source's or publisher's connection in the ``status`` message (a retrying
+    connection reports ``"retrying in N s: reason"``, see `tdmon.daemon.supervisor`)."""
+
+    CONNECTING = "connecting"
+    CONNECTED = "connected"
+    FINISHED = "finished"
+    CLOSED = "closed"
+    RETRYING = "retrying"
+
+
+class AlarmKind(StrEnum):
+    """Every ``kind`` an ``alarm`` message can carry (docs/back-calculation.md, "Alarms")."""
+
+    BAND = "band"
+    FRICTION_JUMP = "friction_jump"
+    LIMIT_TENSILE = "limit_tensile"
+    LIMIT_SINUSOIDAL_BUCKLING = "limit_sinusoidal_buckling"
+    LIMIT_HELICAL_BUCKLING = "limit_helical_buckling"
+    LIMIT_MAKEUP_TORQUE = "limit_makeup_torque"
+    SENSOR_STALE = "sensor_stale"
+    SENSOR_HOOKLOAD_IMPLAUSIBLE = "sensor_hookload_implausible"
+    SENSOR_BIT_BELOW_HOLE = "sensor_bit_below_hole"
+    SENSOR_HOOKLOAD_FROZEN = "sensor_hookload_frozen"
+    SENSOR_TORQUE_FROZEN = "sensor_torque_frozen"
+    WINDOW_REJECTED = "window_rejected"
+    BLOCK_WEIGHT = "block_weight"
+    WEIGHT_CHECK = "weight_check"
+    RECORDER_FAILED = "recorder_failed"
+    RECORDER_RESUMED = "recorder_resumed"
