@@ -3,7 +3,7 @@
 Inside tdmon every quantity is SI (N, N m, m, s, Pa, m^3/s, kg/m^3, rad) except temperatures,
 which are degC because the friction correlations are written in degC. A configured quantity is
 either a plain number, already in the internal unit, or a string such as ``"0.3 kN/m"``,
-``"9950 ft"``, ``"13 ppg"`` or ``"60 degF"``.
+``"9950 ft"``, ``"13 ppg"``, ``"60 degF"`` or an oilfield size such as ``"12 1/4 in"``.
 """
 
 from __future__ import annotations
@@ -22,11 +22,29 @@ _ABSOLUTE_TEMPERATURES = {"degC", "degF", "degR", "K", "kelvin", "celsius", "fah
 _OFFSET_IN_COMPOUND = re.compile(r"\b(degC|degF|celsius|fahrenheit)\b")
 
 
+# Oilfield sizes are written as mixed fractions ("12 1/4 in", "5-1/2 in", "3/4 in"). Read as a
+# plain number, "12 1/4 in" would be 12 times the unit "1/4 in", i.e. 3 in.
+_MIXED_FRACTION = re.compile(
+    r"\s*(?P<sign>[-+]?)(?:(?P<whole>\d+)(?:\s+|-))?(?P<num>\d+)/(?P<den>\d+)\s*(?P<unit>.*?)\s*")
+_DECIMAL = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")
+
+
 def _split(text: str) -> tuple[float, str]:
-    match = re.fullmatch(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*", text)
+    fraction = _MIXED_FRACTION.fullmatch(text)
+    if fraction is not None:
+        denominator = int(fraction["den"])
+        if denominator == 0:
+            raise ValueError(f"'{text}': a fraction with denominator 0")
+        number = int(fraction["whole"] or 0) + int(fraction["num"]) / denominator
+        return (-number if fraction["sign"] == "-" else number), fraction["unit"]
+    match = _DECIMAL.fullmatch(text)
     if match is None:
         raise ValueError(f"'{text}' is not a number followed by a unit (e.g. '9950 ft')")
-    return float(match.group(1)), match.group(2)
+    number, unit = float(match.group(1)), match.group(2)
+    if re.match(r"[\d.]", unit) and not unit.startswith("1/"):  # "1/min" is a unit
+        raise ValueError(f"'{text}': the unit '{unit}' starts with a number; write one number "
+                         "and a unit (e.g. '12.25 in' or '12 1/4 in')")
+    return number, unit
 
 
 @lru_cache(maxsize=512)
