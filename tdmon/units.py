@@ -26,6 +26,7 @@ _OFFSET_IN_COMPOUND = re.compile(r"\b(degC|degF|celsius|fahrenheit)\b")
 # plain number, "12 1/4 in" would be 12 times the unit "1/4 in", i.e. 3 in.
 _MIXED_FRACTION = re.compile(
     r"\s*(?P<sign>[-+]?)(?:(?P<whole>\d+)(?:\s+|-))?(?P<num>\d+)/(?P<den>\d+)\s*(?P<unit>.*?)\s*")
+_LEADING_NUMBER = re.compile(r"\s*[-+]?[\d.](?!\s*/)")  # but "1/min" is a unit
 _DECIMAL = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")
 
 
@@ -41,7 +42,7 @@ def _split(text: str) -> tuple[float, str]:
     if match is None:
         raise ValueError(f"'{text}' is not a number followed by a unit (e.g. '9950 ft')")
     number, unit = float(match.group(1)), match.group(2)
-    if re.match(r"[\d.]", unit) and not unit.startswith("1/"):  # "1/min" is a unit
+    if _LEADING_NUMBER.match(unit):
         raise ValueError(f"'{text}': the unit '{unit}' starts with a number; write one number "
                          "and a unit (e.g. '12.25 in' or '12 1/4 in')")
     return number, unit
@@ -59,6 +60,9 @@ def conversion(unit: str, target: str) -> tuple[float, float]:
     ValueError
         The unit is unknown or has the wrong dimension for ``target``.
     """
+    if _LEADING_NUMBER.match(unit):
+        # pint reads "8 N" as a quantity and would multiply every value by 8
+        raise ValueError(f"unit '{unit}' starts with a number; give the number as the value")
     if unit not in _ABSOLUTE_TEMPERATURES:
         unit = _OFFSET_IN_COMPOUND.sub(lambda m: "delta_" + m.group(1), unit)
     if target not in _ABSOLUTE_TEMPERATURES:

@@ -30,3 +30,10 @@ def test_reciprocal_and_factored_units_still_read() -> None:
     # a dogleg severity written per 30 m: 3 deg/30 m = 0.1 deg/m
     assert parse_quantity("3 deg/(30 m)", "deg/m") == pytest.approx(0.1)
     assert to_unit(60.0, "degF", "degC") == pytest.approx(15.555555555555555)
+
+
+def test_a_payload_unit_with_a_number_is_refused_not_multiplied() -> None:
+    # a payload {"value": 1, "unit": "8 N"} was taken as 8 N (issue 13)
+    with pytest.raises(ValueError, match="starts with a number"):
+        to_unit(1.0, "8 N", "N")
+    assert to_unit(1.0, "kN", "N") == 1000.0
