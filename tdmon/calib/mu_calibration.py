@@ -13,9 +13,9 @@ feeds on, ``T_eff = sum(J_j T_j) / sum(J_j)`` with ``J_j = dh/dmu_j``. :func:`id
 reports the slope dmu/dT with its 95 % interval and the range of T_eff seen, and says the slope
 is not identified when the interval includes zero or the range is too narrow.
 
-Pure ``predict``/``update`` on a frozen :class:`MuTState`, a thin wrapper
-(:class:`MuTCalibrator`); fit results are keyed like the family's own arguments so
-``FrictionModel(family, params)`` works (STYLE.md items 5, 6).
+Pure ``predict``/``update`` on a frozen :class:`MuTState` (the filter itself, Joseph-form update
+and iterated EKF, is :mod:`tdmon.calib.kalman`), a thin wrapper (:class:`MuTCalibrator`); fit
+results are keyed like the family's own arguments so ``FrictionModel(family, params)`` works.
 """
 
 from __future__ import annotations
@@ -26,7 +26,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tdmon.calib import kalman
 from tdmon.calib.backcalc import window_measurement
+from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
 from tdmon.model.friction import FrictionModel
@@ -100,12 +102,13 @@ def scale_parametrisation(lab: FrictionModel) -> tuple[MuTParametrisation, Array
 
 
 @dataclass(frozen=True)
-class MuTState:
-    """Filter state.
+class MuTState(KalmanState):
+    """Filter state: a :class:`~tdmon.calib.kalman.KalmanState` on the law's parameters, and
+    the range of effective temperatures seen.
 
     Attributes
     ----------
-    theta : parameters
+    mean : parameters (also as ``theta``)
     covariance : their covariance
     updates : windows used [-]
     innovation : last measured minus predicted [N or N m]
@@ -113,13 +116,13 @@ class MuTState:
     temperature_min, temperature_max : range of the windows' effective temperatures [degC]
     """
 
-    theta: Array
-    covariance: Array
-    updates: int = 0
-    innovation: float = 0.0
-    innovation_variance: float = 0.0
     temperature_min: float = math.inf
     temperature_max: float = -math.inf
+
+    @property
+    def theta(self) -> Array:
+        """Parameters, in the order of the parametrisation's names."""
+        return self.mean
 
 
 def initial_state(theta: ArrayLike, std: ArrayLike) -> MuTState:
@@ -131,13 +134,13 @@ def initial_state(theta: ArrayLike, std: ArrayLike) -> MuTState:
 
 def predict(state: MuTState, process_std: ArrayLike = 0.0) -> MuTState:
     """Random-walk drift of the parameters between windows."""
-    q = np.broadcast_to(np.asarray(process_std, dtype=np.float64), state.theta.shape)
-    return replace(state, covariance=state.covariance + np.diag(q**2))
+    return kalman.predict(state, process_std)
 
 
 def update(state: MuTState, measured: float, predicted: float, jacobian: Array,
            noise_variance: float, effective_temperature: float | None = None) -> MuTState:
-    """Kalman update with one scalar measurement (Joseph form); bad input keeps the prior.
+    """Kalman update with one scalar measurement (:func:`tdmon.calib.kalman.update`); bad
+    input, or a Jacobian that is all zero, keeps the prior.
 
     Parameters
     ----------
@@ -147,22 +150,21 @@ def update(state: MuTState, measured: float, predicted: float, jacobian: Array,
     noise_variance : measurement variance
     effective_temperature : the window's T_eff [degC], for the range seen
     """
-    h = np.asarray(jacobian, dtype=np.float64)
-    if not (math.isfinite(measured) and math.isfinite(predicted) and np.isfinite(h).all()
-            and math.isfinite(noise_variance) and noise_variance > 0.0 and np.any(h)):
+    if not np.any(jacobian):
         return state
-    p = state.covariance
-    ph = p @ h
-    s = float(h @ ph) + noise_variance
-    gain = ph / s
-    innovation = measured - predicted
-    a = np.eye(h.size) - np.outer(gain, h)
-    covariance = a @ p @ a.T + noise_variance * np.outer(gain, gain)
-    low, high = state.temperature_min, state.temperature_max
-    if effective_temperature is not None and math.isfinite(effective_temperature):
-        low, high = min(low, effective_temperature), max(high, effective_temperature)
-    return MuTState(state.theta + gain * innovation, 0.5 * (covariance + covariance.T),
-                    state.updates + 1, float(innovation), s, low, high)
+    posterior = kalman.update(state, measured, predicted, jacobian, noise_variance)
+    if posterior is state:
+        return state
+    return _seen(posterior, effective_temperature)
+
+
+def _seen(state: MuTState, effective_temperature: float | None) -> MuTState:
+    """``state`` with the range of effective temperatures widened to ``effective_temperature``
+    [degC] (unchanged when None or not finite)."""
+    if effective_temperature is None or not math.isfinite(effective_temperature):
+        return state
+    return replace(state, temperature_min=min(state.temperature_min, effective_temperature),
+                   temperature_max=max(state.temperature_max, effective_temperature))
 
 
 def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Array,
@@ -287,6 +289,13 @@ def identifiability(parametrisation: MuTParametrisation, state: MuTState, *,
     return Identifiability(bool(ok), slope, std, interval, (low, high), reason)
 
 
+@dataclass(frozen=True)
+class _WindowLinearisation(Linearisation):
+    """A window's measurement linearised at an iterate, with its effective temperature."""
+
+    effective_temperature: float = math.nan
+
+
 class MuTCalibrator:
     """The live mu(T) calibration: feed windows, read parameters and identifiability.
 
@@ -327,34 +336,34 @@ class MuTCalibrator:
         self.method = method
 
     def add_window(self, window: Window, *, iterations: int = 3) -> bool:
-        """Update with one window; False when it cannot be used (state unchanged)."""
+        """Update with one window; False when it cannot be used (state unchanged).
+
+        Iterated EKF (:func:`tdmon.calib.kalman.iterated_update`), without gating; the range
+        of effective temperatures takes the last iterate's T_eff.
+        """
         observed = window_measurement(window)
         if observed is None:
             return False
         operation, index = observed.operation, observed.quantity_index
-        measured, se = observed.value, observed.standard_error
-        prior = predict(self.state, self.process_std)
-        estimate = prior.theta
-        posterior = prior
+
+        def linearise(estimate: Array) -> _WindowLinearisation:
+            predicted, jacobian, t_eff = measurement(
+                self.model, self.parametrisation, estimate, self.temperature, operation,
+                window.bit_depth, quantity_index=index, mask=self.mask,
+                base_mu=self.base_mu, method=self.method)
+            noise = kalman.noise_with_model_error(observed.standard_error,
+                                                  self.model_std_fraction, jacobian, estimate)
+            return _WindowLinearisation(predicted, jacobian, noise, t_eff)
+
         try:
-            for _ in range(max(1, iterations)):
-                predicted, jacobian, t_eff = measurement(
-                    self.model, self.parametrisation, estimate, self.temperature, operation,
-                    window.bit_depth, quantity_index=index, mask=self.mask,
-                    base_mu=self.base_mu, method=self.method)
-                friction_part = abs(float(jacobian @ estimate))
-                noise = se**2 + (self.model_std_fraction * friction_part) ** 2
-                posterior = update(prior, measured,
-                                   predicted + float(jacobian @ (prior.theta - estimate)),
-                                   jacobian, max(noise, 1e-12), t_eff)
-                if posterior is prior:
-                    return False
-                estimate = posterior.theta
+            result = kalman.iterated_update(predict(self.state, self.process_std),
+                                            observed.value, linearise, iterations=iterations)
         except ModelError:
             return False
-        if not np.isfinite(posterior.theta).all():
+        if not result.accepted or not np.isfinite(result.state.theta).all():
             return False
-        self.state = posterior
+        assert result.linearisation is not None  # accepted: linearised at least once
+        self.state = _seen(result.state, result.linearisation.effective_temperature)
         return True
 
     @property
@@ -382,7 +391,7 @@ class MuTCalibrator:
         """``estimate`` fields of kind ``mu_T`` (``mu``/``mu_std`` at the middle of the
         temperature range seen; finite numbers only)."""
         ident = identifiability(self.parametrisation, self.state)
-        std = np.sqrt(np.maximum(np.diag(self.state.covariance), 0.0))
+        std = self.state.std
         middle = (0.5 * (ident.temperature_range[0] + ident.temperature_range[1])
                   if ident.temperature_range != (0.0, 0.0) else 50.0)
         try:

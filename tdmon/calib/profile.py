@@ -10,9 +10,10 @@ no longer see it, and the filter's cross-covariances move the part of the earlie
 the shallower bins cannot explain onto the bins the bit has left.
 
 Between windows friction may drift (cuttings beds build up, mud changes): ``predict`` adds
-process noise. Pure ``predict``/``update`` on a frozen :class:`ProfileState` (STYLE.md item 6),
-with the innovation and its variance kept for diagnostics; :class:`FrictionProfile` is the thin
-stateful wrapper the daemon uses.
+process noise. Pure ``predict``/``update`` on a frozen :class:`ProfileState`, with the innovation
+and its variance kept for diagnostics; the filter itself (Joseph-form update, iterated EKF,
+gating) is :mod:`tdmon.calib.kalman`. :class:`FrictionProfile` is the thin stateful wrapper the
+daemon uses.
 
 References
 ----------
@@ -22,12 +23,14 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.calib import kalman
 from tdmon.calib.backcalc import window_measurement
+from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
 from tdmon.model.torque_drag import WellModel
@@ -44,6 +47,9 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+#: the filter's mean is clipped to these [-]: friction cannot be negative
+_MU_BOUNDS = (0.0, 1.5)
 
 
 @dataclass(frozen=True)
@@ -82,28 +88,22 @@ def profile_grid(model: WellModel, bin_length: float) -> ProfileGrid:
 
 
 @dataclass(frozen=True)
-class ProfileState:
-    """Filter state.
+class ProfileState(KalmanState):
+    """Filter state: a :class:`~tdmon.calib.kalman.KalmanState` on the friction per bin.
 
     Attributes
     ----------
-    mu : friction per bin [-]
+    mean : friction per bin [-] (also as ``mu``)
     covariance : its covariance [-^2]
     updates : windows used so far [-]
     innovation : last measured minus predicted value [N or N m] (0 before the first update)
     innovation_variance : its predicted variance [N^2 or (N m)^2]
     """
 
-    mu: Array
-    covariance: Array
-    updates: int = 0
-    innovation: float = 0.0
-    innovation_variance: float = 0.0
-
     @property
-    def std(self) -> Array:
-        """Standard deviation per bin [-]."""
-        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+    def mu(self) -> Array:
+        """Friction per bin [-]."""
+        return self.mean
 
 
 def initial_state(grid: ProfileGrid, mu: float, std: float) -> ProfileState:
@@ -113,14 +113,13 @@ def initial_state(grid: ProfileGrid, mu: float, std: float) -> ProfileState:
 
 def predict(state: ProfileState, process_std: float) -> ProfileState:
     """Random-walk drift of every bin between windows: ``P += q^2 I``, ``q`` [-]."""
-    covariance = state.covariance + np.eye(state.mu.size) * process_std**2
-    return replace(state, covariance=covariance)
+    return kalman.predict(state, process_std)
 
 
 def update(state: ProfileState, measured: float, predicted: float, jacobian: Array,
-           noise_variance: float, *, mu_bounds: tuple[float, float] = (0.0, 1.5)
+           noise_variance: float, *, mu_bounds: tuple[float, float] = _MU_BOUNDS
            ) -> ProfileState:
-    """Kalman update with one scalar measurement.
+    """Kalman update with one scalar measurement (:func:`tdmon.calib.kalman.update`).
 
     Parameters
     ----------
@@ -134,26 +133,8 @@ def update(state: ProfileState, measured: float, predicted: float, jacobian: Arr
     Returns
     -------
     ProfileState
-
-    Notes
-    -----
-    ``S = H P H^T + R``, ``K = P H^T / S``, ``mu += K (z - h)``, ``P = (I - K H) P (I - K H)^T
-    + K R K^T`` (Joseph form, which keeps P symmetric and positive).
     """
-    h = np.asarray(jacobian, dtype=np.float64)
-    if not (math.isfinite(measured) and math.isfinite(predicted) and np.isfinite(h).all()
-            and math.isfinite(noise_variance) and noise_variance > 0.0):
-        return state
-    p = state.covariance
-    ph = p @ h
-    s = float(h @ ph) + noise_variance
-    gain = ph / s
-    innovation = measured - predicted
-    mu = np.clip(state.mu + gain * innovation, *mu_bounds)
-    a = np.eye(mu.size) - np.outer(gain, h)
-    covariance = a @ p @ a.T + noise_variance * np.outer(gain, gain)
-    covariance = 0.5 * (covariance + covariance.T)
-    return ProfileState(mu, covariance, state.updates + 1, float(innovation), s)
+    return kalman.update(state, measured, predicted, jacobian, noise_variance, bounds=mu_bounds)
 
 
 def measurement_jacobian(model: WellModel, grid: ProfileGrid, mu_bins: Array, operation: str,
@@ -223,39 +204,35 @@ class FrictionProfile:
     def add_window(self, window: Window, *, iterations: int = 2) -> bool:
         """Update with one window; False when the window cannot be used (state unchanged).
 
-        Iterated EKF: the Jacobian is re-evaluated at the updated mean ``iterations`` times,
-        which removes most of the linearisation error of the capstan term.
+        Iterated EKF (:func:`tdmon.calib.kalman.iterated_update`): the Jacobian is re-evaluated
+        at the updated mean ``iterations`` times, which removes most of the linearisation error
+        of the capstan term. An overpull at a tight spot or a set-down is not friction along
+        the string: a window further than ``gate`` from what the filter expects is left out.
         """
         observed = window_measurement(window)
         if observed is None:
             return False
         operation, index = observed.operation, observed.quantity_index
-        measured, se = observed.value, observed.standard_error
-        prior = predict(self.state, self.process_std)
-        estimate = prior.mu
+
+        def linearise(estimate: Array) -> Linearisation:
+            predicted, jacobian = measurement_jacobian(
+                self.model, self.grid, estimate, operation, window.bit_depth,
+                quantity_index=index, method=self.method)
+            noise = kalman.noise_with_model_error(observed.standard_error,
+                                                  self.model_std_fraction, jacobian, estimate)
+            return Linearisation(predicted, jacobian, noise)
+
         try:
-            for _ in range(max(1, iterations)):
-                predicted, jacobian = measurement_jacobian(
-                    self.model, self.grid, estimate, operation, window.bit_depth,
-                    quantity_index=index, method=self.method)
-                if not np.any(jacobian):
-                    return False
-                # linearise about the current iterate, not the prior mean
-                predicted_at_prior = predicted + float(jacobian @ (prior.mu - estimate))
-                friction_part = abs(float(jacobian @ estimate))
-                noise = se**2 + (self.model_std_fraction * friction_part) ** 2
-                posterior = update(prior, measured, predicted_at_prior, jacobian,
-                                   max(noise, 1e-12))
-                if posterior.innovation**2 > self.gate**2 * posterior.innovation_variance:
-                    # an overpull at a tight spot or a set-down is not friction along the
-                    # string: a window this far from what the filter expects is left out
-                    self.gated += 1
-                    return False
-                estimate = posterior.mu
+            result = kalman.iterated_update(
+                predict(self.state, self.process_std), observed.value, linearise,
+                iterations=iterations, gate=self.gate, bounds=_MU_BOUNDS)
         except ModelError:
             return False
-        self.state = posterior
-        return True
+        if result.gated:
+            self.gated += 1
+        if result.accepted:
+            self.state = result.state
+        return result.accepted
 
     def message_fields(self) -> dict[str, object]:
         """``estimate`` message fields of kind ``profile`` (finite numbers only)."""

@@ -1,5 +1,5 @@
 """Live mu(T) calibration: the Glydril slope (0.0013 /K, Kaarstad et al. 2009) recovered within
-25 % over a trip from TD on Example 7.1 with a geothermal profile (REFERENCE.md 2-3), the
+25 % over a trip from TD on Example 7.1 with a geothermal profile (docs/back-calculation.md), the
 identifiability statement, scale mode on a lab fit, and results that feed the model as is."""
 
 from __future__ import annotations
