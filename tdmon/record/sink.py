@@ -46,7 +46,6 @@ class Sink(Protocol):
         """Flush and release everything; idempotent."""
 
 
-@runtime_checkable
 class Recorder(Sink, Protocol):
     """A flight recorder: a sink writing MCAP that reports its health instead of raising.
 
