@@ -18,6 +18,7 @@ from pydantic import (
     ConfigDict,
     Field,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -48,6 +49,15 @@ CubicMetersPerSecond = Annotated[float, _quantity("m**3/s")]
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+class CrossFieldError(ValueError):
+    """A check across sections, raised by a model validator for the dotted ``key`` it names
+    (pydantic places a model validator's error at the model, not at the key at fault)."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(reason)
+        self.key = key
 
 
 class TlsConfig(_Model):
@@ -160,6 +170,13 @@ class RerunConfig(_Model):
     path: Path | None = None
     port: int = Field(default=9876, ge=1, le=65535)
 
+    @field_validator("path")
+    @classmethod
+    def _file_mode_needs_path(cls, value: Path | None, info: ValidationInfo) -> Path | None:
+        if value is None and info.data.get("mode") == "file":
+            raise ValueError("mode 'file' needs a path for the .rrd file")
+        return value
+
 
 class QueuesConfig(_Model):
     ingest: int = Field(default=10_000, ge=1, description="raw messages waiting for the pipeline")
@@ -259,6 +276,18 @@ class DaemonConfig(_Model):
             raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
         return value
 
+    @model_validator(mode="after")
+    def _publishing_shares_a_source_connection(self) -> DaemonConfig:
+        """``publish.zenoh = true`` and ``publish.mqtt = true`` publish over the source's
+        session or broker, so that source must be configured."""
+        if self.publish.zenoh is True and self.sources.zenoh is None:
+            raise CrossFieldError("publish.zenoh",
+                                  "true needs [sources.zenoh]; give a table with endpoints")
+        if self.publish.mqtt is True and self.sources.mqtt is None:
+            raise CrossFieldError("publish.mqtt",
+                                  "true needs [sources.mqtt]; give a table with the broker")
+        return self
+
     @field_validator("channels")
     @classmethod
     def _channels(cls, value: dict[str, ChannelConfig]) -> dict[str, ChannelConfig]:
@@ -307,7 +336,11 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
         config = DaemonConfig.model_validate({**data, "source_file": None})
     except ValidationError as exc:
         error = exc.errors()[0]
-        key = ".".join(str(part) for part in error["loc"])
+        loc = [str(part) for part in error["loc"]]
+        cause = error.get("ctx", {}).get("error")
+        if isinstance(cause, CrossFieldError):
+            loc.append(cause.key)
+        key = ".".join(loc)
         reason = error["msg"].removeprefix("Value error, ")
         if error["type"] == "extra_forbidden":
             reason = "unknown key"

@@ -1,13 +1,14 @@
 """Build a runnable daemon from a :class:`~tdmon.config.daemon.DaemonConfig`.
 
-This is the thin adapter between configuration and the composer: it opens the Zenoh session,
-creates sources, publishers, the recorder and the steps, and hands them to :class:`Daemon`.
-Extra sinks and steps (back-calculation, Rerun, tests) are passed in by the caller.
+This is the thin adapter between configuration and the composer: the builder tables create
+the sources (:data:`tdmon.daemon.sources.SOURCES`), the recorder, Rerun and the publishers
+(:data:`tdmon.daemon.sinks.SINKS`, :data:`~tdmon.daemon.sinks.PUBLISHERS`); this module makes
+the steps and hands everything to :class:`Daemon`. Extra sinks and steps (back-calculation,
+Rerun, tests) are passed in by the caller.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import math
@@ -19,18 +20,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tdmon.config.daemon import DaemonConfig, ZenohConfig
+from tdmon.config.daemon import DaemonConfig
 from tdmon.daemon.aligner import Aligner
-from tdmon.daemon.daemon import ConnectedPublisher, Daemon, SourceSpec
+from tdmon.daemon.daemon import Daemon
 from tdmon.daemon.monitor import LoadModel, MonitorStep
 from tdmon.daemon.pipeline import Pipeline, Sink, Stats, Step
 from tdmon.daemon.rigstate import RigStateThresholds, SimpleRigState
+from tdmon.daemon.sinks import PUBLISHERS, SINKS
+from tdmon.daemon.sources import SOURCES
 from tdmon.daemon.supervisor import Backoff
+from tdmon.daemon.wiring import Wiring, wire
 from tdmon.errors import ConfigError
 from tdmon.ingest.decode import Decoder
-from tdmon.ingest.mcap_source import McapSource
-from tdmon.ingest.mqtt import MqttPublisher, MqttSource
-from tdmon.ingest.zenoh_io import ZenohPublisher, ZenohSource, key_expr_for, open_session
 from tdmon.model.friction import FrictionModel
 
 log = logging.getLogger(__name__)
@@ -308,96 +309,13 @@ async def build_daemon(
         extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well),
                                         calibration=calibration))
     stats = Stats()
-    base = config.source_file.parent if config.source_file else None
-    sinks: list[Sink] = []
-    sessions: list[Any] = []
-    recorder: Any = None
-    pipeline: Pipeline | None = None
+    wiring = Wiring(config, stats)
     try:
-        if config.recorder.enabled:
-            from tdmon.record.mcap_recorder import McapRecorder
-
-            def on_alarm(message: dict[str, Any]) -> None:
-                if pipeline is not None:
-                    pipeline.emit("alarm", message)
-
-            recorder = McapRecorder(
-                config.resolve(config.recorder.output),
-                rotate_s=config.recorder.rotation,
-                flush_interval_s=config.recorder.flush_interval,
-                on_alarm=on_alarm,
-            )
-            sinks.append(recorder)
-        if config.rerun.mode != "off":
-            from tdmon.record.rerun_views import RerunViews
-
-            rrd = config.resolve(config.rerun.path) if config.rerun.path else None
-            if config.rerun.mode == "file" and rrd is None:
-                raise ConfigError(str(config.source_file), "rerun.path",
-                                  "mode 'file' needs a path for the .rrd file")
-            sinks.append(RerunViews(
-                rrd, live_port=config.rerun.port if config.rerun.mode == "live" else None))
-        sinks.extend(extra_sinks)
-
-        own = f"{config.prefix}/tdmon/"
-        sources: list[SourceSpec] = []
-        publishers: list[ConnectedPublisher] = []
-        zenoh_session = None
-        if config.sources.zenoh is not None or config.publish.zenoh is True:
-            zcfg = config.sources.zenoh
-            if zcfg is None:
-                raise ConfigError(str(config.source_file), "publish.zenoh",
-                                  "true needs [sources.zenoh]; give a table with endpoints")
-            zenoh_session = await asyncio.to_thread(open_session, zcfg)
-            sessions.append(zenoh_session)
-        if config.sources.zenoh is not None:
-            assert zenoh_session is not None
-            session = zenoh_session
-            max_buffer = config.queues.ingest
-
-            def open_zenoh() -> ZenohSource:
-                return ZenohSource(session, key_expr_for(config.prefix), (own,), max_buffer)
-
-            sources.append(SourceSpec("zenoh", open_zenoh))
-        if config.sources.mqtt is not None:
-            mqtt = config.sources.mqtt
-
-            def open_mqtt() -> MqttSource:
-                return MqttSource(mqtt, [f"{config.prefix}/#"], (own,), base)
-
-            sources.append(SourceSpec("mqtt", open_mqtt))
-        if config.sources.mcap is not None:
-            mcap = config.sources.mcap
-            path = config.resolve(mcap.path)
-            speed = None if mcap.speed == "max" else float(mcap.speed)
-
-            def open_mcap() -> McapSource:
-                return McapSource(path, speed)
-
-            sources.append(SourceSpec("mcap", open_mcap, finite=True))
-
-        names = list(config.publish.names)
-        if config.publish.zenoh is not False:
-            if isinstance(config.publish.zenoh, ZenohConfig):
-                publish_session = await asyncio.to_thread(open_session, config.publish.zenoh)
-                sessions.append(publish_session)
-            else:
-                assert zenoh_session is not None
-                publish_session = zenoh_session
-            sinks.append(ZenohPublisher(publish_session, config.prefix, names))
-        if config.publish.mqtt is not False:
-            if config.publish.mqtt is True:
-                if config.sources.mqtt is None:
-                    raise ConfigError(str(config.source_file), "publish.mqtt",
-                                      "true needs [sources.mqtt]; give a table with the broker")
-                pub_cfg = config.sources.mqtt
-            else:
-                pub_cfg = config.publish.mqtt
-            publisher = MqttPublisher(pub_cfg, config.prefix, names, qos=config.publish.qos,
-                                      queue_size=config.queues.publish,
-                                      on_drop=stats.count_drop, base=base)
-            sinks.append(publisher)
-            publishers.append(publisher)
+        await wire(SINKS, wiring)
+        wiring.sinks.extend(extra_sinks)
+        await wire(SOURCES, wiring)
+        await wire(PUBLISHERS, wiring)
+        sources = wiring.sources
 
         steps = default_steps(config, model, rig_state) + list(extra_steps)
         aligner = Aligner(
@@ -408,20 +326,18 @@ async def build_daemon(
         )
         decoder = Decoder(config.prefix, config.channel_specs(),
                           max_payload_bytes=config.queues.max_payload_bytes)
-        pipeline = Pipeline(decoder, aligner, steps, sinks, stats)
+        pipeline = Pipeline(decoder, aligner, steps, wiring.sinks, stats)
+        wiring.pipeline = pipeline
         if stop_when_sources_done is None:
             stop_when_sources_done = bool(sources) and all(s.finite for s in sources)
         daemon = Daemon(
-            pipeline, sources, publishers,
+            pipeline, sources, wiring.connected,
             queue_size=config.queues.ingest,
             status_interval=config.publish.status_interval,
             backoff=backoff,
             stop_when_sources_done=stop_when_sources_done,
         )
-        yield Built(daemon, pipeline, stats, sinks, steps)
+        yield Built(daemon, pipeline, stats, wiring.sinks, steps)
     finally:
-        if pipeline is None and recorder is not None:
-            recorder.close()
-        for session in sessions:
-            with contextlib.suppress(Exception):  # closing a session that lost its peers
-                await asyncio.to_thread(session.close)
+        # the sinks built here are the daemon's to close, unless it never came to be
+        await wiring.release(close_sinks=wiring.pipeline is None)

@@ -6,13 +6,13 @@ be driven by tests without any transport.
 
 Plug-in points for other issues:
 
-* a **sink** (the MCAP recorder, Rerun, publishers) receives every message the daemon produces:
-  ``write(topic: str, log_time_ns: int, message: dict) -> None`` and ``close() -> None``, with
-  ``topic`` = ``/tdmon/<name>``. A sink that only wants some topics may say so with a
-  ``topics`` attribute (a collection of topics); messages nobody wants are then not even
-  built, which matters for the per-message ``raw`` and ``sample`` dicts. Raw input, samples
-  and rejections reach every sink before any later step sees the sample (DESIGN.md data
-  flow step 3).
+* a **sink** (:class:`tdmon.record.sink.Sink`: the MCAP recorder, Rerun, publishers) receives
+  every message the daemon produces: ``write(topic: str, log_time_ns: int, message: dict) ->
+  None`` and ``close() -> None``, with ``topic`` = ``/tdmon/<name>``. A sink that only wants
+  some topics may say so with a ``topics`` attribute (a collection of topics); messages nobody
+  wants are then not even built, which matters for the per-message ``raw`` and ``sample``
+  dicts. Raw input, samples and rejections reach every sink before any later step sees the
+  sample (docs/daemon.md, the data flow at the top).
 * a **step** (rig state, monitor, back-calculation, alarms) sees each aligned frame in order:
   ``on_frame(frame, emit)`` and ``close(emit)``; ``emit(name, message)`` sends a result to all
   sinks and leaves it in ``frame.results[name]`` for the steps after it.
@@ -35,19 +35,13 @@ from tdmon.ingest.types import (
     rejected_message,
     sample_message,
 )
+from tdmon.record.sink import Sink
+
+__all__ = ["Emit", "Frame", "FrameSource", "Pipeline", "Sink", "Stats", "Step"]
 
 log = logging.getLogger(__name__)
 
 Emit = Callable[[str, dict[str, Any]], None]
-
-
-@runtime_checkable
-class Sink(Protocol):
-    """Receives every daemon message; synchronous (a sink doing network I/O queues inside)."""
-
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None: ...
-
-    def close(self) -> None: ...
 
 
 @dataclass(slots=True)

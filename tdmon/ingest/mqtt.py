@@ -20,6 +20,8 @@ from types import TracebackType
 from typing import Any
 
 import aiomqtt
+from aiomqtt.exceptions import MqttConnectError
+from paho.mqtt.reasoncodes import ReasonCode
 
 from tdmon.config.daemon import MqttConfig
 from tdmon.errors import IngestError
@@ -52,8 +54,10 @@ def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext 
     return context
 
 
-def make_client(config: MqttConfig, client_id: str, base: Path | None = None) -> aiomqtt.Client:
-    """An aiomqtt client for ``config`` (must be called inside the running loop)."""
+def make_client(config: MqttConfig, client_id: str, base: Path | None = None,
+                queue_type: type[asyncio.Queue[aiomqtt.Message]] | None = None) -> aiomqtt.Client:
+    """An aiomqtt client for ``config`` (must be called inside the running loop); incoming
+    messages wait in a ``queue_type`` (default asyncio.Queue)."""
     return aiomqtt.Client(
         config.host,
         config.port,
@@ -67,6 +71,7 @@ def make_client(config: MqttConfig, client_id: str, base: Path | None = None) ->
         timeout=10.0,
         # small messages: without NODELAY, Nagle and delayed ACKs add ~40 ms now and then
         socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
+        queue_type=queue_type,
     )
 
 
@@ -74,11 +79,49 @@ def describe(config: MqttConfig) -> str:
     return f"mqtt {config.host}:{config.port}"
 
 
+#: MQTT 5 reason codes of a CONNACK refused for the credentials: 0x86 "Bad user name or
+#: password", 0x87 "Not authorized" (paho reports an MQTT 3.1.1 refusal with these too)
+AUTH_REASON_CODES = frozenset({0x86, 0x87})
+
+#: MQTT 3.1.1 CONNACK return codes for the same: 4 bad user name or password, 5 not authorised
+AUTH_CONNACK_CODES = frozenset({4, 5})
+
+
+def is_auth_failure(exc: BaseException) -> bool:
+    """Whether the broker refused us for our credentials, from the error's reason code."""
+    if not isinstance(exc, aiomqtt.MqttCodeError):
+        return False
+    if isinstance(exc.rc, ReasonCode):
+        return exc.rc.value in AUTH_REASON_CODES
+    # an integer is a 3.1.1 return code only in a refused connection; elsewhere it is paho's
+    # own error number (MQTTErrorCode), where 4 and 5 mean something else
+    return isinstance(exc, MqttConnectError) and exc.rc in AUTH_CONNACK_CODES
+
+
 def _translate(config: MqttConfig, what: str, exc: BaseException) -> IngestError:
     text = str(exc) or type(exc).__name__
-    if "ot authori" in text or "code:5]" in text or "code:135" in text:
+    if is_auth_failure(exc):
         text += " (check username and password)"
     return IngestError(f"{describe(config)}: {what}: {text}")
+
+
+class _Inbox(asyncio.Queue[aiomqtt.Message]):
+    """A client's incoming-message queue whose object the source holds.
+
+    aiomqtt builds this queue itself from the class passed as ``queue_type`` and keeps it
+    private; :func:`_inbox_class` makes a subclass per connection that hands the object back.
+    """
+
+
+def _inbox_class(made: list[_Inbox]) -> type[_Inbox]:
+    """A queue class whose instances are appended to ``made`` when aiomqtt builds them."""
+
+    class Inbox(_Inbox):
+        def __init__(self, maxsize: int = 0) -> None:
+            super().__init__(maxsize)
+            made.append(self)
+
+    return Inbox
 
 
 class MqttSource:
@@ -103,11 +146,15 @@ class MqttSource:
         self.ignore_prefixes = ignore_prefixes
         self.base = base
         self._client: aiomqtt.Client | None = None
+        self._inbox: _Inbox | None = None
         self._iterator: aiomqtt.MessagesIterator | None = None
         self._lost: IngestError | None = None
 
     async def __aenter__(self) -> MqttSource:
-        client = make_client(self.config, self.config.client_id, self.base)
+        made: list[_Inbox] = []
+        client = make_client(self.config, self.config.client_id, self.base,
+                             queue_type=_inbox_class(made))
+        (inbox,) = made  # built by the client's constructor
         try:
             await client.__aenter__()
         except aiomqtt.MqttError as exc:
@@ -119,6 +166,7 @@ class MqttSource:
             await _quiet_exit(client)
             raise _translate(self.config, "cannot subscribe", exc) from exc
         self._client = client
+        self._inbox = inbox
         self._iterator = client.messages
         self._lost = None
         return self
@@ -132,26 +180,24 @@ class MqttSource:
         if self._client is not None:
             await _quiet_exit(self._client)
             self._client = None
+            self._inbox = None
 
     def __aiter__(self) -> MqttSource:
         return self
 
     async def __anext__(self) -> RawMessage:
-        assert self._client is not None and self._iterator is not None, "not entered"
+        assert self._inbox is not None and self._iterator is not None, "not entered"
+        inbox = self._inbox
         while True:
-            if self._lost is not None:
-                # aiomqtt has already acknowledged what sits in its queue; when the connection
-                # drops, its iterator raises at once and would strand those messages, so hand
-                # them out first (the broker will not send them again).
-                pending = self._client._queue
-                if not pending.empty():
-                    message = pending.get_nowait()
-                else:
-                    raise self._lost
-            elif not self._client._queue.empty():
-                # fast path: aiomqtt's iterator creates a task per message even when one is
-                # already waiting, which costs more than all of our decoding
-                message = self._client._queue.get_nowait()
+            if not inbox.empty():
+                # Fast path: aiomqtt's iterator creates a task per message even when one is
+                # already waiting, which costs more than all of our decoding. And after the
+                # connection dropped: aiomqtt has already acknowledged what waits here, and its
+                # iterator raises at once and would strand it (the broker will not send it
+                # again), so it is handed out first.
+                message = inbox.get_nowait()
+            elif self._lost is not None:
+                raise self._lost
             else:
                 try:
                     message = await self._iterator.__anext__()

@@ -1,6 +1,6 @@
 """The MCAP flight recorder: a sink that writes every daemon message to rotating MCAP files.
 
-Design points (ECOSYSTEM.md, STYLE.md):
+Design points (docs/recording.md):
 
 * JSON messages, one JSON Schema per channel, registered once per file; integer-nanosecond log
   times; zstd chunks.
@@ -235,7 +235,7 @@ def _finish_at_exit(writer: Writer, stream: io.BufferedWriter[Any], lock: thread
 
 
 class McapRecorder:
-    """A :class:`~tdmon.record.sink.Sink` writing MCAP files to ``folder``.
+    """A :class:`~tdmon.record.sink.Recorder` writing MCAP files to ``folder``.
 
     Parameters
     ----------

@@ -1,14 +1,29 @@
-"""The sink protocol every recorder and view implements (docs/architecture.md)."""
+"""The sink and recorder protocols every consumer of daemon messages implements
+(docs/architecture.md).
+
+:class:`Sink` is the one plug-in point of the pipeline's output (recorders, Rerun views,
+publishers, test probes); :class:`Recorder` is what the daemon, the replay driver and the CLI
+use of a flight recorder, whichever process it writes from
+(:class:`~tdmon.record.mcap_recorder.McapRecorder` in this one,
+:class:`~tdmon.record.writer_process.RecorderProcess` in a child).
+"""
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from typing import Any, Protocol, runtime_checkable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+from tdmon.errors import RecordError
+
+if TYPE_CHECKING:  # mcap_recorder imports this module
+    from tdmon.record.mcap_recorder import RecorderStats
 
 log = logging.getLogger(__name__)
 
 #: A message as the daemon produces it: a JSON object (dict) of the shapes in schemas.py.
+#: Sinks that only read a message may accept any Mapping.
 Message = Mapping[str, Any]
 
 #: Called with an ``alarm``-shaped dict when a sink changes health (fails, resumes).
@@ -17,13 +32,47 @@ AlarmHook = Callable[[dict[str, Any]], None]
 
 @runtime_checkable
 class Sink(Protocol):
-    """Synchronous sink: the daemon calls ``write`` for every message and ``close`` once."""
+    """Synchronous sink: the daemon calls ``write`` for every message and ``close`` once.
 
-    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+    The pipeline hands each sink the dict it built (a fresh one per message); a sink that does
+    network I/O queues inside ``write``. A sink that only wants some topics may say so with a
+    ``topics`` attribute (a collection of topics): messages nobody wants are then not built.
+    """
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         """Take one message; must not raise into the caller's pipeline on I/O failure."""
 
     def close(self) -> None:
         """Flush and release everything; idempotent."""
+
+
+class Recorder(Sink, Protocol):
+    """A flight recorder: a sink writing MCAP that reports its health instead of raising.
+
+    Failures while recording put it in a failure state (``error``) and are reported through
+    its alarm hook; messages it could not record are counted in ``stats.lost``.
+    """
+
+    @property
+    def error(self) -> RecordError | None:
+        """The failure the recorder is in (None while recording works)."""
+
+    @property
+    def path(self) -> Path | None:
+        """The file being written (None while failed or after close)."""
+
+    @property
+    def stats(self) -> RecorderStats:
+        """Counters since the recorder was created (a snapshot)."""
+
+    def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
+        """Add a topic with its JSON Schema (raises RecordError for a conflicting schema)."""
+
+    def flush(self) -> None:
+        """Get what was written into the file now."""
+
+    def retry(self) -> bool:
+        """In the failure state, try a new file now; whether it records."""
 
 
 def call_alarm_hook(hook: AlarmHook | None, alarms: list[dict[str, Any]]) -> None:

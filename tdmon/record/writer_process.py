@@ -2,8 +2,8 @@
 
 At full replay speed the pipeline is CPU-bound, and the recorder (JSON encoding and mcap's
 pure-Python record framing of ~2.25 records per input message) took about 40 % of it on one
-core. :class:`RecorderProcess` is a :class:`~tdmon.record.sink.Sink` with the recorder's
-interface whose ``write`` only appends the message to a batch; batches are pickled (about
+core. :class:`RecorderProcess` is a :class:`~tdmon.record.sink.Recorder` like it whose
+``write`` only appends the message to a batch; batches are pickled (about
 0.75 us per message, a quarter of a JSON encoding) and sent over a pipe to a child process,
 which runs an ordinary :class:`McapRecorder`. Encoding, framing, compression and disk I/O then
 happen on the other core, and a slow disk never stalls the event loop.

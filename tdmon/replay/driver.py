@@ -42,6 +42,7 @@ from tdmon.daemon.build import build_daemon
 from tdmon.daemon.pipeline import Pipeline, Sink
 from tdmon.daemon.runner import stop_on_signals
 from tdmon.errors import IngestError, RecordError
+from tdmon.record.sink import Recorder
 
 __all__ = ["FULL_SPEED_GC_YOUNG", "ReplayResult", "SummarySink", "raw_message_count", "replay",
            "replay_config", "summarize_recording"]
@@ -257,8 +258,8 @@ async def replay(
     summary = SummarySink()
     sinks: list[Any] = []
     recorder_type = RecorderProcess if separate_writer else McapRecorder
-    recorder = recorder_type(path=out_path, overwrite=True, on_alarm=on_alarm,
-                             flush_interval_s=5.0)
+    recorder: Recorder = recorder_type(path=out_path, overwrite=True, on_alarm=on_alarm,
+                                       flush_interval_s=5.0)
     sinks.append(recorder)
     try:
         if rrd_path is not None:
