@@ -1,4 +1,5 @@
-"""Shared pieces of the TOML configuration models: quantity fields, file loading, error mapping."""
+"""Shared pieces of the TOML configuration models: quantity fields, the prefix rule, and the one
+reader of every TOML file (:func:`load_model`) with its one error mapping."""
 
 from __future__ import annotations
 
@@ -35,7 +36,9 @@ def _converter(target: str) -> Callable[[Any], float]:
     return convert
 
 
-def _quantity(target: str) -> BeforeValidator:
+def quantity(target: str) -> BeforeValidator:
+    """A pydantic validator reading a number in ``target`` or a string with a unit (such as
+    ``"3 min"``) into a finite number in ``target``: ``Annotated[float, quantity("s")]``."""
     return BeforeValidator(_converter(target))
 
 
@@ -50,14 +53,14 @@ def _weight_per_length(value: Any) -> float:
             raise as_force from None
 
 
-Length = Annotated[float, _quantity("m")]
-Diameter = Annotated[float, _quantity("m")]
-Force = Annotated[float, _quantity("N")]
-Moment = Annotated[float, _quantity("N*m")]
-Pressure = Annotated[float, _quantity("Pa")]
-Density = Annotated[float, _quantity("kg/m^3")]
+Length = Annotated[float, quantity("m")]
+Diameter = Annotated[float, quantity("m")]
+Force = Annotated[float, quantity("N")]
+Moment = Annotated[float, quantity("N*m")]
+Pressure = Annotated[float, quantity("Pa")]
+Density = Annotated[float, quantity("kg/m^3")]
 WeightPerLength = Annotated[float, BeforeValidator(_weight_per_length)]
-Dimensionless = Annotated[float, _quantity("dimensionless")]
+Dimensionless = Annotated[float, quantity("dimensionless")]
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -103,15 +106,56 @@ def read_toml(path: Path | str) -> dict[str, Any]:
         raise ConfigError(str(path), "", f"cannot be read: {exc}") from exc
 
 
-def load_model(
-    model: type[ModelT], path: Path | str, context: dict[str, Any] | None = None
+def validate_model(
+    model: type[ModelT], data: dict[str, Any], path: Path | str,
+    context: dict[str, Any] | None = None,
 ) -> ModelT:
-    """Validate the TOML file at ``path`` against ``model``; errors name file, key and reason."""
-    data = read_toml(path)
+    """Validate already-parsed TOML ``data`` from the file ``path`` against ``model``.
+
+    Raises
+    ------
+    ConfigError
+        The first problem, naming the file, the dotted key and the reason.
+    """
     try:
         return model.model_validate(data, context=context)
     except ValidationError as exc:
         raise validation_to_config_error(path, exc) from exc
+
+
+def load_model(
+    model: type[ModelT], path: Path | str, context: dict[str, Any] | None = None
+) -> ModelT:
+    """Read the TOML file at ``path`` and validate it against ``model``: every TOML file of
+    tdmon is read here, so that every mistake is reported the same way.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not TOML, or invalid; the message names file, key and reason.
+    """
+    return validate_model(model, read_toml(path), path, context)
+
+
+_NOT_IN_PREFIX = "#+*$"
+
+
+def validate_prefix(value: str) -> str:
+    """A rig's topic prefix without its outer slashes, e.g. ``"rig/F4"`` or ``"sim/trip-out"``.
+
+    The prefix is put in front of MQTT topics and Zenoh key expressions, so it may not hold
+    their wildcards and special characters (``#``, ``+``, ``*``, ``$``) nor white space (a
+    typo, never a rig's name). For a pydantic ``field_validator``.
+
+    Raises
+    ------
+    ValueError
+        An empty prefix, or one holding such a character.
+    """
+    value = value.strip("/")
+    if not value or any(c in value for c in _NOT_IN_PREFIX) or any(c.isspace() for c in value):
+        raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
+    return value
 
 
 __all__ = [
@@ -125,6 +169,9 @@ __all__ = [
     "StrictModel",
     "WeightPerLength",
     "load_model",
+    "quantity",
     "read_toml",
+    "validate_model",
+    "validate_prefix",
     "validation_to_config_error",
 ]
