@@ -22,7 +22,7 @@ from pydantic import (
     model_validator,
 )
 
-from tdmon.config.common import read_toml
+from tdmon.config.common import read_toml, validate_prefix, validation_to_config_error
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.ingest.decode import CHANNEL_UNITS, ChannelSpec
@@ -254,10 +254,7 @@ class DaemonConfig(_Model):
     @field_validator("prefix")
     @classmethod
     def _prefix(cls, value: str) -> str:
-        value = value.strip("/")
-        if not value or any(c in value for c in "#+*$"):
-            raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
-        return value
+        return validate_prefix(value)
 
     @field_validator("channels")
     @classmethod
@@ -306,12 +303,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     try:
         config = DaemonConfig.model_validate({**data, "source_file": None})
     except ValidationError as exc:
-        error = exc.errors()[0]
-        key = ".".join(str(part) for part in error["loc"])
-        reason = error["msg"].removeprefix("Value error, ")
-        if error["type"] == "extra_forbidden":
-            reason = "unknown key"
-        raise ConfigError(str(file), key, reason) from exc
+        raise validation_to_config_error(file, exc) from exc
     except ValueError as exc:  # a validator outside pydantic's wrapping
         raise ConfigError(str(file), "", str(exc)) from exc
     config = config.model_copy(update={"source_file": file.resolve()})
