@@ -9,12 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tdmon.calib.labfit import (
-    fit_friction_models,
-    read_tribometer_csv,
-    temperature_averages,
-)
+from tdmon.calib.labfit import fit_friction_models, temperature_averages
 from tdmon.cli import main
+from tdmon.ingest.lab import read_tribometer_csv
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "lab" / "glydril-tribometer.csv"
 
