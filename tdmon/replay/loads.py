@@ -52,7 +52,6 @@ def friction_with_anomalies(element_mid_md: Array, base: Array,
     return mu
 
 
-
 class Loads:
     """Surface hook load [N] and torque [N m] of any timeline state, from the model."""
 

@@ -40,7 +40,6 @@ _MOVING_STATE: Final[Mapping[str, RigState]] = MappingProxyType({
 _MIN_TRAVEL = 0.5
 
 
-
 class Position(NamedTuple):
     """Segment index and bit depth, hole depth, block position [m] at some times."""
 
