@@ -14,7 +14,8 @@ Each non-empty cell of a mapped column becomes one payload ``{"t", "value", "uni
 is not a number, or a time that cannot be read, is an error naming the file, the line and the
 column: a half-imported file would silently shift every statistic computed from it.
 
-The row parser (:func:`parse_rows`) is pure; :func:`import_csv` owns the files.
+The row parser (:func:`parse_rows`) is pure; :func:`import_csv` owns the files. A column map is
+read and validated by :mod:`tdmon.config.column_map`; :func:`load_column_map` makes it a layout.
 """
 
 from __future__ import annotations

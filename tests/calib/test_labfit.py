@@ -61,8 +61,8 @@ def test_true_means_differ_from_printed_averages(lab: tuple[np.ndarray, np.ndarr
     levels, means, counts = temperature_averages(*lab)
     assert levels == pytest.approx(TEMPERATURES)
     assert counts.tolist() == [7, 7, 7, 6, 7]
-    # REFERENCE.md 3 errata: the means at 30 and 40 degC are 0.2806 and 0.2886, printed
-    # 0.279 and 0.287; 50, 60, 70 agree with the print
+    # docs/lab-fit.md (Table 14 errata): the means at 30 and 40 degC are 0.2806 and 0.2886,
+    # printed 0.279 and 0.287; 50, 60, 70 agree with the print
     assert means == pytest.approx([0.2806, 0.2886, 0.283, 0.3185, 0.306], abs=5e-5)
 
 
@@ -83,7 +83,7 @@ def test_table_rows_without_the_csv() -> None:
 
 def test_linear_fit_on_printed_averages() -> None:
     fit = fit_friction(TEMPERATURES, PRINTED_AVERAGES, "linear", data="averages")
-    # REFERENCE.md 3: 0.25195 + 0.000855 T, R^2 0.643, adjusted 0.524, SE 0.0116
+    # docs/lab-fit.md: 0.25195 + 0.000855 T, R^2 0.643, adjusted 0.524, SE 0.0116
     # (by hand: slope = sum(dT dmu)/sum(dT^2) = 0.855/1000; intercept = 0.29470 - 50 b)
     assert fit.coefficients["a"] == pytest.approx(0.25195, abs=1e-6)
     assert fit.coefficients["b"] == pytest.approx(0.000855, abs=1e-9)
@@ -102,7 +102,7 @@ def test_linear_fit_on_printed_averages() -> None:
 def test_linear_fit_on_true_means(lab: tuple[np.ndarray, np.ndarray]) -> None:
     levels, means, _ = temperature_averages(*lab)
     fit = fit_friction(levels, means, "linear", data="averages")
-    # REFERENCE.md 3: 0.25494 + 0.000808 T, R^2 0.612
+    # docs/lab-fit.md: 0.25494 + 0.000808 T, R^2 0.612
     assert fit.coefficients["a"] == pytest.approx(0.25494, abs=1e-5)
     assert fit.coefficients["b"] == pytest.approx(0.000808, abs=1e-6)
     assert fit.r2 == pytest.approx(0.612, abs=5e-4)
@@ -112,7 +112,7 @@ def test_linear_fit_on_raw_values_says_not_significant(
         lab: tuple[np.ndarray, np.ndarray]) -> None:
     fit = fit_friction(*lab, "linear")
     assert fit.n == 34
-    # REFERENCE.md 3: R^2 = 0.03 on the 34 raw values
+    # docs/lab-fit.md: R^2 = 0.03 on the 34 raw values
     assert fit.r2 == pytest.approx(0.029, abs=1e-3)
     interval = fit.confidence_intervals["b"]
     assert interval is not None
