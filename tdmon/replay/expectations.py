@@ -47,7 +47,7 @@ from tdmon.config.expectations import (
     FrictionExpectation,
     StatesExpectation,
 )
-from tdmon.vocabulary import Operation, RigState
+from tdmon.vocabulary import EstimateKind, Operation, RigState
 
 __all__ = [
     "VOLVE_ACTIVITY_STATES",
@@ -248,7 +248,7 @@ def _state_agreement(spec: StatesExpectation, data: _Recorded) -> list[Check]:
 
 def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
     windows = [e for e in data.estimates
-               if e.get("kind") == "window" and e.get("operation") == spec.operation
+               if e.get("kind") == EstimateKind.WINDOW and e.get("operation") == spec.operation
                and (spec.include_revised or not e.get("revised"))
                and (spec.section is None or e.get("section") == spec.section)
                and (spec.depth is None

@@ -23,9 +23,9 @@ from tqdm import tqdm
 from tdmon.errors import RecordError
 from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.record.mcap_recorder import McapRecorder
-from tdmon.record.schemas import DRAFT, RIG_STATES
-from tdmon.replay.session import Scenario, Session, simulate_session
-from tdmon.vocabulary import RigState
+from tdmon.record.schemas import DRAFT
+from tdmon.replay.session import STATES, Scenario, Session, simulate_session
+from tdmon.vocabulary import RigState, Severity
 
 __all__ = [
     "RAW_TOPIC",
@@ -61,7 +61,7 @@ def _schema(name: str, title: str, properties: Mapping[str, Any],
             "required": list(required)}
 
 
-_STATES: Final = {"enum": [s for s in RIG_STATES if s != "unknown"]}
+_STATES: Final = {"enum": [s.value for s in STATES]}
 
 #: JSON Schemas of the truth topics of a simulated file.
 TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
@@ -94,7 +94,7 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
         ("t", "md_m", "mu", "mu_base")),
     "/truth/alarm": _schema(
         "truth.alarm", "an alarm the daemon is expected to raise at about t",
-        {"t": _TIME, "kind": _TEXT, "severity": {"enum": ["info", "warning", "critical"]},
+        {"t": _TIME, "kind": _TEXT, "severity": {"enum": [s.value for s in Severity]},
          "message": _TEXT, "channel": {"type": ["string", "null"]}, "md_m": _OPTIONAL,
          "accept": {"type": "array", "items": _TEXT,
                     "description": "daemon alarm kinds that count as raising it"}},
