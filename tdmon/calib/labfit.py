@@ -10,6 +10,9 @@ Linear-in-parameters families (linear, polynomial) are ordinary least squares; t
 (power, exponential, saturation growth) use :func:`scipy.optimize.curve_fit`, started from a
 linearised fit, with Wald intervals from the covariance and Student's t.
 
+Pure: the data come in as rows (:func:`tribometer_from_table`); reading a tribometer CSV file
+is :func:`tdmon.ingest.lab.read_tribometer_csv`.
+
 References
 ----------
 .. [1] Thesis "Torque and Drag Friction Model: Implemented Friction Factor Dependency of
@@ -22,7 +25,6 @@ import math
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -39,7 +41,6 @@ __all__ = [
     "TribometerData",
     "fit_friction",
     "fit_friction_models",
-    "read_tribometer_csv",
     "temperature_averages",
     "tribometer_from_table",
 ]
@@ -236,31 +237,6 @@ def _number(cell: object, row: int, column: str) -> float:
     if not math.isfinite(value):
         raise FitError(f"data row {row}: '{column}' is not finite: {cell!r}")
     return value
-
-
-def read_tribometer_csv(path: str | Path) -> TribometerData:
-    """Read a tribometer CSV in the layout of ``glydril-tribometer.csv``.
-
-    Columns ``test,temperature_C,friction_coefficient``; lines starting with ``#`` are
-    comments; an empty friction cell is a failed run (dropped and counted).
-
-    Raises
-    ------
-    FitError
-        The file cannot be read or holds bad values (the message names the file and row).
-    """
-    import pandas as pd  # I/O edge: keep pandas out of the pure fitting code's import path
-
-    try:
-        frame = pd.read_csv(path, comment="#", dtype=str, keep_default_na=False,
-                            skipinitialspace=True)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise FitError(f"{path}: cannot read tribometer data: {exc}") from exc
-    try:
-        return tribometer_from_table(frame.itertuples(index=False, name=None),
-                                     list(frame.columns))
-    except FitError as exc:
-        raise FitError(f"{path}: {exc}") from exc
 
 
 def temperature_averages(temperature: ArrayLike,

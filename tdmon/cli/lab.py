@@ -1,7 +1,8 @@
 """``tdmon lab fit``: mu(T) laws fitted to tribometer measurements, with their uncertainty.
 
-The fitting and its statistics live in :mod:`tdmon.calib.labfit`; this module parses the
-arguments, prints the ranked fits and draws the thesis's Figure 15 with confidence bands.
+The fitting and its statistics live in :mod:`tdmon.calib.labfit`, the reading of the CSV file
+in :mod:`tdmon.ingest.lab`; this module parses the arguments, prints the ranked fits and draws
+the thesis's Figure 15 with confidence bands.
 """
 
 from __future__ import annotations
@@ -89,12 +90,8 @@ class _Fits:
 
 
 def _fits(path: Path, models: list[str] | None, given_averages: bool) -> _Fits:
-    from tdmon.calib.labfit import (
-        DEFAULT_MODELS,
-        fit_friction_models,
-        read_tribometer_csv,
-        temperature_averages,
-    )
+    from tdmon.calib.labfit import DEFAULT_MODELS, fit_friction_models, temperature_averages
+    from tdmon.ingest.lab import read_tribometer_csv
 
     chosen = tuple(models) if models is not None else DEFAULT_MODELS
     data = read_tribometer_csv(path)

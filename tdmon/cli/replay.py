@@ -165,8 +165,9 @@ def _speed(text: str) -> float | None:
 
 def _replay(args: argparse.Namespace) -> int:
     from tdmon.config.daemon import load_daemon_config
+    from tdmon.config.expectations import load_expectations
     from tdmon.replay.driver import raw_message_count, replay
-    from tdmon.replay.expectations import check_replay, find_expectations, load_expectations
+    from tdmon.replay.expectations import check_replay, find_expectations
 
     speed = _speed(args.speed)
     expectations = None

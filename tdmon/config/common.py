@@ -1,4 +1,5 @@
-"""Shared pieces of the TOML configuration models: quantity fields, file loading, error mapping."""
+"""Shared pieces of the TOML configuration models: quantity fields, the prefix rule, and the one
+reader of every TOML file (:func:`load_model`) with its one error mapping."""
 
 from __future__ import annotations
 
@@ -35,7 +36,9 @@ def _converter(target: str) -> Callable[[Any], float]:
     return convert
 
 
-def _quantity(target: str) -> BeforeValidator:
+def quantity(target: str) -> BeforeValidator:
+    """A pydantic validator reading a number in ``target`` or a string with a unit (such as
+    ``"3 min"``) into a finite number in ``target``: ``Annotated[float, quantity("s")]``."""
     return BeforeValidator(_converter(target))
 
 
@@ -50,14 +53,14 @@ def _weight_per_length(value: Any) -> float:
             raise as_force from None
 
 
-Length = Annotated[float, _quantity("m")]
-Diameter = Annotated[float, _quantity("m")]
-Force = Annotated[float, _quantity("N")]
-Moment = Annotated[float, _quantity("N*m")]
-Pressure = Annotated[float, _quantity("Pa")]
-Density = Annotated[float, _quantity("kg/m^3")]
+Length = Annotated[float, quantity("m")]
+Diameter = Annotated[float, quantity("m")]
+Force = Annotated[float, quantity("N")]
+Moment = Annotated[float, quantity("N*m")]
+Pressure = Annotated[float, quantity("Pa")]
+Density = Annotated[float, quantity("kg/m^3")]
 WeightPerLength = Annotated[float, BeforeValidator(_weight_per_length)]
-Dimensionless = Annotated[float, _quantity("dimensionless")]
+Dimensionless = Annotated[float, quantity("dimensionless")]
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -72,6 +75,15 @@ def _dotted(location: tuple[int | str, ...]) -> str:
     return "".join(parts)
 
 
+class CrossFieldError(ValueError):
+    """A check across sections, raised by a model validator for the dotted ``key`` it names
+    (pydantic places a model validator's error at the model, not at the key at fault)."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(reason)
+        self.key = key
+
+
 def validation_to_config_error(path: Path | str, error: ValidationError) -> ConfigError:
     """The first validation problem as a ConfigError naming the file, the key and the reason."""
     first = error.errors()[0]
@@ -81,10 +93,14 @@ def validation_to_config_error(path: Path | str, error: ValidationError) -> Conf
         reason = "missing key"
     elif first["type"] == "extra_forbidden":
         reason = "unknown key"
+    loc = tuple(first["loc"])
+    cause = first.get("ctx", {}).get("error")
+    if isinstance(cause, CrossFieldError):
+        loc = (*loc, *cause.key.split("."))
     more = len(error.errors()) - 1
     if more:
         reason += f" (and {more} more problem{'s' if more > 1 else ''})"
-    return ConfigError(str(path), _dotted(tuple(first["loc"])), reason)
+    return ConfigError(str(path), _dotted(loc), reason)
 
 
 def read_toml(path: Path | str) -> dict[str, Any]:
@@ -103,15 +119,56 @@ def read_toml(path: Path | str) -> dict[str, Any]:
         raise ConfigError(str(path), "", f"cannot be read: {exc}") from exc
 
 
-def load_model(
-    model: type[ModelT], path: Path | str, context: dict[str, Any] | None = None
+def validate_model(
+    model: type[ModelT], data: dict[str, Any], path: Path | str,
+    context: dict[str, Any] | None = None,
 ) -> ModelT:
-    """Validate the TOML file at ``path`` against ``model``; errors name file, key and reason."""
-    data = read_toml(path)
+    """Validate already-parsed TOML ``data`` from the file ``path`` against ``model``.
+
+    Raises
+    ------
+    ConfigError
+        The first problem, naming the file, the dotted key and the reason.
+    """
     try:
         return model.model_validate(data, context=context)
     except ValidationError as exc:
         raise validation_to_config_error(path, exc) from exc
+
+
+def load_model(
+    model: type[ModelT], path: Path | str, context: dict[str, Any] | None = None
+) -> ModelT:
+    """Read the TOML file at ``path`` and validate it against ``model``: every TOML file of
+    tdmon is read here, so that every mistake is reported the same way.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not TOML, or invalid; the message names file, key and reason.
+    """
+    return validate_model(model, read_toml(path), path, context)
+
+
+_NOT_IN_PREFIX = "#+*$"
+
+
+def validate_prefix(value: str) -> str:
+    """A rig's topic prefix without its outer slashes, e.g. ``"rig/F4"`` or ``"sim/trip-out"``.
+
+    The prefix is put in front of MQTT topics and Zenoh key expressions, so it may not hold
+    their wildcards and special characters (``#``, ``+``, ``*``, ``$``) nor white space (a
+    typo, never a rig's name). For a pydantic ``field_validator``.
+
+    Raises
+    ------
+    ValueError
+        An empty prefix, or one holding such a character.
+    """
+    value = value.strip("/")
+    if not value or any(c in value for c in _NOT_IN_PREFIX) or any(c.isspace() for c in value):
+        raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
+    return value
 
 
 __all__ = [
@@ -125,6 +182,9 @@ __all__ = [
     "StrictModel",
     "WeightPerLength",
     "load_model",
+    "quantity",
     "read_toml",
+    "validate_model",
+    "validate_prefix",
     "validation_to_config_error",
 ]

@@ -23,7 +23,12 @@ from pydantic import (
     model_validator,
 )
 
-from tdmon.config.common import read_toml
+from tdmon.config.common import (
+    CrossFieldError,
+    read_toml,
+    validate_prefix,
+    validation_to_config_error,
+)
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.ingest.decode import CHANNEL_UNITS, ChannelSpec
@@ -49,15 +54,6 @@ CubicMetersPerSecond = Annotated[float, _quantity("m**3/s")]
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
-
-
-class CrossFieldError(ValueError):
-    """A check across sections, raised by a model validator for the dotted ``key`` it names
-    (pydantic places a model validator's error at the model, not at the key at fault)."""
-
-    def __init__(self, key: str, reason: str) -> None:
-        super().__init__(reason)
-        self.key = key
 
 
 class TlsConfig(_Model):
@@ -271,10 +267,7 @@ class DaemonConfig(_Model):
     @field_validator("prefix")
     @classmethod
     def _prefix(cls, value: str) -> str:
-        value = value.strip("/")
-        if not value or any(c in value for c in "#+*$"):
-            raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
-        return value
+        return validate_prefix(value)
 
     @model_validator(mode="after")
     def _publishing_shares_a_source_connection(self) -> DaemonConfig:
@@ -335,16 +328,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     try:
         config = DaemonConfig.model_validate({**data, "source_file": None})
     except ValidationError as exc:
-        error = exc.errors()[0]
-        loc = [str(part) for part in error["loc"]]
-        cause = error.get("ctx", {}).get("error")
-        if isinstance(cause, CrossFieldError):
-            loc.append(cause.key)
-        key = ".".join(loc)
-        reason = error["msg"].removeprefix("Value error, ")
-        if error["type"] == "extra_forbidden":
-            reason = "unknown key"
-        raise ConfigError(str(file), key, reason) from exc
+        raise validation_to_config_error(file, exc) from exc
     except ValueError as exc:  # a validator outside pydantic's wrapping
         raise ConfigError(str(file), "", str(exc)) from exc
     config = config.model_copy(update={"source_file": file.resolve()})

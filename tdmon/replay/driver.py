@@ -43,6 +43,7 @@ from tdmon.daemon.pipeline import Pipeline, Sink
 from tdmon.daemon.runner import stop_on_signals
 from tdmon.errors import IngestError, RecordError
 from tdmon.record.sink import Recorder
+from tdmon.vocabulary import EstimateKind
 
 __all__ = ["FULL_SPEED_GC_YOUNG", "ReplayResult", "SummarySink", "raw_message_count", "replay",
            "replay_config", "summarize_recording"]
@@ -296,7 +297,7 @@ async def replay(
         state_shares=summary.shares(), wall_s=wall,
         non_finite=recorder.stats.nonfinite_replaced, interrupted=bool(signals),
     )
-    result.windows = summary.estimates.get("window", 0)
+    result.windows = summary.estimates.get(EstimateKind.WINDOW, 0)
     for step in built.steps:
         rejected = getattr(step, "rejected", None)
         if isinstance(rejected, Counter):
@@ -318,7 +319,7 @@ def summarize_recording(path: str | Path) -> dict[str, Any]:
     return {
         "recording": str(path), "messages_in": counts["/tdmon/raw"],
         "samples": counts["/tdmon/sample"], "rejected": counts["/tdmon/rejected"],
-        "windows": summary.estimates.get("window", 0),
+        "windows": summary.estimates.get(EstimateKind.WINDOW, 0),
         "estimates": dict(sorted(summary.estimates.items())),
         "alarms": dict(sorted(summary.alarms.items())),
         "state_shares": dict(sorted(summary.shares().items())),

@@ -22,8 +22,9 @@ daemon configuration and states, all optional:
 * ``[forbidden]``: daemon alarm ``kinds`` that must not occur at all;
 * ``finite`` (default true): no NaN or infinity in anything published.
 
-Checking reads the replay (truth, references) and the daemon's flight recording, and returns
-one :class:`Check` per expectation with what was measured, so a failure says by how much.
+The file is read and validated by :mod:`tdmon.config.expectations`. Checking reads the replay
+(truth, references) and the daemon's flight recording, and returns one :class:`Check` per
+expectation with what was measured, so a failure says by how much.
 """
 
 from __future__ import annotations
@@ -37,140 +38,42 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
-
-from tdmon.config.common import read_toml
-from tdmon.errors import ConfigError
+from tdmon.config.expectations import (
+    AlarmExpectation,
+    Expectations,
+    ForbiddenAlarms,
+    FrictionExpectation,
+    StatesExpectation,
+)
+from tdmon.vocabulary import EstimateKind, Operation, RigState
 
 __all__ = [
     "VOLVE_ACTIVITY_STATES",
     "Check",
-    "Expectations",
     "check_replay",
     "failed",
     "find_expectations",
-    "load_expectations",
 ]
 
 #: Which tdmon rig states count as agreeing with a Volve activity (the code's last digit's
 #: name). "off bottom" is any of the stationary states: the contractor's code does not say
 #: whether the string turns or mud flows reliably enough to tell them apart.
-VOLVE_ACTIVITY_STATES: dict[str, frozenset[str]] = {
-    "in slips": frozenset({"in_slips"}),
-    "tripping out": frozenset({"pick_up", "back_reaming"}),
-    "tripping in": frozenset({"slack_off", "reaming"}),
-    "reaming": frozenset({"reaming", "back_reaming"}),
-    "off bottom": frozenset({"rotating_off_bottom", "static", "circulating"}),
-    "drilling": frozenset({"drilling"}),
+VOLVE_ACTIVITY_STATES: dict[str, frozenset[RigState]] = {
+    "in slips": frozenset({RigState.IN_SLIPS}),
+    "tripping out": frozenset({RigState.PICK_UP, RigState.BACK_REAMING}),
+    "tripping in": frozenset({RigState.SLACK_OFF, RigState.REAMING}),
+    "reaming": frozenset({RigState.REAMING, RigState.BACK_REAMING}),
+    "off bottom": frozenset({RigState.ROTATING_OFF_BOTTOM, RigState.STATIC,
+                             RigState.CIRCULATING}),
+    "drilling": frozenset({RigState.DRILLING}),
 }
 
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class InputExpectation(_Model):
-    messages: int | None = Field(default=None, ge=0)
-    rejected: int = Field(default=0, ge=0, description="at most this many rejections")
-
-
-class StatesExpectation(_Model):
-    reference: Literal["truth", "volve"] = "truth"
-    agreement: float = Field(default=0.9, ge=0, le=1)
-    settle: float = Field(default=10.0, ge=0, description="seconds ignored after a change")
-    required: list[str] = Field(default_factory=list)
-
-
-class FrictionExpectation(_Model):
-    operation: str
-    depth: tuple[float, float] | None = None
-    section: str | None = None
-    min: float | None = None
-    max: float | None = None
-    truth_abs: float | None = Field(default=None, gt=0)
-    min_windows: int = Field(default=1, ge=1)
-    include_revised: bool = True
-
-    @model_validator(mode="after")
-    def _something(self) -> FrictionExpectation:
-        if self.min is None and self.max is None and self.truth_abs is None:
-            raise ValueError("give min, max or truth_abs")
-        return self
-
-
-class AlarmExpectation(_Model):
-    event: str | None = None
-    nth: int = Field(default=1, ge=1, description="which /truth/alarm of that kind (1: first)")
-    kinds: list[str] = Field(default_factory=list)
-    at: float | None = None
-    window: tuple[float, float] | None = None
-    known_issue: str | None = None
-
-    @model_validator(mode="after")
-    def _what(self) -> AlarmExpectation:
-        if self.event is None and not self.kinds:
-            raise ValueError("give event (a /truth/alarm kind) or kinds (daemon alarm kinds)")
-        return self
-
-
-class EstimatesExpectation(_Model):
-    minimum: dict[str, int] = Field(default_factory=dict,
-                                    description="at least this many estimates of each kind")
-
-
-class ForbiddenAlarms(_Model):
-    kinds: list[str] = Field(default_factory=list)
-
-
-class Expectations(_Model):
-    """One replay's expectations (see the module docstring)."""
-
-    replay: Path
-    config: Path
-    finite: bool = True
-    input: InputExpectation = Field(default_factory=InputExpectation)
-    states: StatesExpectation | None = None
-    friction: list[FrictionExpectation] = Field(default_factory=list)
-    estimates: EstimatesExpectation = Field(default_factory=EstimatesExpectation)
-    alarm: list[AlarmExpectation] = Field(default_factory=list)
-    forbidden: ForbiddenAlarms = Field(default_factory=ForbiddenAlarms)
-    source_file: Path | None = Field(default=None, exclude=True)
-
-    def resolve(self, path: Path) -> Path:
-        if path.is_absolute() or self.source_file is None:
-            return path
-        return self.source_file.parent / path
-
-    @property
-    def replay_path(self) -> Path:
-        return self.resolve(self.replay)
-
-    @property
-    def config_path(self) -> Path:
-        return self.resolve(self.config)
-
-
-def load_expectations(path: str | os.PathLike[str]) -> Expectations:
-    """Read and validate an expectations file (paths in it are relative to it).
-
-    Raises
-    ------
-    ConfigError
-        Missing, not TOML, or invalid; the message names the key and the reason.
-    """
-    file = Path(path)
-    data = read_toml(file)
-    try:
-        expectations = Expectations.model_validate(data)
-    except ValidationError as exc:
-        error = exc.errors()[0]
-        key = ".".join(str(part) for part in error["loc"])
-        reason = "unknown key" if error["type"] == "extra_forbidden" else \
-            error["msg"].removeprefix("Value error, ")
-        raise ConfigError(str(file), key, reason) from exc
-    return expectations.model_copy(update={"source_file": file.resolve()})
+#: The ``/truth/friction`` field holding the true friction factor of a window's operation.
+_TRUTH_FRICTION: dict[str, str] = {Operation.PICK_UP: "mu_pick_up",
+                                   Operation.SLACK_OFF: "mu_slack_off",
+                                   Operation.ROTATING: "mu_rotating"}
 
 
 def find_expectations(replay: str | os.PathLike[str]) -> Path | None:
@@ -345,7 +248,7 @@ def _state_agreement(spec: StatesExpectation, data: _Recorded) -> list[Check]:
 
 def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
     windows = [e for e in data.estimates
-               if e.get("kind") == "window" and e.get("operation") == spec.operation
+               if e.get("kind") == EstimateKind.WINDOW and e.get("operation") == spec.operation
                and (spec.include_revised or not e.get("revised"))
                and (spec.section is None or e.get("section") == spec.section)
                and (spec.depth is None
@@ -370,8 +273,7 @@ def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
     measured = f"median {median:.3f} of {len(windows)} windows (range {min(mus):.3f}-" \
                f"{max(mus):.3f})"
     if spec.truth_abs is not None:
-        truth_key = {"pick_up": "mu_pick_up", "slack_off": "mu_slack_off",
-                     "rotating": "mu_rotating"}.get(spec.operation)
+        truth_key = _TRUTH_FRICTION.get(spec.operation)
         truth_t = [float(m["t"]) for m in data.truth_friction]
         errors = []
         for e in windows:

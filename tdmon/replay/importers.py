@@ -14,7 +14,8 @@ Each non-empty cell of a mapped column becomes one payload ``{"t", "value", "uni
 is not a number, or a time that cannot be read, is an error naming the file, the line and the
 column: a half-imported file would silently shift every statistic computed from it.
 
-The row parser (:func:`parse_rows`) is pure; :func:`import_csv` owns the files.
+The row parser (:func:`parse_rows`) is pure; :func:`import_csv` owns the files. A column map is
+read and validated by :mod:`tdmon.config.column_map`; :func:`load_column_map` makes it a layout.
 """
 
 from __future__ import annotations
@@ -26,15 +27,13 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from typing import Annotated, Any, Final
+from typing import Any, Final
 
-from pydantic import BeforeValidator, Field, field_validator
-
-from tdmon.config.common import StrictModel, load_model
+from tdmon.config.column_map import load_column_map_config
 from tdmon.errors import ConfigError, IngestError
 from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.replay.simulate import RAW_TOPIC, MessageRecord, raw_input, write_mcap
-from tdmon.units import conversion, parse_quantity
+from tdmon.units import conversion
 
 __all__ = [
     "REFERENCE_SCHEMAS",
@@ -351,43 +350,7 @@ def import_volve(path: str | Path, out: str | Path, *, prefix: str = "rig/F4",
     return import_csv(path, VOLVE_LAYOUT, out, prefix=prefix, progress=progress)
 
 
-# -- the column map (TOML) --------------------------------------------------------------------
-
-def _seconds(value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | str):
-        raise ValueError("expected a number of seconds or a string with a unit")
-    return parse_quantity(value, "s")
-
-
-class _TimeMap(StrictModel):
-    column: str = Field(min_length=1)
-    format: str = "iso8601"
-    utc_offset: Annotated[float, BeforeValidator(_seconds)] = 0.0
-
-
-class _ChannelMap(StrictModel):
-    column: str = Field(min_length=1)
-    unit: str = Field(min_length=1)
-
-
-class ColumnMapConfig(StrictModel):
-    """A generic CSV's column map: ``[time]``, ``[channels.<channel>]``, optional ``prefix``,
-    ``delimiter``, ``missing`` (cell texts meaning no value)."""
-
-    prefix: str | None = None
-    delimiter: str = Field(default=",", min_length=1, max_length=1)
-    missing: list[str] = Field(default_factory=list)
-    time: _TimeMap
-    channels: dict[str, _ChannelMap] = Field(min_length=1)
-
-    @field_validator("channels")
-    @classmethod
-    def _known(cls, channels: dict[str, _ChannelMap]) -> dict[str, _ChannelMap]:
-        for name in channels:
-            if name not in CHANNEL_UNITS:
-                raise ValueError(f"unknown channel '{name}' (one of {', '.join(CHANNEL_UNITS)})")
-        return channels
-
+# -- the column map ----------------------------------------------------------------------------
 
 def load_column_map(path: str | Path) -> tuple[CsvLayout, str | None]:
     """Read a column map; returns the layout and the map's prefix (None if not given).
@@ -398,7 +361,7 @@ def load_column_map(path: str | Path) -> tuple[CsvLayout, str | None]:
         Naming the file, the key and the reason (unknown channel, unit not convertible to the
         channel's SI unit, missing keys).
     """
-    config = load_model(ColumnMapConfig, path)
+    config = load_column_map_config(path)
     specs = []
     for channel, item in config.channels.items():
         try:

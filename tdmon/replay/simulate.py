@@ -23,8 +23,9 @@ from tqdm import tqdm
 from tdmon.errors import RecordError
 from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.record.mcap_recorder import McapRecorder
-from tdmon.record.schemas import DRAFT, RIG_STATES
-from tdmon.replay.session import Scenario, Session, simulate_session
+from tdmon.record.schemas import DRAFT
+from tdmon.replay.session import STATES, Scenario, Session, simulate_session
+from tdmon.vocabulary import RigState, Severity
 
 __all__ = [
     "RAW_TOPIC",
@@ -60,7 +61,7 @@ def _schema(name: str, title: str, properties: Mapping[str, Any],
             "required": list(required)}
 
 
-_STATES: Final = {"enum": [s for s in RIG_STATES if s != "unknown"]}
+_STATES: Final = {"enum": [s.value for s in STATES]}
 
 #: JSON Schemas of the truth topics of a simulated file.
 TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
@@ -93,7 +94,7 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
         ("t", "md_m", "mu", "mu_base")),
     "/truth/alarm": _schema(
         "truth.alarm", "an alarm the daemon is expected to raise at about t",
-        {"t": _TIME, "kind": _TEXT, "severity": {"enum": ["info", "warning", "critical"]},
+        {"t": _TIME, "kind": _TEXT, "severity": {"enum": [s.value for s in Severity]},
          "message": _TEXT, "channel": {"type": ["string", "null"]}, "md_m": _OPTIONAL,
          "accept": {"type": "array", "items": _TEXT,
                     "description": "daemon alarm kinds that count as raising it"}},
@@ -159,10 +160,10 @@ def session_messages(session: Session) -> list[MessageRecord]:
                             raw_input(topic, float(t), float(value), unit, float(receive))))
 
     timeline_at = session.timeline.at
-    for t, state in session.state_changes:
+    for t, changed_to in session.state_changes:
         where = timeline_at(np.asarray([t - start]))
         records.append((_ns(t), "/truth/state", {
-            "t": t, "state": state, "bit_depth_m": float(where.bit_depth[0]),
+            "t": t, "state": changed_to, "bit_depth_m": float(where.bit_depth[0]),
             "hole_depth_m": float(where.hole_depth[0])}))
     truth = session.truth
     for k, t in enumerate(session.truth_t.tolist()):
@@ -173,7 +174,7 @@ def session_messages(session: Session) -> list[MessageRecord]:
             "hole_depth_m": float(truth["hole_depth"][k]),
             "block_position_m": float(truth["block_position"][k]),
             "hookload_N": float(truth["hookload"][k]), "torque_Nm": float(truth["torque"][k])}))
-        if state != "in_slips":
+        if state != RigState.IN_SLIPS:
             records.append((_ns(t), "/truth/friction", {
                 "t": t, "state": state, "bit_depth_m": bit,
                 "mu_pick_up": _finite_or_none(float(truth["mu_pick_up"][k])),

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,14 +13,12 @@ from tdmon.calib.labfit import (
     confidence_band,
     fit_friction,
     fit_friction_models,
-    read_tribometer_csv,
     temperature_averages,
     tribometer_from_table,
 )
 from tdmon.errors import FitError
 from tdmon.model.friction import FrictionModel
 
-LAB_CSV = Path(__file__).resolve().parents[2] / "data" / "lab" / "glydril-tribometer.csv"
 TEMPERATURES = np.array([30.0, 40.0, 50.0, 60.0, 70.0])
 # the "Average" row of Table 14 as printed (0.283 is printed "0,.283")
 PRINTED_AVERAGES = np.array([0.279, 0.287, 0.283, 0.3185, 0.306])
@@ -36,21 +33,27 @@ TABLE_14: dict[int, list[float | None]] = {
 }
 
 
+def table_14_rows() -> list[tuple[int, float, float | None]]:
+    """Table 14 as (test, temperature, friction) rows in the order of data/lab's CSV file."""
+    return [(test, float(t), mu) for t, runs in TABLE_14.items()
+            for test, mu in enumerate(runs, start=1)]
+
+
 @pytest.fixture(scope="module")
 def lab() -> tuple[np.ndarray, np.ndarray]:
-    data = read_tribometer_csv(LAB_CSV)
+    data = tribometer_from_table(table_14_rows(),
+                                 ["test", "temperature_C", "friction_coefficient"])
     return data.temperature, data.friction
 
 
-# --------------------------------------------------------------------------- reading
+# --------------------------------------------------------------------------- rows
 
-def test_read_csv_drops_and_counts_the_failed_run() -> None:
-    data = read_tribometer_csv(LAB_CSV)
+def test_table_14_rows_drop_and_count_the_failed_run() -> None:
+    data = tribometer_from_table(table_14_rows(),
+                                 ["test", "temperature_C", "friction_coefficient"])
     assert data.failed_runs == 1
     assert data.friction.size == 34
-    expected = [(t, mu) for t, runs in TABLE_14.items() for mu in runs if mu is not None]
-    got = sorted(zip(data.temperature.tolist(), data.friction.tolist(), strict=True))
-    assert got == sorted(expected)  # the CSV holds the printed three-decimal values exactly
+    assert data.friction[:3].tolist() == [0.372, 0.256, 0.132]
     assert set(data.test) == set(range(1, 8))
 
 
@@ -58,27 +61,9 @@ def test_true_means_differ_from_printed_averages(lab: tuple[np.ndarray, np.ndarr
     levels, means, counts = temperature_averages(*lab)
     assert levels == pytest.approx(TEMPERATURES)
     assert counts.tolist() == [7, 7, 7, 6, 7]
-    # REFERENCE.md 3 errata: the means at 30 and 40 degC are 0.2806 and 0.2886, printed
-    # 0.279 and 0.287; 50, 60, 70 agree with the print
+    # docs/lab-fit.md (Table 14 errata): the means at 30 and 40 degC are 0.2806 and 0.2886,
+    # printed 0.279 and 0.287; 50, 60, 70 agree with the print
     assert means == pytest.approx([0.2806, 0.2886, 0.283, 0.3185, 0.306], abs=5e-5)
-
-
-def test_non_numeric_value_names_the_row(tmp_path: Path) -> None:
-    path = tmp_path / "lab.csv"
-    path.write_text("# comment\ntest,temperature_C,friction_coefficient\n1,30,0.3\n"
-                    "2,30,0.2O5\n3,40,0.31\n")
-    with pytest.raises(FitError, match=r"lab\.csv: data row 2: 'friction_coefficient' is not "
-                                       r"a number: '0\.2O5'"):
-        read_tribometer_csv(path)
-
-
-def test_missing_column_and_missing_file(tmp_path: Path) -> None:
-    path = tmp_path / "lab.csv"
-    path.write_text("test,temp,mu\n1,30,0.3\n")
-    with pytest.raises(FitError, match="no 'temperature_C' column"):
-        read_tribometer_csv(path)
-    with pytest.raises(FitError, match="cannot read"):
-        read_tribometer_csv(tmp_path / "absent.csv")
 
 
 def test_table_rows_without_the_csv() -> None:
@@ -98,7 +83,7 @@ def test_table_rows_without_the_csv() -> None:
 
 def test_linear_fit_on_printed_averages() -> None:
     fit = fit_friction(TEMPERATURES, PRINTED_AVERAGES, "linear", data="averages")
-    # REFERENCE.md 3: 0.25195 + 0.000855 T, R^2 0.643, adjusted 0.524, SE 0.0116
+    # docs/lab-fit.md: 0.25195 + 0.000855 T, R^2 0.643, adjusted 0.524, SE 0.0116
     # (by hand: slope = sum(dT dmu)/sum(dT^2) = 0.855/1000; intercept = 0.29470 - 50 b)
     assert fit.coefficients["a"] == pytest.approx(0.25195, abs=1e-6)
     assert fit.coefficients["b"] == pytest.approx(0.000855, abs=1e-9)
@@ -117,7 +102,7 @@ def test_linear_fit_on_printed_averages() -> None:
 def test_linear_fit_on_true_means(lab: tuple[np.ndarray, np.ndarray]) -> None:
     levels, means, _ = temperature_averages(*lab)
     fit = fit_friction(levels, means, "linear", data="averages")
-    # REFERENCE.md 3: 0.25494 + 0.000808 T, R^2 0.612
+    # docs/lab-fit.md: 0.25494 + 0.000808 T, R^2 0.612
     assert fit.coefficients["a"] == pytest.approx(0.25494, abs=1e-5)
     assert fit.coefficients["b"] == pytest.approx(0.000808, abs=1e-6)
     assert fit.r2 == pytest.approx(0.612, abs=5e-4)
@@ -127,7 +112,7 @@ def test_linear_fit_on_raw_values_says_not_significant(
         lab: tuple[np.ndarray, np.ndarray]) -> None:
     fit = fit_friction(*lab, "linear")
     assert fit.n == 34
-    # REFERENCE.md 3: R^2 = 0.03 on the 34 raw values
+    # docs/lab-fit.md: R^2 = 0.03 on the 34 raw values
     assert fit.r2 == pytest.approx(0.029, abs=1e-3)
     interval = fit.confidence_intervals["b"]
     assert interval is not None

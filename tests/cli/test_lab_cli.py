@@ -1,5 +1,5 @@
 """``tdmon lab fit`` on the thesis's tribometer data (Table 14): the JSON against the calib
-functions and REFERENCE.md 3, the ranked text table with its verdicts, Figure 15, and the
+functions and docs/lab-fit.md, the ranked text table with its verdicts, Figure 15, and the
 one-line errors for bad files."""
 
 from __future__ import annotations
@@ -9,12 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tdmon.calib.labfit import (
-    fit_friction_models,
-    read_tribometer_csv,
-    temperature_averages,
-)
+from tdmon.calib.labfit import fit_friction_models, temperature_averages
 from tdmon.cli import main
+from tdmon.ingest.lab import read_tribometer_csv
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "lab" / "glydril-tribometer.csv"
 
@@ -65,7 +62,7 @@ def test_json_equals_the_calib_functions(capsys):
 
 
 def test_raw_runs_show_no_significant_temperature_effect(capsys):
-    """REFERENCE.md 3 / docs/lab-fit.md: on all 34 runs R^2 = 0.03 and the slope's 95 %
+    """docs/lab-fit.md: on all 34 runs R^2 = 0.03 and the slope's 95 %
     interval includes zero."""
     linear = pick(run_json(capsys, str(DATA)), "linear", "raw")
     assert linear["n"] == 34
@@ -88,7 +85,7 @@ def test_true_means_of_the_runs(capsys):
 
 
 def test_printed_averages_reproduce_reference(tmp_path, capsys):
-    """REFERENCE.md 3: with the printed averages the least-squares line is 0.25195 + 0.000855 T,
+    """docs/lab-fit.md: with the printed averages the least-squares line is 0.25195 + 0.000855 T,
     R^2 0.643, adjusted 0.524, SE 0.0116; Table 16's polynomial statistics follow closely."""
     table = tmp_path / "table14-averages.csv"
     table.write_text(PRINTED_AVERAGES)

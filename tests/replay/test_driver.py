@@ -13,15 +13,10 @@ import pytest
 
 from tdmon.cli import main
 from tdmon.config.daemon import load_daemon_config
+from tdmon.config.expectations import load_expectations
 from tdmon.record.reader import read_messages, topic_counts
 from tdmon.replay.driver import ReplayResult, replay
-from tdmon.replay.expectations import (
-    Check,
-    check_replay,
-    failed,
-    find_expectations,
-    load_expectations,
-)
+from tdmon.replay.expectations import Check, check_replay, failed, find_expectations
 from tdmon.replay.session import STATES
 
 from .conftest import REPO

@@ -9,14 +9,9 @@ from typing import Any
 import pytest
 from mcap.writer import Writer
 
+from tdmon.config.expectations import Expectations, load_expectations
 from tdmon.errors import ConfigError
-from tdmon.replay.expectations import (
-    Expectations,
-    check_replay,
-    failed,
-    find_expectations,
-    load_expectations,
-)
+from tdmon.replay.expectations import check_replay, failed, find_expectations
 
 T0 = 1_700_000_000.0
 

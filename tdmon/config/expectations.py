@@ -1,0 +1,126 @@
+"""The expectations file of a replay as pydantic models, and ``load_expectations(path)``.
+
+An expectations file (TOML, ``replays/expectations/<replay>.toml``) names the replay and the
+daemon configuration and states what the daemon must (and must not) find in the replay: see
+:mod:`tdmon.replay.expectations`, which checks them, for the tables and keys. Paths in the file
+are relative to it. Every mistake is a :class:`tdmon.errors.ConfigError` naming the file, the
+key and the reason.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from tdmon.config.common import StrictModel, load_model
+from tdmon.vocabulary import RigState
+
+__all__ = [
+    "AlarmExpectation",
+    "EstimatesExpectation",
+    "Expectations",
+    "ForbiddenAlarms",
+    "FrictionExpectation",
+    "InputExpectation",
+    "StatesExpectation",
+    "load_expectations",
+]
+
+
+class InputExpectation(StrictModel):
+    messages: int | None = Field(default=None, ge=0)
+    rejected: int = Field(default=0, ge=0, description="at most this many rejections")
+
+
+class StatesExpectation(StrictModel):
+    reference: Literal["truth", "volve"] = "truth"
+    agreement: float = Field(default=0.9, ge=0, le=1)
+    settle: float = Field(default=10.0, ge=0, description="seconds ignored after a change")
+    required: list[RigState] = Field(default_factory=list)
+
+
+class FrictionExpectation(StrictModel):
+    # a window estimate's operation: pick_up, slack_off, rotating, or the combined-motion
+    # states reaming and back_reaming
+    operation: str
+    depth: tuple[float, float] | None = None
+    section: str | None = None
+    min: float | None = None
+    max: float | None = None
+    truth_abs: float | None = Field(default=None, gt=0)
+    min_windows: int = Field(default=1, ge=1)
+    include_revised: bool = True
+
+    @model_validator(mode="after")
+    def _something(self) -> FrictionExpectation:
+        if self.min is None and self.max is None and self.truth_abs is None:
+            raise ValueError("give min, max or truth_abs")
+        return self
+
+
+class AlarmExpectation(StrictModel):
+    event: str | None = None
+    nth: int = Field(default=1, ge=1, description="which /truth/alarm of that kind (1: first)")
+    kinds: list[str] = Field(default_factory=list)
+    at: float | None = None
+    window: tuple[float, float] | None = None
+    known_issue: str | None = None
+
+    @model_validator(mode="after")
+    def _what(self) -> AlarmExpectation:
+        if self.event is None and not self.kinds:
+            raise ValueError("give event (a /truth/alarm kind) or kinds (daemon alarm kinds)")
+        return self
+
+
+class EstimatesExpectation(StrictModel):
+    minimum: dict[str, int] = Field(default_factory=dict,
+                                    description="at least this many estimates of each kind")
+
+
+class ForbiddenAlarms(StrictModel):
+    kinds: list[str] = Field(default_factory=list)
+
+
+class Expectations(StrictModel):
+    """One replay's expectations (see the module docstring)."""
+
+    replay: Path
+    config: Path
+    finite: bool = True
+    input: InputExpectation = Field(default_factory=InputExpectation)
+    states: StatesExpectation | None = None
+    friction: list[FrictionExpectation] = Field(default_factory=list)
+    estimates: EstimatesExpectation = Field(default_factory=EstimatesExpectation)
+    alarm: list[AlarmExpectation] = Field(default_factory=list)
+    forbidden: ForbiddenAlarms = Field(default_factory=ForbiddenAlarms)
+    source_file: Path | None = Field(default=None, exclude=True)
+
+    def resolve(self, path: Path) -> Path:
+        if path.is_absolute() or self.source_file is None:
+            return path
+        return self.source_file.parent / path
+
+    @property
+    def replay_path(self) -> Path:
+        return self.resolve(self.replay)
+
+    @property
+    def config_path(self) -> Path:
+        return self.resolve(self.config)
+
+
+def load_expectations(path: str | os.PathLike[str]) -> Expectations:
+    """Read and validate an expectations file (paths in it are relative to it).
+
+    Raises
+    ------
+    ConfigError
+        Missing, not TOML, or invalid; the message names the key and the reason.
+    """
+    file = Path(path)
+    expectations = load_model(Expectations, file)
+    return expectations.model_copy(update={"source_file": file.resolve()})

@@ -1,0 +1,244 @@
+"""The scenario TOML of ``tdmon simulate`` as pydantic models, and ``load_scenario(path)``.
+
+A scenario names a well file, a rig programme (``[[phase]]``), sampling, noise, faults, friction
+anomalies and tight spots. Quantities are numbers in SI or strings with a unit (``"28 m"``,
+``"120 rpm"``, ``"2000 L/min"``, ``"3 min"``, ``"150 kN"``). Every problem is a
+:class:`tdmon.errors.ConfigError` naming the file, the key and the reason. The simulator's
+:class:`tdmon.replay.spec.Scenario` is built from a validated file by
+:func:`tdmon.replay.scenario.to_scenario`. See docs/replays.md for the keys.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Final, Literal, get_args
+
+from pydantic import Field, field_validator, model_validator
+
+from tdmon.config.common import (
+    Force,
+    Length,
+    Pressure,
+    StrictModel,
+    load_model,
+    quantity,
+    validate_prefix,
+)
+from tdmon.ingest.decode import parse_time
+
+__all__ = [
+    "CHANNELS",
+    "FAULT_KINDS",
+    "PHASE_KINDS",
+    "TIMED_PHASE_KINDS",
+    "FaultConfig",
+    "NoiseConfig",
+    "PhaseConfig",
+    "ScenarioConfig",
+    "load_scenario",
+]
+
+CHANNELS: Final[tuple[str, ...]] = (
+    "hookload", "torque", "bit_depth", "hole_depth", "block_position", "rpm", "flow_in", "spp",
+    "wob", "mud_temp_in", "mud_temp_out")
+"""Channels a scenario can sample, in the order the simulator seeds their random streams
+(changing the order changes every simulated replay)."""
+
+PhaseKind = Literal["static", "circulate", "rotate", "slips", "trip_out", "trip_in", "ream",
+                    "back_ream", "drill"]
+PHASE_KINDS: Final[tuple[str, ...]] = get_args(PhaseKind)
+"""The steps a rig programme is made of."""
+
+TIMED_PHASE_KINDS: Final[tuple[str, ...]] = ("static", "circulate", "rotate", "slips")
+"""Phases that last a ``duration`` (the others move the bit ``to`` a depth)."""
+
+FaultKind = Literal["stuck", "dropout"]
+FAULT_KINDS: Final[tuple[str, ...]] = get_args(FaultKind)
+"""Scheduled sensor faults: the last good value repeats, or nothing is sent."""
+
+Speed = Annotated[float, quantity("m/s")]
+Seconds = Annotated[float, quantity("s")]
+Rotation = Annotated[float, quantity("rad/s")]
+Flow = Annotated[float, quantity("m**3/s")]
+Fraction = Annotated[float, quantity("dimensionless")]
+
+
+def _known_channels(channels: list[str]) -> list[str]:
+    unknown = [c for c in channels if c not in CHANNELS]
+    if unknown:
+        raise ValueError(f"unknown channel '{unknown[0]}' (one of {', '.join(CHANNELS)})")
+    return channels
+
+
+class ScenarioInfo(StrictModel):
+    name: str = ""
+    well: Path
+    seed: int = 0
+    start: float | str = "2024-01-01T00:00:00Z"
+    prefix: str = "sim/rig"
+    method: Literal["soft-string", "aadnoy"] = "soft-string"
+    bit_depth: Length = Field(gt=0)
+    hole_depth: Length | None = None
+    block_position: Length | None = None
+
+    @field_validator("start")
+    @classmethod
+    def _time(cls, value: float | str) -> float:
+        parsed = parse_time(value)
+        if isinstance(parsed, str):
+            raise ValueError(parsed.replace("'t'", "start"))
+        return parsed
+
+    @field_validator("prefix")
+    @classmethod
+    def _prefix(cls, value: str) -> str:
+        return validate_prefix(value)
+
+
+class AnomalyConfig(StrictModel):
+    top: Length
+    bottom: Length
+    delta_mu: float
+
+    @model_validator(mode="after")
+    def _ordered(self) -> AnomalyConfig:
+        if self.bottom <= self.top:
+            raise ValueError(f"bottom ({self.bottom:g} m) must be below top ({self.top:g} m)")
+        return self
+
+
+class FrictionConfig(StrictModel):
+    temperature_model: Literal["well", "geothermal"] = "well"
+    anomaly: list[AnomalyConfig] = Field(default_factory=list)
+
+
+class TightSpotConfig(StrictModel):
+    md: Length = Field(gt=0)
+    length: Length = Field(default=5.0, gt=0)
+    force: Force = Field(gt=0)
+
+
+class RigConfig(StrictModel):
+    stand_length: Length = Field(default=28.0, gt=1)
+    block_low: Length = Field(default=2.0, ge=0)
+    spp_reference: Pressure = Field(default=150e5, ge=0)
+    flow_reference: Flow = Field(default=2000.0 / 60000.0, gt=0)
+    bit_torque_factor: Length = Field(default=0.02, ge=0)
+    latency: Seconds = Field(default=0.2, ge=0)
+    break_over: Force = Field(default=0.0, ge=0)
+    break_over_time: Seconds = Field(default=3.0, gt=0)
+
+
+class SamplingConfig(StrictModel):
+    interval: Seconds = Field(default=5.0, gt=0, le=60)
+    channels: list[str] = Field(default_factory=lambda: list(CHANNELS))
+    intervals: dict[str, Annotated[Seconds, Field(gt=0, le=60)]] = Field(default_factory=dict)
+
+    @field_validator("channels")
+    @classmethod
+    def _known(cls, channels: list[str]) -> list[str]:
+        return _known_channels(channels)
+
+    @model_validator(mode="after")
+    def _overrides_known(self) -> SamplingConfig:
+        unknown = [c for c in self.intervals if c not in self.channels]
+        if unknown:
+            raise ValueError(f"interval given for '{unknown[0]}', which is not in channels")
+        return self
+
+
+class NoiseConfig(StrictModel):
+    relative: Fraction = Field(default=0.0, ge=0)
+    absolute: float = Field(default=0.0, ge=0)
+    spike_rate: Fraction = Field(default=0.0, ge=0, le=1)
+    spike_size: Fraction = Field(default=0.2, ge=0)
+    missing_rate: Fraction = Field(default=0.0, ge=0, lt=1)
+    clock_jitter: Seconds = Field(default=0.0, ge=0)
+
+
+class NoiseTable(NoiseConfig):
+    """Defaults for every channel, and ``[noise.channels.<name>]`` overrides (merged)."""
+
+    channels: dict[str, dict[str, Any]] = Field(default_factory=dict)
+
+    @field_validator("channels")
+    @classmethod
+    def _known(cls, channels: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        for name, table in channels.items():
+            _known_channels([name])
+            NoiseConfig.model_validate(table)
+        return channels
+
+    def for_channel(self, channel: str) -> NoiseConfig:
+        """The noise of ``channel``: the defaults with the channel's overrides."""
+        base = self.model_dump(exclude={"channels"})
+        return NoiseConfig.model_validate({**base, **self.channels.get(channel, {})})
+
+
+class FaultConfig(StrictModel):
+    kind: FaultKind
+    channels: list[str] = Field(min_length=1)
+    start: Seconds = Field(ge=0)
+    duration: Seconds = Field(gt=0)
+
+    @field_validator("channels")
+    @classmethod
+    def _known(cls, channels: list[str]) -> list[str]:
+        return _known_channels(channels)
+
+
+class PhaseConfig(StrictModel):
+    kind: PhaseKind
+    duration: Seconds = Field(default=0.0, ge=0)
+    to: Length | None = None
+    speed: Speed | None = Field(default=None, gt=0)
+    rop: Speed | None = Field(default=None, gt=0)
+    rpm: Rotation = Field(default=0.0, ge=0)
+    flow: Flow = Field(default=0.0, ge=0)
+    wob: Force = Field(default=0.0, ge=0)
+    slips_time: Seconds = Field(default=60.0, gt=0)
+
+    @model_validator(mode="after")
+    def _complete(self) -> PhaseConfig:
+        if self.kind in TIMED_PHASE_KINDS:
+            if self.duration <= 0:
+                raise ValueError(f"a '{self.kind}' phase needs a positive duration")
+            if self.kind == "rotate" and self.rpm <= 0:
+                raise ValueError("a 'rotate' phase needs rpm")
+            if self.kind == "circulate" and self.flow <= 0:
+                raise ValueError("a 'circulate' phase needs flow")
+            return self
+        if self.to is None:
+            raise ValueError(f"a '{self.kind}' phase needs 'to'")
+        if self.kind == "drill":
+            if self.rop is None or self.wob <= 0 or self.rpm <= 0:
+                raise ValueError("a 'drill' phase needs rop, wob and rpm")
+        elif self.speed is None:
+            raise ValueError(f"a '{self.kind}' phase needs speed")
+        if self.kind in ("ream", "back_ream") and self.rpm <= 0:
+            raise ValueError(f"a '{self.kind}' phase needs rpm")
+        return self
+
+
+class ScenarioConfig(StrictModel):
+    """The whole scenario file."""
+
+    scenario: ScenarioInfo
+    friction: FrictionConfig = FrictionConfig()
+    tight_spot: list[TightSpotConfig] = Field(default_factory=list)
+    rig: RigConfig = RigConfig()
+    sampling: SamplingConfig = SamplingConfig()
+    noise: NoiseTable = NoiseTable()
+    fault: list[FaultConfig] = Field(default_factory=list)
+    phase: list[PhaseConfig] = Field(min_length=1)
+
+
+def load_scenario(path: str | Path) -> ScenarioConfig:
+    """Read and validate a scenario file.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not TOML, or invalid; the message names the key and the reason.
+    """
+    return load_model(ScenarioConfig, path)

@@ -1,0 +1,113 @@
+"""The sensors of a simulated session: each channel's true value, and what a rig sends of it.
+
+A channel's true value at its sample times comes from the timeline (depths, rotation, flow,
+weight on bit), from the loads (hook load, torque) or from the scenario (mud temperatures);
+:func:`sensor_series` then applies the channel's noise, spikes, scheduled faults, missing
+samples and clock jitter, from the channel's own random stream.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tdmon.config.scenario import CHANNELS
+from tdmon.errors import ModelError
+from tdmon.replay.loads import Loads
+from tdmon.replay.spec import Array, NoiseSettings, Scenario
+from tdmon.replay.timeline import Timeline
+
+__all__ = ["ChannelSeries", "InjectedFault", "channel_truth", "sensor_series"]
+
+
+@dataclass(frozen=True)
+class ChannelSeries:
+    """One channel as sent.
+
+    Attributes
+    ----------
+    t : payload time stamps [Unix s] (with clock jitter)
+    receive_time : arrival at tdmon [Unix s] (true sampling time plus latency)
+    value : values sent [SI]
+    true_value : noise-free values at the true sampling time [SI]
+    """
+
+    t: Array
+    receive_time: Array
+    value: Array
+    true_value: Array
+
+
+@dataclass(frozen=True)
+class InjectedFault:
+    """A sensor fault put into the data: ``spike`` (one sample), ``stuck`` or ``dropout``
+    (a window ``t`` .. ``until`` [Unix s])."""
+
+    t: float
+    kind: str
+    channel: str
+    until: float | None = None
+
+
+def channel_truth(name: str, scenario: Scenario, timeline: Timeline, loads: Loads,
+                  t: Array) -> Array:
+    """Noise-free values [SI] of channel ``name`` at times ``t`` [s from the start]."""
+    where = timeline.at(t)
+    index = where.segment
+    if name in ("hookload", "torque"):
+        hookload, torque = loads.at(timeline, t)
+        return hookload if name == "hookload" else torque
+    if name in ("bit_depth", "hole_depth", "block_position"):
+        return np.asarray(getattr(where, name), dtype=np.float64)
+    if name == "rpm":
+        return timeline.rpm[index]
+    if name == "flow_in":
+        return timeline.flow[index]
+    if name == "spp":
+        rig = scenario.rig
+        return np.asarray(rig.spp_reference * (timeline.flow[index] / rig.flow_reference) ** 2)
+    if name == "wob":
+        return timeline.wob[index]
+    if name == "mud_temp_in":
+        return np.full(t.size, np.nan if scenario.mud_temp_in is None else scenario.mud_temp_in)
+    if name == "mud_temp_out":
+        return np.full(t.size, np.nan if scenario.mud_temp_out is None else scenario.mud_temp_out)
+    raise ModelError(f"unknown channel '{name}' (one of {', '.join(CHANNELS)})")
+
+
+def sensor_series(name: str, scenario: Scenario, tau: Array, truth: Array, interval: float,
+                  rng: np.random.Generator) -> tuple[ChannelSeries, list[InjectedFault]]:
+    """Noise, spikes, faults, missing samples and jitter applied to one channel's truth."""
+    noise = scenario.noise.get(name, NoiseSettings())
+    start = scenario.start
+    n = tau.size
+    # Draw every random stream whatever the settings, so that switching one feature on does
+    # not reshuffle the others.
+    gauss_rel, gauss_abs, jitter = rng.standard_normal(n), rng.standard_normal(n), \
+        rng.standard_normal(n)
+    spike_draw, spike_sign, missing_draw = rng.random(n), rng.random(n), rng.random(n)
+    value = truth * (1.0 + noise.relative * gauss_rel) + noise.absolute * gauss_abs
+    faults: list[InjectedFault] = []
+    scale = float(np.max(np.abs(truth))) if n else 0.0
+    spikes = spike_draw < noise.spike_rate
+    if scale > 0.0 and spikes.any():
+        value[spikes] += np.where(spike_sign[spikes] < 0.5, -1.0, 1.0) * noise.spike_size * scale
+        faults += [InjectedFault(start + float(x), "spike", name) for x in tau[spikes]]
+    keep = missing_draw >= noise.missing_rate
+    for fault in scenario.faults:
+        if name not in fault.channels:
+            continue
+        inside = (tau >= fault.start) & (tau < fault.start + fault.duration)
+        faults.append(InjectedFault(start + fault.start, fault.kind, name,
+                                    start + fault.start + fault.duration))
+        if fault.kind == "dropout":
+            keep &= ~inside
+        elif fault.kind == "stuck" and inside.any():
+            first = int(np.argmax(inside))
+            value[inside] = value[first - 1] if first > 0 else value[first]
+    limit = 0.45 * interval
+    stamp = tau + np.clip(noise.clock_jitter * jitter, -limit, limit)
+    series = ChannelSeries(t=start + stamp[keep], receive_time=start + tau[keep] +
+                           scenario.rig.latency, value=value[keep], true_value=truth[keep])
+    return series, faults

@@ -1,0 +1,125 @@
+"""The truth of a simulated session: what the daemon should find in it.
+
+The rig state at its changes, the noise-free loads and the effective friction factors at every
+true hook-load sample time, and the alarms a tight spot, a friction anomaly or a sensor fault
+should raise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tdmon.replay.loads import MOVING_DOWN, MOVING_UP, Loads
+from tdmon.replay.spec import Array, Scenario
+from tdmon.replay.timeline import Timeline
+from tdmon.vocabulary import AlarmKind, Operation, RigState, Severity
+
+__all__ = ["ExpectedAlarm", "expected_alarms", "state_changes", "truth_samples"]
+
+# A tight spot or a local friction change shows as a window's friction jumping above the recent
+# ones, or as the load trending out of the modelled band.
+_FRICTION_ALARMS: Final = (AlarmKind.FRICTION_JUMP, AlarmKind.BAND)
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class ExpectedAlarm:
+    """An alarm the daemon should raise: ``kind`` at about ``t`` [Unix s], with context.
+
+    ``kind`` names the event (``overpull``, ``set_down``, ``friction_anomaly``,
+    ``stuck_sensor``, ``data_gap``); ``accept`` lists the daemon's alarm kinds
+    (:mod:`tdmon.calib.alarms`) that count as raising it.
+    """
+
+    t: float
+    kind: str
+    severity: Severity
+    message: str
+    channel: str | None = None
+    md: float | None = None
+    accept: tuple[str, ...] = ()
+
+
+def state_changes(timeline: Timeline, start: float) -> list[tuple[float, RigState]]:
+    """(Unix time [s], state) at the start and at every change of rig state."""
+    changes: list[tuple[float, RigState]] = []
+    for t0, state in zip(timeline.t0, timeline.state, strict=True):
+        if not changes or changes[-1][1] != state:
+            changes.append((start + float(t0), state))
+    return changes
+
+
+def expected_alarms(scenario: Scenario, truth_t: Array,
+                    truth: dict[str, NDArray[np.generic]]) -> list[ExpectedAlarm]:
+    """The alarms the scenario's tight spots, friction anomalies and sensor faults should
+    raise, in time order (``truth_t`` [Unix s] and ``truth`` from :func:`truth_samples`)."""
+    alarms: list[ExpectedAlarm] = []
+    state = truth["state"]
+    bit = np.asarray(truth["bit_depth"], dtype=np.float64)
+    for spot in scenario.tight_spots:
+        inside = (bit >= spot.md) & (bit <= spot.md + spot.length)
+        for kind, states, word in (("overpull", MOVING_UP, "overpull"),
+                                   ("set_down", MOVING_DOWN, "set-down weight")):
+            hits = np.flatnonzero(inside & np.isin(state, states))
+            if hits.size:
+                alarms.append(ExpectedAlarm(
+                    float(truth_t[hits[0]]), kind, Severity.WARNING,
+                    f"{word} of {spot.force / 1e3:.0f} kN at a tight spot at {spot.md:.0f} m MD",
+                    md=spot.md, accept=_FRICTION_ALARMS))
+    moving = np.isin(state, (RigState.PICK_UP, RigState.SLACK_OFF))
+    for anomaly in scenario.anomalies:
+        hits = np.flatnonzero(moving & (bit >= anomaly.top))
+        if hits.size:
+            alarms.append(ExpectedAlarm(
+                float(truth_t[hits[0]]), "friction_anomaly", Severity.WARNING,
+                f"local friction {anomaly.delta_mu:+.2f} between {anomaly.top:.0f} and "
+                f"{anomaly.bottom:.0f} m MD", md=0.5 * (anomaly.top + anomaly.bottom),
+                accept=_FRICTION_ALARMS))
+    for fault in scenario.faults:
+        kind = "stuck_sensor" if fault.kind == "stuck" else "data_gap"
+        channels = [c for c in fault.channels if c in scenario.sample_interval]
+        if channels:
+            # one alarm per fault: a dropout of every channel is one gap, not nine
+            alarms.append(ExpectedAlarm(
+                scenario.start + fault.start, kind, Severity.WARNING,
+                f"{', '.join(channels)} {'stuck' if fault.kind == 'stuck' else 'silent'} for "
+                f"{fault.duration:.0f} s", channel=channels[0] if len(channels) == 1 else None,
+                accept=tuple(f"sensor_{c}_frozen" for c in channels) if fault.kind == "stuck"
+                else (AlarmKind.SENSOR_STALE,)))
+    return sorted(alarms, key=lambda alarm: alarm.t)
+
+
+def truth_samples(timeline: Timeline, loads: Loads, tau: Array, element_md: Array,
+                  element_length: Array) -> dict[str, NDArray[np.generic]]:
+    """The truth at times ``tau`` [s from the start]: see :class:`tdmon.replay.session.Session`
+    ``truth`` (element mid-MD and length [m] give the mean friction the string meets)."""
+    where = timeline.at(tau)
+    index = where.segment
+    hookload, torque = loads.at(timeline, tau)
+    state = np.asarray([timeline.state[i] for i in index], dtype=np.str_)
+    bit = where.bit_depth
+    mus = {"mu_pick_up": np.full(tau.size, np.nan), "mu_slack_off": np.full(tau.size, np.nan),
+           "mu_rotating": np.full(tau.size, np.nan), "mu_mean": np.full(tau.size, np.nan)}
+    cache: dict[float, tuple[float, float, float, float]] = {}
+    top_of_element = element_md - 0.5 * element_length
+    for k in range(tau.size):
+        if state[k] == RigState.IN_SLIPS:
+            continue
+        depth = float(bit[k])
+        if depth not in cache:
+            # length of each element inside the string, for the mean friction it meets
+            inside = np.clip(depth - top_of_element, 0.0, element_length)
+            cache[depth] = (loads.effective_mu(Operation.PICK_UP, depth),
+                            loads.effective_mu(Operation.SLACK_OFF, depth),
+                            loads.effective_mu(Operation.ROTATING, depth),
+                            float(np.sum(loads.mu * inside) / max(np.sum(inside), _EPS)))
+        for key, value in zip(mus, cache[depth], strict=True):
+            mus[key][k] = value
+    return {"state": state, "bit_depth": bit, "hole_depth": where.hole_depth,
+            "block_position": where.block_position, "hookload": hookload, "torque": torque,
+            **mus}
+
