@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tdmon.calib.rigstate import MOVING_STATES, Detection, RigSample
+from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.vocabulary import MOVING_STATES
 
 __all__ = ["Window", "WindowAccumulator", "WindowSettings", "add_sample", "close", "summarise"]
 
