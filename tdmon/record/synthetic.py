@@ -121,7 +121,7 @@ def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[Recorde
                 "payload_encoding": "base64"})
         if second % 200 == 120:
             yield RecordedMessage("/tdmon/alarm", ns, {
-                "t": t, "kind": "overpull", "severity": "warning",
+                "t": t, "kind": "band", "severity": "warning",
                 "message": f"hook load {measured_hookload / 1e3:.0f} kN above the band",
                 "value": measured_hookload, "limit": pick_up})
     t_end = T0 + duration_s
