@@ -32,7 +32,8 @@ __all__ = [
 
 
 class RigState(StrEnum):
-    """What the rig is doing, as the rig-state detector classifies a sample (docs/back-calculation.md)."""
+    """What the rig is doing, as the rig-state detector classifies a sample
+    (docs/back-calculation.md)."""
 
     IN_SLIPS = "in_slips"
     PICK_UP = "pick_up"

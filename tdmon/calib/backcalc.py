@@ -24,9 +24,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
+from tdmon import vocabulary
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
-from tdmon import vocabulary
 from tdmon.model.torque_drag import WellModel
 from tdmon.vocabulary import Operation, RigState
 

@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BeforeValidator, Field, field_validator, model_validator
 
+from tdmon.channels import validate_prefix
 from tdmon.config.common import StrictModel, load_model
 from tdmon.config.well import WellConfig, load_well
 from tdmon.errors import ConfigError, ModelError
@@ -84,10 +85,7 @@ class ScenarioInfo(StrictModel):
     @field_validator("prefix")
     @classmethod
     def _prefix(cls, value: str) -> str:
-        value = value.strip("/")
-        if not value or any(c in value for c in "#+ \t"):
-            raise ValueError("prefix must be a plain topic path such as 'sim/rig'")
-        return value
+        return validate_prefix(value)
 
 
 class AnomalyConfig(StrictModel):
