@@ -1,7 +1,7 @@
 """Back-calculated friction factor of one steady window.
 
 The torque-and-drag model is iterated on the friction factor until it matches the measured
-value (section 4.2.6 of the seed thesis; REFERENCE.md section 5): pick-up hook load rises with
+value (section 4.2.6 of the seed thesis; docs/back-calculation.md): pick-up hook load rises with
 mu, slack-off hook load falls, off-bottom torque rises, so a bracketed root solve
 (`scipy.optimize.brentq`) finds the one mu that fits. Its standard deviation propagates the
 window's standard error through the model's slope, ``sigma_mu = sigma_measured / |dF/dmu|``.

@@ -1,13 +1,13 @@
 """Rig-state detection from surface channels, one sample at a time.
 
-The state of a sample comes from (REFERENCE.md section 5): hook load against the block weight
-(in slips when the string hangs in the slips and the hook carries only the travelling
-equipment), the axial velocity of the string (from the block position when the rig sends it,
-otherwise from the bit depth), rotation, flow or standpipe pressure, and bit depth against hole
-depth. A sample is *steady* when its state has lasted a settling time, the string does not
-accelerate and the hook load did not jump since the previous sample: this keeps break-over peaks
-at the start of a pull, accelerations and the last sample before the slips out of every
-estimate.
+The state of a sample comes from (docs/back-calculation.md, "Rig state"): hook load against
+the block weight (in slips when the string hangs in the slips and the hook carries only the
+travelling equipment), the axial velocity of the string (from the block position when the rig
+sends it, otherwise from the bit depth), rotation, flow or standpipe pressure, and bit depth
+against hole depth. A sample is *steady* when its state has lasted a settling time, the string
+does not accelerate and the hook load did not jump since the previous sample: this keeps
+break-over peaks at the start of a pull, accelerations and the last sample before the slips out
+of every estimate.
 
 Pure functions on a frozen :class:`DetectorState`; :func:`detect_series` runs them over arrays.
 State names are those of the daemon's ``state`` message (docs/architecture.md).

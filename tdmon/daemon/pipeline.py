@@ -11,8 +11,8 @@ Plug-in points for other issues:
   ``topic`` = ``/tdmon/<name>``. A sink that only wants some topics may say so with a
   ``topics`` attribute (a collection of topics); messages nobody wants are then not even
   built, which matters for the per-message ``raw`` and ``sample`` dicts. Raw input, samples
-  and rejections reach every sink before any later step sees the sample (DESIGN.md data
-  flow step 3).
+  and rejections reach every sink before any later step sees the sample (docs/architecture.md,
+  the data flow).
 * a **step** (rig state, monitor, back-calculation, alarms) sees each aligned frame in order:
   ``on_frame(frame, emit)`` and ``close(emit)``; ``emit(name, message)`` sends a result to all
   sinks and leaves it in ``frame.results[name]`` for the steps after it.

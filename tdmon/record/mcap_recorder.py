@@ -1,6 +1,6 @@
 """The MCAP flight recorder: a sink that writes every daemon message to rotating MCAP files.
 
-Design points (ECOSYSTEM.md, STYLE.md):
+Design points (docs/recording.md):
 
 * JSON messages, one JSON Schema per channel, registered once per file; integer-nanosecond log
   times; zstd chunks.
