@@ -43,11 +43,10 @@ import threading
 import time
 import weakref
 from collections.abc import Mapping
-from enum import StrEnum
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Final
 
 import tdmon
 from tdmon.errors import RecordError
@@ -70,22 +69,23 @@ PIPE_BUFFER = 4 * 1024 * 1024
 _PICKLE = pickle.HIGHEST_PROTOCOL
 
 
-class _Tag(StrEnum):
+class _Tag:
     """The first element of every tuple on the pipe between the parent and the child (a batch
-    of messages is a bare list, untagged)."""
+    of messages is a bare list, untagged). Plain strings on the wire: the pipe carries no
+    class that both ends would have to import alike."""
 
-    # parent -> child, once: a command; the child's reply carries the same tag
-    STATS = "stats"
-    FLUSH = "flush"
-    RETRY = "retry"
-    REGISTER_TOPIC = "register_topic"
-    CLOSE = "close"
-    # child -> parent: unasked events, and the replies to starting and to CLOSE
-    READY = "ready"
-    ERROR = "error"
-    ALARM = "alarm"
-    STATE = "state"
-    CLOSED = "closed"
+    # parent -> child: a command; the child's reply carries the same tag
+    STATS: Final = "stats"
+    FLUSH: Final = "flush"
+    RETRY: Final = "retry"
+    REGISTER_TOPIC: Final = "register_topic"
+    CLOSE: Final = "close"
+    # child -> parent: unasked events, and the answers to starting and to CLOSE
+    READY: Final = "ready"
+    ERROR: Final = "error"
+    ALARM: Final = "alarm"
+    STATE: Final = "state"
+    CLOSED: Final = "closed"
 
 
 class RecorderProcess:
@@ -322,7 +322,7 @@ class RecorderProcess:
             return event
         return None
 
-    def _wait_for(self, tag: _Tag, timeout: float) -> tuple[Any, ...]:
+    def _wait_for(self, tag: str, timeout: float) -> tuple[Any, ...]:
         """Handle events until the child's ``tag`` reply arrives; its fields."""
         deadline = time.monotonic() + timeout
         while True:
@@ -348,7 +348,7 @@ class RecorderProcess:
                 return other[1:]
             log.debug("unexpected message from the recorder process: %r", other[0])
 
-    def _request(self, command: _Tag, *args: Any) -> Any:
+    def _request(self, command: str, *args: Any) -> Any:
         """Ask the child something and wait for the answer (None when it is gone)."""
         if self._dead:
             return None
