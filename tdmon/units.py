@@ -8,7 +8,9 @@ either a plain number, already in the internal unit, or a string such as ``"0.3 
 
 from __future__ import annotations
 
+import math
 import re
+from datetime import UTC, datetime
 from functools import lru_cache
 
 import pint
@@ -102,3 +104,42 @@ def parse_quantity(value: float | int | str, target: str) -> float:
     if not unit:
         return number
     return to_unit(number, unit, target)
+
+
+# Sample times: Unix seconds from 1970 up to the year 2200 (a stamp beyond is a unit mistake,
+# e.g. milliseconds, never a real time).
+T_MIN = 0.0
+T_MAX = 7_258_118_400.0
+
+
+def parse_time(t: object) -> float | str:
+    """Unix seconds from a number or an ISO 8601 string, or the rejection reason."""
+    if isinstance(t, bool):
+        return "'t' must be Unix seconds or ISO 8601, got bool"
+    if isinstance(t, int | float):
+        try:
+            seconds = float(t)
+        except OverflowError:
+            return "'t' is too large"
+    elif isinstance(t, str):
+        try:
+            stamp = datetime.fromisoformat(t)
+        except ValueError:
+            return f"'t' is not ISO 8601: '{_clip(t)}'"
+        if stamp.tzinfo is None:
+            stamp = stamp.replace(tzinfo=UTC)
+        try:
+            seconds = stamp.timestamp()
+        except (OverflowError, OSError, ValueError):
+            return f"'t' out of range: '{_clip(t)}'"
+    else:
+        return f"'t' must be Unix seconds or ISO 8601, got {type(t).__name__}"
+    if not math.isfinite(seconds):
+        return f"'t' is not finite ({seconds})"
+    if not T_MIN <= seconds < T_MAX:
+        return f"'t' out of range ({seconds:g} s)"
+    return seconds
+
+
+def _clip(text: str, limit: int = 60) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."

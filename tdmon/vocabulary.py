@@ -5,6 +5,9 @@ Every layer names these things the same way, and the JSON Schemas of the recorde
 a name the schema lists. The members are ``StrEnum``: they compare equal to, hash like and
 serialise as their plain string values, so a recorded or published message is unchanged.
 
+The messages made of these words are built by `tdmon.messages`; the rig's channel names and
+units are in `tdmon.channels`.
+
 This module imports nothing of tdmon: every layer, the physics included, may use it.
 """
 
@@ -32,7 +35,8 @@ __all__ = [
 
 
 class RigState(StrEnum):
-    """What the rig is doing, as the rig-state detector classifies a sample (docs/back-calculation.md)."""
+    """What the rig is doing, as the rig-state detector classifies a sample
+    (docs/back-calculation.md)."""
 
     IN_SLIPS = "in_slips"
     PICK_UP = "pick_up"

@@ -29,9 +29,11 @@ from typing import Any
 
 import numpy as np
 
+from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads
 from tdmon.model.well import Well
+from tdmon.vocabulary import AlarmKind, Operation, Severity
 
 __all__ = [
     "Alarm",
@@ -50,22 +52,28 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Alarm:
-    """One alarm, as the daemon's ``alarm`` message."""
+    """One alarm, as the daemon's ``alarm`` message.
+
+    ``kind`` and ``severity`` may be given as their plain names; they are held as the
+    `AlarmKind` and `Severity` members, so a name outside the vocabulary (and therefore outside
+    the alarm schema) raises ``ValueError`` where the alarm is made.
+    """
 
     t: float
-    kind: str
-    severity: str
+    kind: AlarmKind | str
+    severity: Severity | str
     message: str
     value: float | None = None
     limit: float | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", AlarmKind(self.kind))
+        object.__setattr__(self, "severity", Severity(self.severity))
+
     def to_message(self) -> dict[str, Any]:
         """The ``alarm`` message; non-finite numbers become null (JSON has no NaN)."""
-        def clean(x: float | None) -> float | None:
-            return float(x) if x is not None and math.isfinite(x) else None
-
-        return {"t": float(self.t), "kind": self.kind, "severity": self.severity,
-                "message": self.message, "value": clean(self.value), "limit": clean(self.limit)}
+        return alarm_message(self.t, self.kind, self.severity, self.message, self.value,
+                             self.limit)
 
 
 # -- band trend -----------------------------------------------------------------------------
@@ -120,7 +128,7 @@ def update_band_trend(state: BandTrendState, t: float, measured: float, low: flo
         return BandTrendState(average, outside, False), None
     above = average > 0
     bound = high if above else low
-    alarm = Alarm(t, "band", "warning",
+    alarm = Alarm(t, AlarmKind.BAND, Severity.WARNING,
                   f"{what} trending {'above' if above else 'below'} the modelled band for "
                   f"{outside} samples", measured, bound)
     return BandTrendState(average, outside, True), alarm
@@ -151,17 +159,19 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
     compression with the sinusoidal and helical buckling loads (eq 30, 31); torque with the
     connections' make-up torque.
     """
-    window = operating_window(well, loads, torque_operation="rotating")
+    window = operating_window(well, loads, torque_operation=Operation.ROTATING)
     force = loads.axial_force[operation]
     torque = np.abs(loads.torque[operation])
     checks = (
-        ("tensile", force, window.tensile, "tension"),
-        ("sinusoidal_buckling", -force, window.sinusoidal_buckling, "compression"),
-        ("helical_buckling", -force, window.helical_buckling, "compression"),
-        ("makeup_torque", torque, window.makeup_torque, "torque"),
+        (AlarmKind.LIMIT_TENSILE, "tensile", force, window.tensile, "tension"),
+        (AlarmKind.LIMIT_SINUSOIDAL_BUCKLING, "sinusoidal_buckling", -force,
+         window.sinusoidal_buckling, "compression"),
+        (AlarmKind.LIMIT_HELICAL_BUCKLING, "helical_buckling", -force, window.helical_buckling,
+         "compression"),
+        (AlarmKind.LIMIT_MAKEUP_TORQUE, "makeup_torque", torque, window.makeup_torque, "torque"),
     )
     alarms: list[Alarm] = []
-    for name, load, limit, label in checks:
+    for kind, name, load, limit, label in checks:
         with np.errstate(invalid="ignore", divide="ignore"):
             usage = np.where(np.isfinite(limit) & (limit > 0) & (load > 0), load / limit, 0.0)
         if not usage.size:
@@ -170,8 +180,8 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
         ratio = float(usage[worst])
         if ratio < warn:
             continue
-        severity = "critical" if ratio >= 1.0 else "warning"
-        alarms.append(Alarm(t, f"limit_{name}", severity,
+        severity = Severity.CRITICAL if ratio >= 1.0 else Severity.WARNING
+        alarms.append(Alarm(t, kind, severity,
                             f"{operation} {label} at {loads.md[worst]:.0f} m is "
                             f"{100 * ratio:.0f} % of the {name.replace('_', ' ')} limit",
                             float(load[worst]), float(limit[worst])))
@@ -206,7 +216,7 @@ def friction_jump(history: tuple[float, ...], mu: float, mu_std: float, t: float
     limit = median + max(settings.min_step, settings.sigmas * math.hypot(mu_std, spread))
     if mu <= limit:
         return None
-    return Alarm(t, "friction_jump", "warning",
+    return Alarm(t, AlarmKind.FRICTION_JUMP, Severity.WARNING,
                  f"{operation} friction {mu:.3f} at {bit_depth:.0f} m jumped above the recent "
                  f"{median:.3f} (tight spot or cuttings bed?)", mu, limit)
 
@@ -271,7 +281,7 @@ def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.
     if best is None:
         return None, known
     _, first, excess, limit, reference = best
-    alarm = Alarm(t, "friction_jump", "warning",
+    alarm = Alarm(t, AlarmKind.FRICTION_JUMP, Severity.WARNING,
                   f"local friction {reference + excess:.3f} between {edges[first]:.0f} and "
                   f"{edges[first + width]:.0f} m MD, {excess:.3f} above the rest of the profile "
                   "(tight spot or cuttings bed?)", reference + excess, reference + limit)
@@ -293,14 +303,22 @@ class SensorSettings:
     rotating_speed: float = 0.5
 
 
+# Channels whose repeated values are counted, and the alarm each raises when frozen (the bit
+# depth's run is kept but raises none, see sensor_alarms).
+_FROZEN_CHANNELS = ("hookload", "torque", "bit_depth")
+_FROZEN_KIND = {"hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
+                "torque": AlarmKind.SENSOR_TORQUE_FROZEN}
+
+
 @dataclass(frozen=True)
 class SensorState:
-    """Channels reported stale, the last values and their run lengths, active conditions."""
+    """Channels reported stale, the last values and their run lengths, and the sensor alarm
+    kinds whose condition holds (an alarm is raised when its condition starts)."""
 
     stale: frozenset[str] = frozenset()
     last: tuple[tuple[str, float], ...] = ()
     runs: tuple[tuple[str, int], ...] = ()
-    active: frozenset[str] = frozenset()
+    active: frozenset[AlarmKind] = frozenset()
     below_since: float | None = None
 
 
@@ -323,12 +341,13 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     started = new_stale - state.stale
     if started:
         for channel in sorted(started):
-            alarms.append(Alarm(t, "sensor_stale", "warning", f"channel {channel} is stale"))
-    conditions: set[str] = set()
+            alarms.append(Alarm(t, AlarmKind.SENSOR_STALE, Severity.WARNING,
+                                f"channel {channel} is stale"))
+    conditions: set[AlarmKind] = set()
     hookload = values.get("hookload")
     if hookload is not None and (not math.isfinite(hookload) or hookload < 0.0
                                  or hookload > settings.max_hookload):
-        conditions.add("hookload_implausible")
+        conditions.add(AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE)
     bit, hole = values.get("bit_depth"), values.get("hole_depth")
     last = dict(state.last)
     runs = dict(state.runs)
@@ -336,35 +355,41 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
              and bit > hole + settings.depth_tolerance)
     below_since = (state.below_since if state.below_since is not None else t) if below else None
     if below_since is not None and t - below_since >= settings.persist_time:
-        conditions.add("bit_below_hole")
+        conditions.add(AlarmKind.SENSOR_BIT_BELOW_HOLE)
     # bit depth legitimately stands still; a frozen load while moving is suspicious, but
     # surface torque rests at its zero offset whenever the string does not rotate (Volve
     # F-4 trips: a constant 5.2 N m), so a constant torque counts only while rotating
     rotating = values.get("rpm", 0.0) > settings.rotating_speed
-    for channel in ("hookload", "torque", "bit_depth"):
+    for channel in _FROZEN_CHANNELS:
         value = values.get(channel)
         if value is None:
             continue
         run = runs.get(channel, 0) + 1 if last.get(channel) == value else 0
         runs[channel] = run
         last[channel] = value
-        if channel != "bit_depth" and moving and run >= settings.frozen_samples \
+        frozen_kind = _FROZEN_KIND.get(channel)
+        if frozen_kind is not None and moving and run >= settings.frozen_samples \
                 and value != 0.0 and (channel != "torque" or rotating):
-            conditions.add(f"{channel}_frozen")
+            conditions.add(frozen_kind)
     new_conditions = conditions - state.active
     if new_conditions:
         texts = {
-            "hookload_implausible": ("critical", "hook load is negative or implausibly large",
-                                     hookload, settings.max_hookload),
-            "bit_below_hole": ("warning", "bit depth is below the hole depth", bit, hole),
-            "hookload_frozen": ("warning", "hook load has not changed while the string moves",
-                                hookload, None),
-            "torque_frozen": ("warning", "torque has not changed while the string rotates",
-                              values.get("torque"), None),
+            AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE: (
+                Severity.CRITICAL, "hook load is negative or implausibly large", hookload,
+                settings.max_hookload),
+            AlarmKind.SENSOR_BIT_BELOW_HOLE: (
+                Severity.WARNING, "bit depth is below the hole depth", bit, hole),
+            AlarmKind.SENSOR_HOOKLOAD_FROZEN: (
+                Severity.WARNING, "hook load has not changed while the string moves", hookload,
+                None),
+            AlarmKind.SENSOR_TORQUE_FROZEN: (
+                Severity.WARNING, "torque has not changed while the string rotates",
+                values.get("torque"), None),
         }
+        # sorted by name: the order the alarms of one frame are raised in
         for condition in sorted(new_conditions):
             severity, text, value, limit = texts[condition]
-            alarms.append(Alarm(t, f"sensor_{condition}", severity, text, value, limit))
+            alarms.append(Alarm(t, condition, severity, text, value, limit))
     # built directly: dataclasses.replace on every frame cost more than the checks
     new_state = SensorState(stale=new_stale, last=tuple(last.items()),
                             runs=tuple(runs.items()), active=frozenset(conditions),

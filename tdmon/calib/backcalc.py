@@ -1,7 +1,7 @@
 """Back-calculated friction factor of one steady window.
 
 The torque-and-drag model is iterated on the friction factor until it matches the measured
-value (section 4.2.6 of the seed thesis; REFERENCE.md section 5): pick-up hook load rises with
+value (section 4.2.6 of the seed thesis; docs/back-calculation.md): pick-up hook load rises with
 mu, slack-off hook load falls, off-bottom torque rises, so a bracketed root solve
 (`scipy.optimize.brentq`) finds the one mu that fits. Its standard deviation propagates the
 window's standard error through the model's slope, ``sigma_mu = sigma_measured / |dF/dmu|``.
@@ -15,16 +15,20 @@ the solve sets the open-hole elements only (per-element friction arrays of
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
+from types import MappingProxyType
+from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
+from tdmon import vocabulary
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
 from tdmon.model.torque_drag import WellModel
+from tdmon.vocabulary import Operation, RigState
 
 __all__ = [
     "OPERATION_FOR_STATE",
@@ -39,12 +43,14 @@ __all__ = [
 
 Quantity = Literal["hookload", "torque"]
 
-OPERATION_FOR_STATE: dict[str, tuple[str, Quantity]] = {
-    "pick_up": ("pick_up", "hookload"),
-    "slack_off": ("slack_off", "hookload"),
-    "rotating_off_bottom": ("rotating", "torque"),
-}
-"""Which model operation and measured quantity a window of a rig state calibrates."""
+OPERATION_FOR_STATE: Mapping[RigState, tuple[Operation, Quantity]] = MappingProxyType({
+    state: (vocabulary.OPERATION_FOR_STATE[state],
+            "torque" if state == RigState.ROTATING_OFF_BOTTOM else "hookload")
+    for state in (RigState.PICK_UP, RigState.SLACK_OFF, RigState.ROTATING_OFF_BOTTOM)
+})
+"""Which model operation and measured quantity a window of a rig state calibrates: the
+`tdmon.vocabulary.CALIBRATING_STATES`, with the vocabulary's load case; off-bottom rotation
+calibrates on the torque (its hook load has no axial friction)."""
 
 @dataclass(frozen=True)
 class WindowMeasurement:
@@ -71,7 +77,7 @@ def window_measurement(window: Window) -> WindowMeasurement | None:
     return WindowMeasurement(operation, 1 if quantity == "torque" else 0, measured, se)
 
 
-REAMING_OPERATIONS: dict[str, str] = {"reaming": "slack_off", "back_reaming": "pick_up"}
+REAMING_OPERATIONS: Final[Mapping[RigState, Operation]] = vocabulary.REAMING_AXIAL_OPERATION
 """Axial operation of the combined-motion states; their friction comes from the torque with
 the friction split by the motion angle psi (Aadnoy, Fazaelizadeh and Hareland 2010)."""
 
@@ -254,7 +260,7 @@ def back_calculate_window(
     elif window.state in OPERATION_FOR_STATE:
         operation, quantity = OPERATION_FOR_STATE[window.state]
     else:
-        raise FitError(f"no friction solve for rig state {window.state!r}")
+        raise FitError(f"no friction solve for rig state '{window.state}'")
     if quantity == "torque":
         if window.torque is None or window.torque_se is None:
             raise FitError("rotating window without surface torque")

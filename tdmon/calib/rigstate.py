@@ -1,13 +1,13 @@
 """Rig-state detection from surface channels, one sample at a time.
 
-The state of a sample comes from (REFERENCE.md section 5): hook load against the block weight
-(in slips when the string hangs in the slips and the hook carries only the travelling
-equipment), the axial velocity of the string (from the block position when the rig sends it,
-otherwise from the bit depth), rotation, flow or standpipe pressure, and bit depth against hole
-depth. A sample is *steady* when its state has lasted a settling time, the string does not
-accelerate and the hook load did not jump since the previous sample: this keeps break-over peaks
-at the start of a pull, accelerations and the last sample before the slips out of every
-estimate.
+The state of a sample comes from (docs/back-calculation.md, "Rig state"): hook load against
+the block weight (in slips when the string hangs in the slips and the hook carries only the
+travelling equipment), the axial velocity of the string (from the block position when the rig
+sends it, otherwise from the bit depth), rotation, flow or standpipe pressure, and bit depth
+against hole depth. A sample is *steady* when its state has lasted a settling time, the string
+does not accelerate and the hook load did not jump since the previous sample: this keeps
+break-over peaks at the start of a pull, accelerations and the last sample before the slips out
+of every estimate.
 
 Pure functions on a frozen :class:`DetectorState`; :func:`detect_series` runs them over arrays.
 State names are those of the daemon's ``state`` message (docs/architecture.md).
@@ -21,6 +21,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tdmon.vocabulary import MOVING_STATES, RigState
+
 __all__ = [
     "MOVING_STATES",
     "STATES",
@@ -33,11 +35,8 @@ __all__ = [
     "detect_series",
 ]
 
-STATES: tuple[str, ...] = ("in_slips", "pick_up", "slack_off", "rotating_off_bottom", "reaming",
-                           "back_reaming", "drilling", "circulating", "static", "unknown")
+STATES: tuple[RigState, ...] = tuple(RigState)
 """Rig states, as in the ``state`` message of docs/architecture.md."""
-
-MOVING_STATES = frozenset({"pick_up", "slack_off", "reaming", "back_reaming"})
 
 _RPM = 2.0 * math.pi / 60.0  # rad/s per rev/min
 
@@ -136,7 +135,7 @@ class DetectorState:
     block_loaded: bool = False
     velocity: float | None = None
     hookload: float | None = None
-    state: str = "unknown"
+    state: RigState = RigState.UNKNOWN
     state_since: float = -math.inf
 
 
@@ -144,7 +143,7 @@ class DetectorState:
 class Detection:
     """Result for one sample: ``state``, ``steady``, axial ``velocity`` [m/s] (> 0 deeper)."""
 
-    state: str
+    state: RigState
     steady: bool
     velocity: float | None
 
@@ -154,7 +153,7 @@ def _finite(value: float | None) -> float | None:
 
 
 def classify(hookload: float | None, velocity: float | None, rpm: float | None,
-             circulating: bool, on_bottom: bool, thresholds: RigStateThresholds) -> str:
+             circulating: bool, on_bottom: bool, thresholds: RigStateThresholds) -> RigState:
     """Rig state of one sample.
 
     Parameters
@@ -168,7 +167,7 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
 
     Returns
     -------
-    str, one of :data:`STATES`
+    RigState
 
     Notes
     -----
@@ -177,23 +176,23 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
     advancing while the block moves empty, a depth-tracking artefact).
     """
     if hookload is None:
-        return "unknown"
+        return RigState.UNKNOWN
     if hookload < thresholds.block_weight + thresholds.in_slips_margin:
-        return "in_slips"
+        return RigState.IN_SLIPS
     moving_down = velocity is not None and velocity > thresholds.moving_speed
     moving_up = velocity is not None and velocity < -thresholds.moving_speed
     rotating = rpm is not None and rpm > thresholds.rotating_speed
     if rotating:
         if on_bottom:
-            return "drilling"
+            return RigState.DRILLING
         if moving_up:
-            return "back_reaming"
-        return "reaming" if moving_down else "rotating_off_bottom"
+            return RigState.BACK_REAMING
+        return RigState.REAMING if moving_down else RigState.ROTATING_OFF_BOTTOM
     if moving_up:
-        return "pick_up"
+        return RigState.PICK_UP
     if moving_down:
-        return "slack_off"
-    return "circulating" if circulating else "static"
+        return RigState.SLACK_OFF
+    return RigState.CIRCULATING if circulating else RigState.STATIC
 
 
 def _channel_velocity(value: float | None, time: float, prior_value: float | None,
@@ -226,7 +225,7 @@ def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
     t = sample.t
     block_time = t if sample.block_time is None else sample.block_time
     bit_time = t if sample.bit_time is None else sample.bit_time
-    carry = prior.velocity if prior.state != "in_slips" else None
+    carry = prior.velocity if prior.state != RigState.IN_SLIPS else None
     # the channel memory is kept in locals and the new state built once by `detect` (a
     # dataclasses.replace per channel cost more than the rest of the detector)
     memory_block, memory_block_time, memory_loaded = (prior.block_position, prior.block_time,
@@ -281,7 +280,7 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     hookload = _finite(sample.hookload)
     t = sample.t
     if not math.isfinite(t):
-        return replace(prior, state="unknown"), Detection("unknown", False, None)
+        return replace(prior, state=RigState.UNKNOWN), Detection(RigState.UNKNOWN, False, None)
     dt = t - prior.t
     fresh = not (math.isfinite(dt) and 0.0 < dt <= thresholds.max_gap)
     loaded = hookload is not None and (
@@ -305,7 +304,7 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     state = classify(hookload, velocity, rpm, circulating, on_bottom, thresholds)
     since = prior.state_since if (state == prior.state and not fresh) else t
     prior_hookload = prior.hookload
-    steady = (state != "unknown" and not fresh and t - since >= thresholds.settle_time
+    steady = (state != RigState.UNKNOWN and not fresh and t - since >= thresholds.settle_time
               and hookload is not None and prior_hookload is not None)
     if steady and velocity is not None and prior.velocity is not None:
         steady = abs(velocity - prior.velocity) / dt <= thresholds.max_acceleration

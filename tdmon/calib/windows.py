@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tdmon.calib.rigstate import MOVING_STATES, Detection, RigSample
+from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.vocabulary import MOVING_STATES, RigState
 
 __all__ = ["Window", "WindowAccumulator", "WindowSettings", "add_sample", "close", "summarise"]
 
@@ -68,7 +69,7 @@ class Window:
     rejected : why the window must not be used (None when usable)
     """
 
-    state: str
+    state: RigState
     t_start: float
     t_end: float
     n: int
@@ -94,7 +95,7 @@ class Window:
 class WindowAccumulator:
     """Samples of the window being built (tuples: the accumulator is immutable)."""
 
-    state: str = ""
+    state: RigState = RigState.UNKNOWN  # of the samples; none yet: unknown is never steady
     samples: tuple[RigSample, ...] = ()
     velocities: tuple[float | None, ...] = ()
 
@@ -112,7 +113,7 @@ def _mean_se(values: np.ndarray, floor: float) -> tuple[float, float]:
     return float(np.mean(values)), max(spread, floor) / math.sqrt(n)
 
 
-def summarise(state: str, samples: tuple[RigSample, ...],
+def summarise(state: RigState, samples: tuple[RigSample, ...],
               velocities: tuple[float | None, ...], settings: WindowSettings) -> Window | None:
     """Check and summarise the samples of one window (None when there are none usable).
 

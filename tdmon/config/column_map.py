@@ -14,8 +14,8 @@ from typing import Annotated
 
 from pydantic import Field, field_validator
 
+from tdmon.channels import check_channel
 from tdmon.config.common import StrictModel, load_model, quantity
-from tdmon.ingest.decode import CHANNEL_UNITS
 
 __all__ = ["ChannelColumn", "ColumnMapConfig", "TimeColumn", "load_column_map_config"]
 
@@ -50,8 +50,7 @@ class ColumnMapConfig(StrictModel):
     @classmethod
     def _known(cls, channels: dict[str, ChannelColumn]) -> dict[str, ChannelColumn]:
         for name in channels:
-            if name not in CHANNEL_UNITS:
-                raise ValueError(f"unknown channel '{name}' (one of {', '.join(CHANNEL_UNITS)})")
+            check_channel(name)
         return channels
 
 

@@ -150,27 +150,6 @@ def load_model(
     return validate_model(model, read_toml(path), path, context)
 
 
-_NOT_IN_PREFIX = "#+*$"
-
-
-def validate_prefix(value: str) -> str:
-    """A rig's topic prefix without its outer slashes, e.g. ``"rig/F4"`` or ``"sim/trip-out"``.
-
-    The prefix is put in front of MQTT topics and Zenoh key expressions, so it may not hold
-    their wildcards and special characters (``#``, ``+``, ``*``, ``$``) nor white space (a
-    typo, never a rig's name). For a pydantic ``field_validator``.
-
-    Raises
-    ------
-    ValueError
-        An empty prefix, or one holding such a character.
-    """
-    value = value.strip("/")
-    if not value or any(c in value for c in _NOT_IN_PREFIX) or any(c.isspace() for c in value):
-        raise ValueError("prefix must be a plain topic path such as 'rig/F4'")
-    return value
-
-
 __all__ = [
     "Density",
     "Diameter",
@@ -185,6 +164,5 @@ __all__ = [
     "quantity",
     "read_toml",
     "validate_model",
-    "validate_prefix",
     "validation_to_config_error",
 ]

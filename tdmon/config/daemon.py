@@ -23,15 +23,10 @@ from pydantic import (
     model_validator,
 )
 
-from tdmon.config.common import (
-    CrossFieldError,
-    read_toml,
-    validate_prefix,
-    validation_to_config_error,
-)
+from tdmon.channels import CHANNEL_UNITS, ChannelSpec, check_channel, validate_prefix
+from tdmon.config.common import CrossFieldError, read_toml, validation_to_config_error
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
-from tdmon.ingest.decode import CHANNEL_UNITS, ChannelSpec
 from tdmon.units import conversion, parse_quantity
 
 
@@ -285,8 +280,7 @@ class DaemonConfig(_Model):
     @classmethod
     def _channels(cls, value: dict[str, ChannelConfig]) -> dict[str, ChannelConfig]:
         for name in value:
-            if name not in CHANNEL_UNITS:
-                raise ValueError(f"unknown channel '{name}' (known: {', '.join(CHANNEL_UNITS)})")
+            check_channel(name)
         return value
 
     def channel_specs(self) -> list[ChannelSpec]:
@@ -355,8 +349,10 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
         if not name or "/" in name:
             raise ConfigError(str(file), "publish.names", f"'{name}' is not a message name")
     for channel in config.align.wait_for or ():
-        if channel not in CHANNEL_UNITS:
-            raise ConfigError(str(file), "align.wait_for", f"unknown channel '{channel}'")
+        try:
+            check_channel(channel)
+        except ValueError as exc:
+            raise ConfigError(str(file), "align.wait_for", str(exc)) from None
     if config.calibration.enabled and config.well is None:
         raise ConfigError(str(file), "calibration.enabled", "calibration needs a well file")
     if config.well is not None and not config.resolve(config.well).exists():

@@ -15,6 +15,7 @@ from typing import Annotated, Any, Final, Literal, get_args
 
 from pydantic import Field, field_validator, model_validator
 
+from tdmon.channels import check_channel, validate_prefix
 from tdmon.config.common import (
     Force,
     Length,
@@ -22,9 +23,8 @@ from tdmon.config.common import (
     StrictModel,
     load_model,
     quantity,
-    validate_prefix,
 )
-from tdmon.ingest.decode import parse_time
+from tdmon.units import parse_time
 
 __all__ = [
     "CHANNELS",
@@ -64,9 +64,8 @@ Fraction = Annotated[float, quantity("dimensionless")]
 
 
 def _known_channels(channels: list[str]) -> list[str]:
-    unknown = [c for c in channels if c not in CHANNELS]
-    if unknown:
-        raise ValueError(f"unknown channel '{unknown[0]}' (one of {', '.join(CHANNELS)})")
+    for name in channels:
+        check_channel(name, CHANNELS)
     return channels
 
 

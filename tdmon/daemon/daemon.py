@@ -21,6 +21,7 @@ from typing import Any, Protocol
 from tdmon.daemon.pipeline import Pipeline
 from tdmon.daemon.supervisor import Backoff, supervise
 from tdmon.ingest.types import RawMessage
+from tdmon.vocabulary import ConnectionState
 
 log = logging.getLogger(__name__)
 
@@ -165,8 +166,8 @@ class Daemon:
             task.cancel()
         await asyncio.gather(*source_tasks, return_exceptions=True)
         for spec in self.sources:
-            if self.connections.get(spec.name) != "finished":
-                self.connections[spec.name] = "closed"
+            if self.connections.get(spec.name) != ConnectionState.FINISHED:
+                self.connections[spec.name] = ConnectionState.CLOSED
         housekeeping.cancel()
         await asyncio.gather(housekeeping, return_exceptions=True)
         if not consumer.done():
@@ -184,5 +185,5 @@ class Daemon:
             task.cancel()
         await asyncio.gather(*publisher_tasks, return_exceptions=True)
         for publisher in self.publishers:
-            self.connections[publisher.name] = "closed"
+            self.connections[publisher.name] = ConnectionState.CLOSED
         self.pipeline.close_sinks()

@@ -19,19 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tdmon.daemon.pipeline import Emit, Frame
+from tdmon.vocabulary import CURVE_FOR_STATE, ROTATING_STATES, Operation
 
-#: Which modelled hook-load curve a measured value is compared with, per rig state.
-CURVE_FOR_STATE = {
-    "pick_up": "pick_up",
-    "back_reaming": "pick_up",
-    "slack_off": "slack_off",
-    "reaming": "slack_off",
-    "rotating_off_bottom": "rotating",
-    "drilling": "rotating",
-    "circulating": "rotating",
-    "static": "rotating",
-}
-_ROTATING_STATES = frozenset({"rotating_off_bottom", "reaming", "back_reaming", "drilling"})
+# The vocabulary's map as a plain dict keyed by state name: a frame carries its state as a
+# str, and a dict lookup is the cheapest on this per-frame path.
+_CURVE_FOR_STATE: dict[str, Operation] = {state.value: curve
+                                           for state, curve in CURVE_FOR_STATE.items()}
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,13 +140,13 @@ def model_message(frame: Frame, loads: ModelledLoads) -> dict[str, Any]:
     """The ``model`` daemon message for one frame (docs/architecture.md)."""
     hookload = frame.values.get("hookload")
     torque = frame.values.get("torque")
-    curve = CURVE_FOR_STATE.get(frame.state)
+    curve = _CURVE_FOR_STATE.get(frame.state)
     modelled = {"pick_up": loads.pick_up, "slack_off": loads.slack_off,
                 "rotating": loads.rotating}
     hookload_residual = (None if hookload is None or curve is None
                          else hookload - modelled[curve])
     torque_residual = (torque - loads.torque_rotating
-                       if torque is not None and frame.state in _ROTATING_STATES else None)
+                       if torque is not None and frame.state in ROTATING_STATES else None)
     return {
         "t": frame.t,
         "bit_depth_m": loads.bit_depth,

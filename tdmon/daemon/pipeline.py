@@ -35,7 +35,9 @@ from tdmon.ingest.types import (
     rejected_message,
     sample_message,
 )
+from tdmon.messages import status_message
 from tdmon.record.sink import Sink
+from tdmon.vocabulary import RigState
 
 __all__ = ["Emit", "Frame", "FrameSource", "Pipeline", "Sink", "Stats", "Step"]
 
@@ -58,7 +60,7 @@ class Frame:
     values: dict[str, float]
     ages: dict[str, float]
     stale: tuple[str, ...] = ()
-    state: str = "unknown"
+    state: str = RigState.UNKNOWN
     steady: bool = False
     results: dict[str, dict[str, Any]] = field(default_factory=dict)
 
@@ -208,18 +210,10 @@ class Pipeline:
         now = time.time() if now is None else now
         stats = self.stats
         lag = 0.0 if stats.last_sample_t is None else max(0.0, now - stats.last_sample_t)
-        return {
-            "t": now,
-            "samples_in": stats.samples_in,
-            "rejected": stats.rejected,
-            "dropped": stats.dropped,
-            "lag_s": lag,
-            "connections": dict(connections),
-            "messages_in": stats.messages_in,
-            "duplicates": stats.duplicates,
-            "out_of_order": stats.out_of_order,
-            "frames": stats.frames,
-        }
+        return status_message(now, stats.samples_in, stats.rejected, stats.dropped, lag,
+                              connections, messages_in=stats.messages_in,
+                              duplicates=stats.duplicates, out_of_order=stats.out_of_order,
+                              frames=stats.frames)
 
     def _sync_aligner_counts(self) -> None:
         self.stats.duplicates = self.aligner.duplicates

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from tdmon.errors import IngestError
+from tdmon.vocabulary import ConnectionState
 
 log = logging.getLogger(__name__)
 
@@ -56,23 +57,23 @@ async def supervise(
     attempt = 0
     while True:
         attempt += 1
-        states[name] = "connecting"
+        states[name] = ConnectionState.CONNECTING
         try:
             async with connect() as connection:
-                states[name] = "connected"
+                states[name] = ConnectionState.CONNECTED
                 if attempt > 1:
                     log.info("%s: connected again after %d attempts", name, attempt - 1)
                 attempt = 0
                 delay = backoff.initial
                 await work(connection)
             if finite:
-                states[name] = "finished"
+                states[name] = ConnectionState.FINISHED
                 return
             reason = "connection ended"
         except (IngestError, OSError) as exc:
             reason = str(exc)
         wait = backoff.wait(delay)
-        states[name] = f"retrying in {wait:.1f} s: {reason}"
+        states[name] = f"{ConnectionState.RETRYING} in {wait:.1f} s: {reason}"
         log.warning("%s: %s; retrying in %.1f s", name, reason, wait)
         await asyncio.sleep(wait)
         delay = backoff.next(delay)

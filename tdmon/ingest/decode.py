@@ -12,31 +12,17 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
-from datetime import UTC, datetime
 
+# CHANNEL_UNITS and ChannelSpec live in tdmon.channels (the config builds channel specs
+# without importing the decoder); they are named here too for the decoder's users.
+from tdmon.channels import CHANNEL_UNITS, ChannelSpec, check_channel
 from tdmon.ingest.types import RawMessage, Rejected, Sample
-from tdmon.units import conversion
+from tdmon.units import T_MAX, T_MIN, conversion, parse_time
 
-#: Canonical channels and their internal unit: (pint expression, display string).
-CHANNEL_UNITS: dict[str, tuple[str, str]] = {
-    "hookload": ("N", "N"),
-    "torque": ("N*m", "N m"),
-    "bit_depth": ("m", "m"),
-    "hole_depth": ("m", "m"),
-    "block_position": ("m", "m"),
-    "rpm": ("rad/s", "rad/s"),
-    "flow_in": ("m**3/s", "m^3/s"),
-    "spp": ("Pa", "Pa"),
-    "wob": ("N", "N"),
-    "mud_temp_in": ("degC", "degC"),
-    "mud_temp_out": ("degC", "degC"),
-    "mud_density": ("kg/m**3", "kg/m^3"),
-}
+__all__ = ["ABS_VALUE_MAX", "CHANNEL_UNITS", "T_MAX", "T_MIN", "ChannelSpec", "Decoder",
+           "parse_payload", "parse_time", "topic_for"]
 
 #: Timestamps outside [1970, 2200) are typos or unit mix-ups (ms instead of s), not data.
-T_MIN = 0.0
-T_MAX = 7_258_118_400.0
 
 #: Anything larger in magnitude is not a measurement, whatever the channel.
 ABS_VALUE_MAX = 1e15
@@ -51,21 +37,6 @@ _NUMBER = (int, float)
 #: The decoder ``json.loads`` uses (default settings), for its faster ``raw_decode``.
 _JSON = json.JSONDecoder()
 _NOT_PLAIN = object()  # what `_plain_json_object` returns when json.loads must look
-
-
-@dataclass(frozen=True, slots=True)
-class ChannelSpec:
-    """How one topic feeds one canonical channel.
-
-    ``unit`` is the unit assumed when the payload has none (None: the payload must say).
-    ``minimum``/``maximum`` bound the converted SI value (None: unbounded).
-    """
-
-    channel: str
-    topic: str
-    unit: str | None = None
-    minimum: float | None = None
-    maximum: float | None = None
 
 
 class Decoder:
@@ -87,8 +58,7 @@ class Decoder:
         self._factors: dict[str, dict[str, tuple[float, float]]] = {}
         self._default_factor: dict[str, tuple[float, float] | None] = {}
         for spec in specs:
-            if spec.channel not in CHANNEL_UNITS:
-                raise ValueError(f"unknown channel '{spec.channel}'")
+            check_channel(spec.channel)
             topic = topic_for(self.prefix, spec.topic)
             self._by_topic[topic] = spec
             target = CHANNEL_UNITS[spec.channel][0]
@@ -224,35 +194,6 @@ def _plain_json_object(text: str) -> object:
         if end == len(text):
             return obj
     return _NOT_PLAIN
-
-
-def parse_time(t: object) -> float | str:
-    """Unix seconds from a number or an ISO 8601 string, or the rejection reason."""
-    if isinstance(t, bool):
-        return "'t' must be Unix seconds or ISO 8601, got bool"
-    if isinstance(t, _NUMBER):
-        try:
-            seconds = float(t)
-        except OverflowError:
-            return "'t' is too large"
-    elif isinstance(t, str):
-        try:
-            stamp = datetime.fromisoformat(t)
-        except ValueError:
-            return f"'t' is not ISO 8601: '{_clip(t)}'"
-        if stamp.tzinfo is None:
-            stamp = stamp.replace(tzinfo=UTC)
-        try:
-            seconds = stamp.timestamp()
-        except (OverflowError, OSError, ValueError):
-            return f"'t' out of range: '{_clip(t)}'"
-    else:
-        return f"'t' must be Unix seconds or ISO 8601, got {type(t).__name__}"
-    if not math.isfinite(seconds):
-        return f"'t' is not finite ({seconds})"
-    if not T_MIN <= seconds < T_MAX:
-        return f"'t' out of range ({seconds:g} s)"
-    return seconds
 
 
 def _reject(raw: RawMessage, reason: str) -> Rejected:

@@ -21,12 +21,13 @@ from typing import Protocol
 import aiomqtt
 import zenoh
 
+from tdmon.channels import check_channel
 from tdmon.config.daemon import MqttConfig, ZenohConfig
 from tdmon.errors import IngestError
-from tdmon.ingest.decode import CHANNEL_UNITS, parse_time
 from tdmon.ingest.mcap_source import iter_raw
 from tdmon.ingest.mqtt import make_client
 from tdmon.ingest.zenoh_io import open_session
+from tdmon.units import parse_time
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,8 +62,10 @@ def parse_columns(text: str) -> tuple[Column, ...]:
             column, unit = rest.rsplit(":", 1)
         except ValueError:
             raise IngestError(f"column map item '{item}' is not channel=column:unit") from None
-        if channel not in CHANNEL_UNITS:
-            raise IngestError(f"column map: unknown channel '{channel}'")
+        try:
+            check_channel(channel)
+        except ValueError as exc:
+            raise IngestError(f"column map: {exc}") from None
         columns.append(Column(channel.strip(), column.strip(), unit.strip()))
     if not columns:
         raise IngestError("column map is empty")

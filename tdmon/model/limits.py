@@ -19,6 +19,7 @@ from tdmon.model.string import GRAVITY
 from tdmon.model.survey import interpolate_survey
 from tdmon.model.torque_drag import Loads
 from tdmon.model.well import Well, hole_grid
+from tdmon.vocabulary import Operation
 
 __all__ = [
     "Limit",
@@ -275,7 +276,7 @@ def _node_properties(well: Well, loads: Loads) -> _NodeProperties:
 
 
 def operating_window(well: Well, loads: Loads, *,
-                     torque_operation: str = "rotating") -> OperatingWindow:
+                     torque_operation: str = Operation.ROTATING) -> OperatingWindow:
     """Limit lines along the string at the bit depth of ``loads``.
 
     Parameters

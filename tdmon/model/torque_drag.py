@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any, Literal
 
 import numpy as np
@@ -36,6 +35,7 @@ from tdmon.errors import ModelError
 from tdmon.model import _kernels
 from tdmon.model.survey import interpolate_survey, tangent_vectors
 from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
+from tdmon.vocabulary import Operation
 
 __all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"]
 
@@ -48,20 +48,6 @@ _march_gradient: Any = _kernels.march_gradient
 
 # Bit depths this close [m] outside the string or the hole are taken as on the limit.
 _DEPTH_TOLERANCE = 1e-6
-
-
-class Operation(StrEnum):
-    """What the string is doing.
-
-    static: hanging still (no friction); rotating: rotating off bottom (no axial friction);
-    pick_up: pulling out; slack_off: lowering; on_bottom: rotating with weight on the bit.
-    """
-
-    STATIC = "static"
-    ROTATING = "rotating"
-    PICK_UP = "pick_up"
-    SLACK_OFF = "slack_off"
-    ON_BOTTOM = "on_bottom"
 
 
 @dataclass(frozen=True)

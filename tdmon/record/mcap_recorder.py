@@ -40,8 +40,10 @@ from mcap.writer import CompressionType, Writer
 
 from tdmon import __version__
 from tdmon.errors import RecordError
+from tdmon.messages import alarm_message
 from tdmon.record import schemas
 from tdmon.record.sink import AlarmHook, Message, call_alarm_hook
+from tdmon.vocabulary import AlarmKind, Severity
 
 if TYPE_CHECKING:
     from tdmon.record.recover import RecoveryResult
@@ -584,15 +586,9 @@ class McapRecorder:
         self._retry_at = time.monotonic() + self.retry_s
         log.error("%s", error)
         if first:
-            self._pending_alarms.append(
-                {
-                    "t": time.time(),
-                    "kind": "recorder_failed",
-                    "severity": "critical",
-                    "message": str(error),
-                    "value": float(self._stats.lost),
-                }
-            )
+            self._pending_alarms.append(alarm_message(
+                time.time(), AlarmKind.RECORDER_FAILED, Severity.CRITICAL, str(error),
+                value=self._stats.lost))
 
     def _maybe_resume(self, now: float) -> None:
         if self._closed or now < self._retry_at:
@@ -606,15 +602,9 @@ class McapRecorder:
         lost = self._stats.lost
         log.warning("recording resumed in %s after losing %d messages", self._file.path, lost)
         self._error = None
-        self._pending_alarms.append(
-            {
-                "t": time.time(),
-                "kind": "recorder_resumed",
-                "severity": "info",
-                "message": f"recording resumed in {self._file.path}; {lost} messages lost so far",
-                "value": float(lost),
-            }
-        )
+        self._pending_alarms.append(alarm_message(
+            time.time(), AlarmKind.RECORDER_RESUMED, Severity.INFO,
+            f"recording resumed in {self._file.path}; {lost} messages lost so far", value=lost))
 
     def _fire_alarms(self) -> None:
         with self._lock:

@@ -22,13 +22,15 @@ import numpy as np
 
 from tdmon.errors import RecordError
 from tdmon.record.reader import read_messages, topic_counts
+from tdmon.vocabulary import EstimateKind, RigState
 
 _TOPICS: Final = ("/tdmon/model", "/tdmon/estimate", "/tdmon/state", "/tdmon/alarm",
                   "/tdmon/profile")
-_STATE_COLOURS: Final = {
-    "in_slips": "#7f7f7f", "pick_up": "#d62728", "slack_off": "#1f77b4",
-    "rotating_off_bottom": "#2ca02c", "reaming": "#9467bd", "back_reaming": "#8c564b",
-    "drilling": "#e377c2", "circulating": "#17becf", "static": "#bcbd22", "unknown": "#c7c7c7",
+_STATE_COLOURS: Final[dict[str, str]] = {
+    RigState.IN_SLIPS: "#7f7f7f", RigState.PICK_UP: "#d62728", RigState.SLACK_OFF: "#1f77b4",
+    RigState.ROTATING_OFF_BOTTOM: "#2ca02c", RigState.REAMING: "#9467bd",
+    RigState.BACK_REAMING: "#8c564b", RigState.DRILLING: "#e377c2",
+    RigState.CIRCULATING: "#17becf", RigState.STATIC: "#bcbd22", RigState.UNKNOWN: "#c7c7c7",
 }
 _CSV_FIELDS: Final = ("time_utc", "t", "kind", "operation", "mu", "mu_std", "bit_depth_m")
 
@@ -88,7 +90,7 @@ def _legend(axes: Any, **options: Any) -> None:
 
 def write_estimates_csv(estimates: Sequence[dict[str, Any]], path: Path) -> int:
     """One row per window estimate (scalar kind-specific fields become extra columns)."""
-    windows = [e for e in estimates if e.get("kind") == "window"]
+    windows = [e for e in estimates if e.get("kind") == EstimateKind.WINDOW]
     extra = sorted({
         key for e in windows for key, value in e.items()
         if key not in _CSV_FIELDS and isinstance(value, int | float | str)
@@ -194,9 +196,9 @@ def torque_figure(data: ReportData, path: Path) -> Path | None:
 
 def friction_figure(data: ReportData, path: Path) -> Path | None:
     """Window estimates of mu against bit depth, and the latest local friction profile."""
-    windows = [e for e in data.estimates if e.get("kind") == "window"
+    windows = [e for e in data.estimates if e.get("kind") == EstimateKind.WINDOW
                and math.isfinite(_num(e.get("bit_depth_m")))]
-    profile = next((e for e in reversed(data.estimates) if e.get("kind") == "profile"
+    profile = next((e for e in reversed(data.estimates) if e.get("kind") == EstimateKind.PROFILE
                     and "md_m" in e and "mu_profile" in e), None)
     if profile is None:
         profile = next(({"md_m": p["md_m"], "mu_profile": p["mu"], "mu_profile_std":
@@ -224,7 +226,7 @@ def friction_figure(data: ReportData, path: Path) -> Path | None:
 
 def mu_t_figure(data: ReportData, path: Path) -> Path | None:
     """The mu(T) fits: the fitted points and, where the estimate carries it, the curve."""
-    fits = [e for e in data.estimates if e.get("kind") == "mu_T"]
+    fits = [e for e in data.estimates if e.get("kind") == EstimateKind.MU_T]
     if not fits:
         return None
     figure, axes = _figure(6.0, 4.5)
@@ -309,7 +311,7 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
 
 def _summary_rows(data: ReportData) -> list[tuple[str, str, str, str]]:
     rows = []
-    windows = [e for e in data.estimates if e.get("kind") == "window"]
+    windows = [e for e in data.estimates if e.get("kind") == EstimateKind.WINDOW]
     for operation in sorted({str(e["operation"]) for e in windows}):
         mu = np.array([_num(e["mu"]) for e in windows if e["operation"] == operation])
         rows.append((operation, str(len(mu)), f"{np.nanmean(mu):.3f}", f"{np.nanstd(mu):.3f}"))

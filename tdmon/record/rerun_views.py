@@ -39,13 +39,15 @@ from numpy.typing import NDArray
 
 from tdmon.errors import RecordError
 from tdmon.record.sink import Message
+from tdmon.vocabulary import EstimateKind, Operation, Severity
 
 log = logging.getLogger(__name__)
 
 APPLICATION_ID: Final = "tdmon"
 TIME: Final = "time"
 BIT_DEPTH: Final = "bit_depth_cm"
-_SEVERITY_LEVEL: Final = {"info": "INFO", "warning": "WARN", "critical": "ERROR"}
+_SEVERITY_LEVEL: Final[dict[str, str]] = {Severity.INFO: "INFO", Severity.WARNING: "WARN",
+                                          Severity.CRITICAL: "ERROR"}
 # Rebuild the string position only when the bit has moved this much [cm]: a trip logs one
 # message per second, and a new 3D polyline for every centimetre would dominate the file.
 _STRING_STEP_CM: Final = 100
@@ -297,7 +299,8 @@ class RerunViews:
         for operation, value in (message.get("torque_Nm") or {}).items():
             self._both(f"torque_kNm/model/{operation}", t_ns, _kilo(value))
         band = message.get("band") or {}
-        for column, label in (("pick_up_N", "pick_up"), ("slack_off_N", "slack_off")):
+        for column, label in (("pick_up_N", Operation.PICK_UP),
+                              ("slack_off_N", Operation.SLACK_OFF)):
             for mu, value in zip(band.get("mu", []), band.get(column, []), strict=False):
                 self._both(f"hookload_kN/band/{label}_{_mu_key(mu)}", t_ns, _kilo(value))
         residual = message.get("residual") or {}
@@ -318,7 +321,7 @@ class RerunViews:
 
     def _on_estimate(self, t_ns: int, message: Message) -> None:
         kind = message["kind"]
-        if kind == "window":
+        if kind == EstimateKind.WINDOW:
             operation = str(message.get("operation", "unknown"))
             depth = _finite(message.get("bit_depth_m"))
             mu = _finite(message.get("mu"))
@@ -326,9 +329,9 @@ class RerunViews:
             cm = round(depth * 100) if depth is not None else self._bit_depth_cm
             if cm is not None:
                 self._scalar(f"vs_depth/friction/{operation}", BIT_DEPTH, cm, mu)
-        elif kind == "profile" and "md_m" in message and "mu_profile" in message:
+        elif kind == EstimateKind.PROFILE and "md_m" in message and "mu_profile" in message:
             self._friction_profile(t_ns, message["md_m"], message["mu_profile"])
-        elif kind == "mu_T":
+        elif kind == EstimateKind.MU_T:
             for name, value in (message.get("params") or {}).items():
                 self._scalar(f"friction_mu_T/{name}", TIME, t_ns, _finite(value))
 

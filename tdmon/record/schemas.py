@@ -22,6 +22,8 @@ import json
 from collections.abc import Mapping
 from typing import Any, Final
 
+from tdmon.vocabulary import AlarmKind, EstimateKind, RigState, Severity
+
 JsonSchema = dict[str, Any]
 
 DRAFT: Final = "https://json-schema.org/draft/2020-12/schema"
@@ -30,20 +32,11 @@ TOPIC_PREFIX: Final = "/tdmon/"
 
 SOURCES: Final = ("mqtt", "zenoh", "mcap")
 PAYLOAD_ENCODINGS: Final = ("utf-8", "base64")
-RIG_STATES: Final = (
-    "in_slips",
-    "pick_up",
-    "slack_off",
-    "rotating_off_bottom",
-    "reaming",
-    "back_reaming",
-    "drilling",
-    "circulating",
-    "static",
-    "unknown",
-)
-ESTIMATE_KINDS: Final = ("window", "profile", "mu_T")
-SEVERITIES: Final = ("info", "warning", "critical")
+# The enumerations of the vocabulary, as plain strings (the schema is serialised to JSON).
+RIG_STATES: Final = tuple(state.value for state in RigState)
+ESTIMATE_KINDS: Final = tuple(kind.value for kind in EstimateKind)
+SEVERITIES: Final = tuple(severity.value for severity in Severity)
+ALARM_KINDS: Final = tuple(kind.value for kind in AlarmKind)
 
 _NUMBER: Final[JsonSchema] = {"type": "number"}
 _OPTIONAL_NUMBER: Final[JsonSchema] = {"type": ["number", "null"]}
@@ -188,7 +181,7 @@ ALARM: Final = _object(
     "tdmon alarm",
     {
         "t": _TIME,
-        "kind": _TEXT,
+        "kind": {"enum": list(ALARM_KINDS)},
         "severity": {"enum": list(SEVERITIES)},
         "message": _TEXT,
         "value": _OPTIONAL_NUMBER,

@@ -15,7 +15,17 @@ import random
 from collections.abc import Iterator
 from typing import Any, Final
 
+from tdmon.messages import alarm_message, estimate_message, status_message
 from tdmon.record.reader import RecordedMessage
+from tdmon.vocabulary import (
+    OPERATION_FOR_STATE,
+    AlarmKind,
+    ConnectionState,
+    EstimateKind,
+    Operation,
+    RigState,
+    Severity,
+)
 
 T0_NS: Final = 1_475_600_400 * 10**9  # 2016-10-04 17:00 UTC, a Volve-era date
 T0: Final = T0_NS / 1e9
@@ -62,11 +72,11 @@ def _loads(bit_depth: float, mu: float) -> tuple[float, float, float, float]:
     return pick_up, slack_off, rotating, torque
 
 
-def _bit_depth(second: int, duration: int) -> tuple[float, str]:
+def _bit_depth(second: int, duration: int) -> tuple[float, RigState]:
     half = duration / 2
     if second < half:
-        return 3000.0 - 1000.0 * second / half, "pick_up"
-    return 2000.0 + 1000.0 * (second - half) / half, "slack_off"
+        return 3000.0 - 1000.0 * second / half, RigState.PICK_UP
+    return 2000.0 + 1000.0 * (second - half) / half, RigState.SLACK_OFF
 
 
 def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[RecordedMessage]:
@@ -78,9 +88,11 @@ def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[Recorde
     for second in range(duration_s):
         t = T0 + second
         ns = T0_NS + second * 10**9
-        bit_depth, operation = _bit_depth(second, duration_s)
+        bit_depth, state = _bit_depth(second, duration_s)
+        operation = OPERATION_FOR_STATE[state].value
         pick_up, slack_off, rotating, torque = _loads(bit_depth, TRUE_MU)
-        measured_hookload = (pick_up if operation == "pick_up" else slack_off) + rng.gauss(0, 2e3)
+        measured_hookload = ((pick_up if operation == Operation.PICK_UP else slack_off)
+                             + rng.gauss(0, 2e3))
         measured_torque = torque + rng.gauss(0, 100.0)
         values = (measured_hookload, measured_torque, bit_depth)
         for (channel, unit), value in zip(_CHANNELS, values, strict=True):
@@ -93,9 +105,9 @@ def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[Recorde
                 "channel": channel, "t": t, "value": value, "unit": unit, "source": "mqtt",
                 "topic": topic})
         yield RecordedMessage("/tdmon/state", ns, {
-            "t": t, "state": operation, "steady": second % 90 > 5, "bit_depth_m": bit_depth})
+            "t": t, "state": state.value, "steady": second % 90 > 5, "bit_depth_m": bit_depth})
         band = [_loads(bit_depth, mu) for mu in BAND_MU]
-        modelled = pick_up if operation == "pick_up" else slack_off
+        modelled = pick_up if operation == Operation.PICK_UP else slack_off
         yield RecordedMessage("/tdmon/model", ns, {
             "t": t, "bit_depth_m": bit_depth,
             "hookload_N": {"pick_up": pick_up, "slack_off": slack_off, "rotating": rotating},
@@ -106,13 +118,13 @@ def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[Recorde
             "residual": {"hookload_N": measured_hookload - modelled,
                          "torque_Nm": measured_torque - torque}})
         if second % 30 == 29:
-            yield RecordedMessage("/tdmon/estimate", ns, {
-                "t": t, "kind": "window", "operation": operation,
-                "mu": TRUE_MU + rng.gauss(0, 0.02), "mu_std": 0.02, "bit_depth_m": bit_depth})
+            yield RecordedMessage("/tdmon/estimate", ns, estimate_message(
+                t, EstimateKind.WINDOW, operation, TRUE_MU + rng.gauss(0, 0.02), 0.02,
+                bit_depth_m=bit_depth))
         if second % 60 == 59:
-            yield RecordedMessage("/tdmon/status", ns, {
-                "t": t, "samples_in": 3 * (second + 1), "rejected": second // 100,
-                "dropped": 0, "lag_s": 0.05, "connections": {"mqtt": "connected"}})
+            yield RecordedMessage("/tdmon/status", ns, status_message(
+                t, 3 * (second + 1), second // 100, 0, 0.05,
+                {"mqtt": ConnectionState.CONNECTED}))
         if second % 100 == 50:
             bad = b"\xff{not json"
             yield RecordedMessage("/tdmon/rejected", ns, {
@@ -120,19 +132,21 @@ def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[Recorde
                 "receive_time": t, "payload": base64.b64encode(bad).decode(),
                 "payload_encoding": "base64"})
         if second % 200 == 120:
-            yield RecordedMessage("/tdmon/alarm", ns, {
-                "t": t, "kind": "overpull", "severity": "warning",
-                "message": f"hook load {measured_hookload / 1e3:.0f} kN above the band",
-                "value": measured_hookload, "limit": pick_up})
+            yield RecordedMessage("/tdmon/alarm", ns, alarm_message(
+                t, AlarmKind.BAND, Severity.WARNING,
+                f"hook load {measured_hookload / 1e3:.0f} kN above the band", measured_hookload,
+                pick_up))
     t_end = T0 + duration_s
     temperatures = [40.0, 55.0, 70.0, 85.0, 100.0]
     yield RecordedMessage("/tdmon/estimate", T0_NS + duration_s * 10**9, {
-        "t": t_end, "kind": "mu_T", "operation": "pick_up", "mu": TRUE_MU, "mu_std": 0.01,
-        "model": "linear", "params": {"mu0": 0.18, "slope_per_C": 0.001},
+        "t": t_end, "kind": EstimateKind.MU_T.value, "operation": Operation.PICK_UP.value,
+        "mu": TRUE_MU, "mu_std": 0.01, "model": "linear",
+        "params": {"mu0": 0.18, "slope_per_C": 0.001},
         "temperature_C": temperatures,
         "mu_points": [0.18 + 0.001 * x + rng.gauss(0, 0.005) for x in temperatures]})
     profile = profile_message(t_end, well)
     yield RecordedMessage("/tdmon/estimate", T0_NS + duration_s * 10**9, {
-        "t": t_end, "kind": "profile", "operation": "pick_up", "mu": TRUE_MU, "mu_std": 0.03,
+        "t": t_end, "kind": EstimateKind.PROFILE.value, "operation": Operation.PICK_UP.value,
+        "mu": TRUE_MU, "mu_std": 0.03,
         "md_m": profile["md_m"], "mu_profile": profile["mu"],
         "mu_profile_std": profile["mu_std"]})

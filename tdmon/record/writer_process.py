@@ -46,12 +46,14 @@ from collections.abc import Mapping
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Final
 
 import tdmon
 from tdmon.errors import RecordError
+from tdmon.messages import alarm_message
 from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
 from tdmon.record.sink import AlarmHook, Message, call_alarm_hook
+from tdmon.vocabulary import AlarmKind, Severity
 
 __all__ = ["RecorderProcess"]
 
@@ -65,6 +67,25 @@ BATCH_SIZE = 512
 PIPE_BUFFER = 4 * 1024 * 1024
 
 _PICKLE = pickle.HIGHEST_PROTOCOL
+
+
+class _Tag:
+    """The first element of every tuple on the pipe between the parent and the child (a batch
+    of messages is a bare list, untagged). Plain strings on the wire: the pipe carries no
+    class that both ends would have to import alike."""
+
+    # parent -> child: a command; the child's reply carries the same tag
+    STATS: Final = "stats"
+    FLUSH: Final = "flush"
+    RETRY: Final = "retry"
+    REGISTER_TOPIC: Final = "register_topic"
+    CLOSE: Final = "close"
+    # child -> parent: unasked events, and the answers to starting and to CLOSE
+    READY: Final = "ready"
+    ERROR: Final = "error"
+    ALARM: Final = "alarm"
+    STATE: Final = "state"
+    CLOSED: Final = "closed"
 
 
 class RecorderProcess:
@@ -122,7 +143,7 @@ class RecorderProcess:
             raise RecordError(f"cannot start the recorder's process: {exc}") from exc
         try:
             self._conn.send((folder, options, logging.getLogger().level))
-            ready = self._wait_for("ready", start_timeout_s)
+            ready = self._wait_for(_Tag.READY, start_timeout_s)
         except (RecordError, OSError) as exc:
             self._stop_child()
             if isinstance(exc, RecordError):
@@ -157,7 +178,7 @@ class RecorderProcess:
         with self._lock:
             if self._final_stats is None and not self._dead:
                 self._send_batch()
-                reply = self._request("stats")
+                reply = self._request(_Tag.STATS)
                 if reply is not None:
                     self._last_stats = reply
             base = self._final_stats or self._last_stats
@@ -185,7 +206,7 @@ class RecorderProcess:
         """Add a topic with its JSON Schema (see :meth:`McapRecorder.register_topic`)."""
         with self._lock:
             self._send_batch()
-            problem = self._request("register_topic", topic, dict(schema))
+            problem = self._request(_Tag.REGISTER_TOPIC, topic, dict(schema))
         self._fire_alarms()
         if problem:
             raise RecordError(problem)
@@ -194,14 +215,14 @@ class RecorderProcess:
         """Send what is queued and have the child flush its file."""
         with self._lock:
             self._send_batch()
-            self._request("flush")
+            self._request(_Tag.FLUSH)
         self._fire_alarms()
 
     def retry(self) -> bool:
         """In the failure state, have the child try a new file now; whether it records."""
         with self._lock:
             self._send_batch()
-            recording = bool(self._request("retry"))
+            recording = bool(self._request(_Tag.RETRY))
         self._fire_alarms()
         return recording
 
@@ -218,8 +239,8 @@ class RecorderProcess:
             self._send_batch()
             if not self._dead:
                 try:
-                    self._conn.send(("close",))
-                    final = self._wait_for("closed", self.close_timeout_s)
+                    self._conn.send((_Tag.CLOSE,))
+                    final = self._wait_for(_Tag.CLOSED, self.close_timeout_s)
                     self._final_stats = final[0]
                 except RecordError as exc:
                     self._child_gone(str(exc))
@@ -290,10 +311,10 @@ class RecorderProcess:
             self._child_gone(f"the recorder process stopped ({exc or 'pipe closed'})")
 
     def _handle(self, event: tuple[Any, ...]) -> tuple[Any, ...] | None:
-        kind = event[0]
-        if kind == "alarm":
+        tag = event[0]
+        if tag == _Tag.ALARM:
             self._pending_alarms.append(event[1])
-        elif kind == "state":
+        elif tag == _Tag.STATE:
             error, path = event[1], event[2]
             self._error = None if error is None else RecordError(error)
             self._path = None if path is None else Path(path)
@@ -301,8 +322,8 @@ class RecorderProcess:
             return event
         return None
 
-    def _wait_for(self, kind: str, timeout: float) -> tuple[Any, ...]:
-        """Handle events until the child's ``kind`` reply arrives; its fields."""
+    def _wait_for(self, tag: str, timeout: float) -> tuple[Any, ...]:
+        """Handle events until the child's ``tag`` reply arrives; its fields."""
         deadline = time.monotonic() + timeout
         while True:
             remaining = deadline - time.monotonic()
@@ -321,9 +342,9 @@ class RecorderProcess:
             other = self._handle(event)
             if other is None:
                 continue
-            if other[0] == "error":
+            if other[0] == _Tag.ERROR:
                 raise RecordError(other[1])
-            if other[0] == kind:
+            if other[0] == tag:
                 return other[1:]
             log.debug("unexpected message from the recorder process: %r", other[0])
 
@@ -351,10 +372,9 @@ class RecorderProcess:
         self._error = error
         log.error("%s", error)
         if first:
-            self._pending_alarms.append({
-                "t": time.time(), "kind": "recorder_failed", "severity": "critical",
-                "message": str(error), "value": float(self._lost_here),
-            })
+            self._pending_alarms.append(alarm_message(
+                time.time(), AlarmKind.RECORDER_FAILED, Severity.CRITICAL, str(error),
+                value=self._lost_here))
 
     def _stop_child(self) -> None:
         with contextlib.suppress(OSError):
@@ -443,25 +463,25 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
         recorder = McapRecorder(folder, on_alarm=alarms.append, **options)
     except Exception as exc:  # RecordError, or options the recorder refuses
         with contextlib.suppress(OSError):
-            conn.send(("error", str(exc) if isinstance(exc, RecordError)
+            conn.send((_Tag.ERROR, str(exc) if isinstance(exc, RecordError)
                        else f"cannot start the recorder: {exc}"))
         conn.close()
         return
     path = recorder.path
-    conn.send(("ready", None if path is None else str(path), recorder.recovered))
+    conn.send((_Tag.READY, None if path is None else str(path), recorder.recovered))
     state: tuple[str | None, str | None] = (None, None if path is None else str(path))
 
     def report() -> None:
         """Send the recorder's alarms and, when they changed, its error and file."""
         nonlocal state
         for alarm in alarms:
-            conn.send(("alarm", alarm))
+            conn.send((_Tag.ALARM, alarm))
         alarms.clear()
         error, path = recorder.error, recorder.path
         now = (None if error is None else str(error), None if path is None else str(path))
         if now != state:
             state = now
-            conn.send(("state", *now))
+            conn.send((_Tag.STATE, *now))
 
     try:
         while True:
@@ -475,7 +495,7 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
                 for topic, log_time_ns, message in item:
                     write(topic, log_time_ns, message)
                 report()
-            elif item[0] == "close":
+            elif item[0] == _Tag.CLOSE:
                 break
             else:
                 reply = _command(recorder, item)
@@ -485,20 +505,20 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
         recorder.close()
         with contextlib.suppress(OSError, ValueError):
             report()
-            conn.send(("closed", recorder.stats))
+            conn.send((_Tag.CLOSED, recorder.stats))
         conn.close()
 
 
 def _command(recorder: McapRecorder, item: tuple[Any, ...]) -> Any:
     command = item[0]
-    if command == "stats":
+    if command == _Tag.STATS:
         return recorder.stats
-    if command == "flush":
+    if command == _Tag.FLUSH:
         recorder.flush()
         return True
-    if command == "retry":
+    if command == _Tag.RETRY:
         return recorder.retry()
-    if command == "register_topic":
+    if command == _Tag.REGISTER_TOPIC:
         try:
             recorder.register_topic(item[1], item[2])
         except RecordError as exc:

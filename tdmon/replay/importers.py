@@ -29,9 +29,9 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any, Final
 
+from tdmon.channels import CHANNEL_UNITS, check_channel
 from tdmon.config.column_map import load_column_map_config
 from tdmon.errors import ConfigError, IngestError
-from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.replay.simulate import RAW_TOPIC, MessageRecord, raw_input, write_mcap
 from tdmon.units import conversion
 
@@ -100,8 +100,7 @@ class ColumnSpec:
     @classmethod
     def of(cls, column: str, channel: str, unit: str) -> ColumnSpec:
         """A column in ``unit`` (raises ValueError for an unknown channel or unusable unit)."""
-        if channel not in CHANNEL_UNITS:
-            raise ValueError(f"unknown channel '{channel}' (one of {', '.join(CHANNEL_UNITS)})")
+        check_channel(channel)
         scale, offset = conversion(unit, CHANNEL_UNITS[channel][0])
         return cls(column, channel, unit, scale, offset)
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tdmon.channels import check_channel
 from tdmon.config.scenario import CHANNELS
 from tdmon.errors import ModelError
 from tdmon.replay.loads import Loads
@@ -73,7 +74,11 @@ def channel_truth(name: str, scenario: Scenario, timeline: Timeline, loads: Load
         return np.full(t.size, np.nan if scenario.mud_temp_in is None else scenario.mud_temp_in)
     if name == "mud_temp_out":
         return np.full(t.size, np.nan if scenario.mud_temp_out is None else scenario.mud_temp_out)
-    raise ModelError(f"unknown channel '{name}' (one of {', '.join(CHANNELS)})")
+    try:
+        check_channel(name, CHANNELS)
+    except ValueError as exc:
+        raise ModelError(str(exc)) from None
+    raise ModelError(f"no simulated series for channel '{name}'")
 
 
 def sensor_series(name: str, scenario: Scenario, tau: Array, truth: Array, interval: float,

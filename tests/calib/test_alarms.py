@@ -152,7 +152,7 @@ def test_sensor_state_carried_between_frames() -> None:
     # runs count repeats of the last value per channel, in the order channels were first seen
     assert states[0].last == (("hookload", 1e6), ("torque", 0.0))
     assert states[2].runs == (("hookload", 2), ("torque", 1), ("bit_depth", 1))
-    assert states[2].active == frozenset({"hookload_frozen", "bit_below_hole"})
+    assert states[2].active == frozenset({"sensor_hookload_frozen", "sensor_bit_below_hole"})
     assert states[1].below_since == 1.0 and states[2].below_since == 1.0
     assert states[3].runs == (("hookload", 0), ("torque", 1), ("bit_depth", 2))
     assert states[3].last == (("hookload", 1.1e6), ("torque", 0.0), ("bit_depth", 3010.0))

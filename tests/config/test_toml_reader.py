@@ -8,8 +8,9 @@ from pathlib import Path
 import pytest
 from pydantic import Field
 
+from tdmon.channels import validate_prefix
 from tdmon.config.column_map import load_column_map_config
-from tdmon.config.common import StrictModel, load_model, validate_prefix
+from tdmon.config.common import StrictModel, load_model
 from tdmon.config.daemon import load_daemon_config
 from tdmon.config.expectations import load_expectations
 from tdmon.config.scenario import CHANNELS, PHASE_KINDS, load_scenario
@@ -85,12 +86,13 @@ def test_prefix_rule_refuses_wildcards_and_white_space(prefix: str) -> None:
 def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
     daemon = tmp_path / "d.toml"
     daemon.write_text('prefix = "rig F4"\n[sources.mqtt]\n')
-    with pytest.raises(ConfigError, match="prefix: prefix must be a plain topic path"):
+    with pytest.raises(ConfigError, match="prefix: prefix 'rig F4' must be a plain topic path"):
         load_daemon_config(daemon)
     scenario = tmp_path / "s.toml"
     scenario.write_text('[scenario]\nwell = "w.toml"\nbit_depth = 100\nprefix = "sim/*"\n'
                         '[[phase]]\nkind = "static"\nduration = 10\n')
-    with pytest.raises(ConfigError, match=r"scenario\.prefix: prefix must be a plain topic path"):
+    with pytest.raises(ConfigError,
+                       match=r"scenario\.prefix: prefix 'sim/\*' must be a plain topic path"):
         load_scenario(scenario)
 
 
