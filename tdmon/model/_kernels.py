@@ -1,7 +1,7 @@
 """Compiled element loops of the torque-and-drag model (numba).
 
 The physics is documented in `tdmon.model.torque_drag` and docs/torque-drag.md; this module only
-holds the loops, written for speed: scalars instead of small arrays, no allocation in the march.
+holds the loops, written for speed: scalars instead of small arrays, no allocation in the loops.
 
 Geometry arrives as the hole grid (node MD, node unit tangents, element dogleg, a curve kind per
 element and a run-break flag per node) and the string as cumulative component tops measured from
