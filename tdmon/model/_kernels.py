@@ -1,7 +1,7 @@
 """Compiled element loops of the torque-and-drag model (numba).
 
 The physics is documented in `tdmon.model.torque_drag` and docs/torque-drag.md; this module only
-holds the loops, written for speed: scalars instead of small arrays, no allocation in the march.
+holds the loops, written for speed: scalars instead of small arrays, no allocation in the loops.
 
 Geometry arrives as the hole grid (node MD, node unit tangents, element dogleg, a curve kind per
 element and a run-break flag per node) and the string as cumulative component tops measured from
@@ -11,14 +11,20 @@ element's nodes and the string's component boundaries, so each piece has one wei
 one friction factor and lies on one circular arc. `march_gradient` is the same march for one
 operation followed by its adjoint: the value and its gradient with respect to every element's
 friction factor.
+
+The per-well arrays travel packed in one `KernelWell` (built once per well by `kernel_well`, by
+name); the entry points take it and the per-call values, and callers pass those by keyword.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.experimental import structref
+from numpy.typing import ArrayLike
 
 SOFT_STRING = 0
 AADNOY = 1
@@ -121,6 +127,94 @@ def element_geometry(node_md, tangents):
         tb = (tangents[j + 1, 0], tangents[j + 1, 1], tangents[j + 1, 2])
         kk[j], ke[j], ee[j], dtvd[j] = piece_geometry(tt, tb, node_md[j + 1] - node_md[j])
     return kk, ke, ee, dtvd
+
+
+# --- the per-well arguments, packed ---
+#
+# A structref rather than a NamedTuple: numba types a NamedTuple argument in Python on every
+# call (about 0.5 us each), a structref from its stored type, which makes the call cheaper than
+# passing its arrays one by one (docs/benchmarks.md, "Kernel arguments (issue 11)").
+
+
+@structref.register
+class KernelWellType(types.StructRef):
+    """numba type of `KernelWell`."""
+
+
+class KernelWell(structref.StructRefProxy):
+    """The arrays of one well that every kernel reads, built once by `kernel_well`.
+
+    Hole grid: ``node_md`` (n_nodes,) [m], ``tangents`` (n_nodes, 3) unit tangents [-],
+    ``dogleg`` (n_elements,) [rad], ``curve_kind`` (n_elements,) (`STRAIGHT`, `PLANAR_BUILD`,
+    `GENERAL_CURVE`), ``run_break`` (n_nodes,) where an Aadnoy run ends; the whole elements'
+    `piece_geometry` as ``element_kk``, ``element_ke``, ``element_ee`` and ``element_dtvd``
+    (n_elements,). String, bit first: ``component_top`` (n_components,) cumulative top from
+    the bit [m], ``component_weight`` buoyed weight per length [N/m], ``component_radius``
+    friction radius of the torque [m]. Read only in jit code; the Python object is a handle.
+    """
+
+
+structref.define_boxing(KernelWellType, KernelWell)
+
+# numba's intrinsic, typed loosely: mypy sees its compile-time signature, not the jit-code one
+_new_struct: Any = structref.new
+
+_VECTOR = types.float64[::1]
+_KERNEL_WELL_TYPE = KernelWellType([
+    ("node_md", _VECTOR),
+    ("tangents", types.float64[:, ::1]),
+    ("dogleg", _VECTOR),
+    ("curve_kind", types.int64[::1]),
+    ("run_break", types.bool_[::1]),
+    ("element_kk", _VECTOR),
+    ("element_ke", _VECTOR),
+    ("element_ee", _VECTOR),
+    ("element_dtvd", _VECTOR),
+    ("component_top", _VECTOR),
+    ("component_weight", _VECTOR),
+    ("component_radius", _VECTOR),
+])
+
+
+def kernel_well(*, node_md: ArrayLike, tangents: ArrayLike, dogleg: ArrayLike,
+                curve_kind: ArrayLike, run_break: ArrayLike, component_top: ArrayLike,
+                component_weight: ArrayLike, component_radius: ArrayLike) -> KernelWell:
+    """Pack a well's arrays into a `KernelWell` (see there) and add its element geometry.
+
+    Each array is taken as the field's dtype, C-contiguous (copied only if it is not): numba
+    would store an array of another dtype or layout without converting it.
+    """
+    vector = np.ascontiguousarray
+    return _pack_well(
+        node_md=vector(node_md, dtype=np.float64),
+        tangents=vector(tangents, dtype=np.float64),
+        dogleg=vector(dogleg, dtype=np.float64),
+        curve_kind=vector(curve_kind, dtype=np.int64),
+        run_break=vector(run_break, dtype=np.bool_),
+        component_top=vector(component_top, dtype=np.float64),
+        component_weight=vector(component_weight, dtype=np.float64),
+        component_radius=vector(component_radius, dtype=np.float64),
+    )
+
+
+@njit(cache=True)
+def _pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
+               component_weight, component_radius):
+    well = _new_struct(_KERNEL_WELL_TYPE)
+    well.node_md = node_md
+    well.tangents = tangents
+    well.dogleg = dogleg
+    well.curve_kind = curve_kind
+    well.run_break = run_break
+    kk, ke, ee, dtvd = element_geometry(node_md, tangents)
+    well.element_kk = kk
+    well.element_ke = ke
+    well.element_ee = ee
+    well.element_dtvd = dtvd
+    well.component_top = component_top
+    well.component_weight = component_weight
+    well.component_radius = component_radius
+    return well
 
 
 @njit(cache=True)
@@ -230,19 +324,32 @@ def _record(k, md, comp, tangent, force, torque, out_md, out_force, out_torque, 
 
 
 @njit(cache=True)
-def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
-          mu, comp_top, comp_weight, comp_radius, bit_depth, bit_forces, bit_torques,
-          axial_factors, torque_factors, record, out_md, out_force, out_torque, out_comp,
-          out_tan):
+def _march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, torque_factors,
+           out_md, out_force, out_torque, out_comp, out_tan):
     """March from the bit to the top of the hole for several operations at once.
 
     An operation is a (bit force, bit torque, axial friction factor, torque friction factor)
     quadruple; the pieces and their geometry are shared by all. Returns (n recorded, top
-    forces, top torques). With ``record`` the node MD, component index (of the piece below the
-    node) and tangent, and per operation the axial force and torque, are written bit first into
-    the ``out_*`` arrays (length >= n elements + n components + 2; out_force and out_torque are
-    (n_op, length)). Aadnoy runs write their nodes when the run closes.
+    forces, top torques). Given non-empty ``out_*`` arrays (see `march_profile`) the node MD,
+    component index (of the piece below the node) and tangent, and per operation the axial
+    force and torque, are written into them bit first; Aadnoy runs write their nodes when the
+    run closes. Empty ones record nothing.
     """
+    # a run-time test, not a flag argument: a literal flag would compile the march twice
+    record = out_md.size > 0
+    # the loop reads local arrays, as it did when they were arguments
+    node_md = well.node_md
+    tangents = well.tangents
+    dogleg = well.dogleg
+    el_kk = well.element_kk
+    el_ke = well.element_ke
+    el_ee = well.element_ee
+    el_dtvd = well.element_dtvd
+    curve_kind = well.curve_kind
+    run_break = well.run_break
+    comp_top = well.component_top
+    comp_weight = well.component_weight
+    comp_radius = well.component_radius
     n_comp = comp_top.size
     j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
     comp = 0
@@ -335,29 +442,72 @@ def march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve
 
 
 @njit(cache=True)
-def sweep(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind, run_break,
-          mu_cases, comp_top, comp_weight, comp_radius, bit_depths, bit_forces, bit_torques,
-          axial_factors, torque_factors):
+def march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, torque_factors):
+    """Force and torque at the top of the hole for several operations, marched together.
+
+    Parameters
+    ----------
+    well : `KernelWell`
+    method : `SOFT_STRING` or `AADNOY`
+    mu : (n_elements,) friction factor per element [-]
+    bit_depth : [m], inside the string and the hole
+    bit_forces, bit_torques : (n_op,) force [N] and torque [N m] at the bit per operation
+    axial_factors, torque_factors : (n_op,) multipliers of mu in the axial and the torque
+        balance per operation [-]
+
+    Returns
+    -------
+    (n_op,) forces [N] and (n_op,) torques [N m] at the top
+    """
+    no_float_2d = np.empty((0, 0))
+    _, force, torque = _march(
+        well=well, method=method, mu=mu, bit_depth=bit_depth, bit_forces=bit_forces,
+        bit_torques=bit_torques, axial_factors=axial_factors, torque_factors=torque_factors,
+        out_md=np.empty(0), out_force=no_float_2d, out_torque=no_float_2d,
+        out_comp=np.empty(0, dtype=np.int64), out_tan=np.empty((0, 3)))
+    return force, torque
+
+
+@njit(cache=True)
+def march_profile(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors,
+                  torque_factors, out_md, out_force, out_torque, out_comp, out_tan):
+    """`march` that also writes the loads at every node, bit first; returns the node count.
+
+    The outputs have room for n_elements + n_components + 2 nodes: ``out_md`` [m],
+    ``out_comp`` (index of the component below the node), ``out_tan`` (n, 3) unit tangent,
+    and per operation ``out_force`` [N] and ``out_torque`` [N m], (n_op, n).
+    """
+    count, _, _ = _march(
+        well=well, method=method, mu=mu, bit_depth=bit_depth, bit_forces=bit_forces,
+        bit_torques=bit_torques, axial_factors=axial_factors, torque_factors=torque_factors,
+        out_md=out_md, out_force=out_force, out_torque=out_torque,
+        out_comp=out_comp, out_tan=out_tan)
+    return count
+
+
+@njit(cache=True)
+def sweep(well, method, mu_cases, bit_depths, bit_forces, bit_torques, axial_factors,
+          torque_factors):
     """Surface force and torque for every (case, depth, operation): arrays (n_case, n_depth, n_op).
 
-    ``mu_cases`` is (n_case, n_element); the operations are marched together (see `march`).
+    ``mu_cases`` is (n_case, n_element); the other arguments are `march`'s.
     """
     n_case = mu_cases.shape[0]
     n_depth = bit_depths.size
     n_op = axial_factors.size
     forces = np.empty((n_case, n_depth, n_op))
     torques = np.empty((n_case, n_depth, n_op))
-    dummy = np.empty(1)
-    dummy_2d = np.empty((1, 1))
-    dummy_int = np.empty(1, dtype=np.int64)
-    dummy_tan = np.empty((1, 3))
+    no_float = np.empty(0)  # record nothing
+    no_float_2d = np.empty((0, 0))
+    no_int = np.empty(0, dtype=np.int64)
+    no_tangent = np.empty((0, 3))
     for c in range(n_case):
         for d in range(n_depth):
-            _, f, t = march(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd,
-                            curve_kind, run_break, mu_cases[c], comp_top, comp_weight,
-                            comp_radius, bit_depths[d], bit_forces, bit_torques, axial_factors,
-                            torque_factors, False, dummy, dummy_2d, dummy_2d, dummy_int,
-                            dummy_tan)
+            _, f, t = _march(
+                well=well, method=method, mu=mu_cases[c], bit_depth=bit_depths[d],
+                bit_forces=bit_forces, bit_torques=bit_torques, axial_factors=axial_factors,
+                torque_factors=torque_factors, out_md=no_float, out_force=no_float_2d,
+                out_torque=no_float_2d, out_comp=no_int, out_tan=no_tangent)
             forces[c, d, :] = f
             torques[c, d, :] = t
     return forces, torques
@@ -463,17 +613,29 @@ def _aadnoy_run_adjoint(force, top_inc, bottom_inc, length, theta, kind, mu, axi
 
 
 @njit(cache=True)
-def march_gradient(method, node_md, tangents, dogleg, el_kk, el_ke, el_ee, el_dtvd, curve_kind,
-                   run_break, mu, comp_top, comp_weight, comp_radius, bit_depth, bit_force,
-                   bit_torque, axial_factor, torque_factor, force_seed, torque_seed):
+def march_gradient(well, method, mu, bit_depth, bit_force, bit_torque, axial_factor,
+                   torque_factor, force_seed, torque_seed):
     """`march` of one operation with the gradient of ``force_seed F_top + torque_seed T_top``.
 
-    Returns (top force, top torque, gradient per element of ``mu``); elements the string does
-    not reach get 0. One forward march and one backward sweep over its pieces (soft string) or
-    runs (Aadnoy). The forward loop is `march`'s, written out again because a helper taking the
-    geometry arrays costs more per piece than the piece's physics; tests compare the values
-    with `march`'s bit for bit.
+    The operation's terms are scalars here (`march` takes arrays of them). Returns (top force,
+    top torque, gradient per element of ``mu``); elements the string does not reach get 0. One
+    forward march and one backward sweep over its pieces (soft string) or runs (Aadnoy). The
+    forward loop is `march`'s, written out again because a helper taking the geometry arrays
+    costs more per piece than the piece's physics; tests compare the values with `march`'s bit
+    for bit.
     """
+    node_md = well.node_md
+    tangents = well.tangents
+    dogleg = well.dogleg
+    el_kk = well.element_kk
+    el_ke = well.element_ke
+    el_ee = well.element_ee
+    el_dtvd = well.element_dtvd
+    curve_kind = well.curve_kind
+    run_break = well.run_break
+    comp_top = well.component_top
+    comp_weight = well.component_weight
+    comp_radius = well.component_radius
     n_comp = comp_top.size
     size = node_md.size + n_comp
     # per piece: element, component, force at its bottom; soft string: (kk, ke, ee, dtvd),

@@ -21,7 +21,7 @@ from tdmon.model.well import Well
 
 __all__ = ["BROOMSTICK_OPERATIONS", "Broomstick", "broomstick", "broomstick_from_model"]
 
-# numba dispatcher, typed loosely: mypy cannot see through its signature
+# numba dispatcher, typed loosely: mypy cannot see through its signature; called by keyword
 _sweep: Any = _kernels.sweep
 
 BROOMSTICK_OPERATIONS: tuple[Operation, ...] = (
@@ -101,10 +101,11 @@ def broomstick_from_model(
     cases = _friction_cases(model, mus)
     terms = np.array([operation_terms(op) for op in BROOMSTICK_OPERATIONS])
     forces, torques = _sweep(
-        kernel_method, *model.kernel_geometry, cases, *model.kernel_string, depths,
-        np.ascontiguousarray(terms[:, 0]),
-        np.ascontiguousarray(terms[:, 1]), np.ascontiguousarray(terms[:, 2]),
-        np.ascontiguousarray(terms[:, 3]),
+        well=model.kernel_well, method=kernel_method, mu_cases=cases, bit_depths=depths,
+        bit_forces=np.ascontiguousarray(terms[:, 0]),
+        bit_torques=np.ascontiguousarray(terms[:, 1]),
+        axial_factors=np.ascontiguousarray(terms[:, 2]),
+        torque_factors=np.ascontiguousarray(terms[:, 3]),
     )
     hookloads = forces + model.well.block_weight
     lengths = np.diff(model.node_md)

@@ -42,8 +42,9 @@ __all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"
 Method = Literal["soft-string", "aadnoy"]
 METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
 
-# numba dispatchers, typed loosely: mypy cannot see through their signatures
+# numba dispatchers, typed loosely: mypy cannot see through their signatures; called by keyword
 _march: Any = _kernels.march
+_march_profile: Any = _kernels.march_profile
 _march_gradient: Any = _kernels.march_gradient
 
 # Bit depths this close [m] outside the string or the hole are taken as on the limit.
@@ -167,11 +168,6 @@ class WellModel:
         self.grid = hole_grid(well)
         grid = self.grid
         self.node_md = np.ascontiguousarray(grid.md)
-        self.tangents = np.ascontiguousarray(tangent_vectors(grid.inclination, grid.azimuth))
-        self.dogleg = np.ascontiguousarray(grid.dogleg)
-        self.element_geometry = _kernels.element_geometry(self.node_md, self.tangents)
-        self.curve_kind = _curve_kinds(well, grid)
-        self.run_break = _run_breaks(well, grid)
         string = well.string
         self.component_top = np.ascontiguousarray(string.component_tops())
         self.component_weight = np.array(
@@ -180,10 +176,17 @@ class WellModel:
         self.component_radius = np.array([c.torque_radius for c in string.components],
                                          dtype=np.float64)
         self._section_mu: NDArray[np.float64] | None = None
-        # argument groups of the compiled kernels, in their order
-        self.kernel_geometry = (self.node_md, self.tangents, self.dogleg, *self.element_geometry,
-                                self.curve_kind, self.run_break)
-        self.kernel_string = (self.component_top, self.component_weight, self.component_radius)
+        # what every kernel call reads, packed once (see `_kernels.KernelWell`)
+        self.kernel_well = _kernels.kernel_well(
+            node_md=self.node_md,
+            tangents=tangent_vectors(grid.inclination, grid.azimuth),
+            dogleg=grid.dogleg,
+            curve_kind=_curve_kinds(well, grid),
+            run_break=_run_breaks(well, grid),
+            component_top=self.component_top,
+            component_weight=self.component_weight,
+            component_radius=self.component_radius,
+        )
         self._max_nodes = grid.n_elements + len(string.components) + 2
 
     @property
@@ -260,10 +263,10 @@ class WellModel:
         depth = self.check_bit_depth(bit_depth)
         friction = self.friction(mu)
         terms = np.array(operation_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi))
-        _, force, torque = _march(
-            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth,
-            terms[0:1], terms[1:2], terms[2:3], terms[3:4], False,
-            _EMPTY, _EMPTY_2D, _EMPTY_2D, _EMPTY_INT, _EMPTY_TANGENT,
+        force, torque = _march(
+            well=self.kernel_well, method=kernel_method, mu=friction, bit_depth=depth,
+            bit_forces=terms[0:1], bit_torques=terms[1:2], axial_factors=terms[2:3],
+            torque_factors=terms[3:4],
         )
         return float(force[0]) + self.well.block_weight, float(torque[0])
 
@@ -324,9 +327,10 @@ class WellModel:
         bit_force, bit_torque_term, axial_factor, torque_factor = operation_terms(
             operation, wob=wob, bit_torque=bit_torque, psi=psi)
         force, torque, gradient = _march_gradient(
-            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth,
-            bit_force, bit_torque_term, axial_factor, torque_factor,
-            1.0 - quantity_index, float(quantity_index),
+            well=self.kernel_well, method=kernel_method, mu=friction, bit_depth=depth,
+            bit_force=bit_force, bit_torque=bit_torque_term, axial_factor=axial_factor,
+            torque_factor=torque_factor, force_seed=1.0 - quantity_index,
+            torque_seed=float(quantity_index),
         )
         if quantity_index == 0:
             return float(force) + self.well.block_weight, gradient
@@ -363,10 +367,13 @@ class WellModel:
         torque = np.empty((terms.shape[0], size))
         component = np.empty(size, dtype=np.int64)
         tangent = np.empty((size, 3))
-        count, _, _ = _march(
-            kernel_method, *self.kernel_geometry, friction, *self.kernel_string, depth,
-            *(np.ascontiguousarray(terms[:, i]) for i in range(4)), True,
-            md, force, torque, component, tangent,
+        count = _march_profile(
+            well=self.kernel_well, method=kernel_method, mu=friction, bit_depth=depth,
+            bit_forces=np.ascontiguousarray(terms[:, 0]),
+            bit_torques=np.ascontiguousarray(terms[:, 1]),
+            axial_factors=np.ascontiguousarray(terms[:, 2]),
+            torque_factors=np.ascontiguousarray(terms[:, 3]),
+            out_md=md, out_force=force, out_torque=torque, out_comp=component, out_tan=tangent,
         )
         return (md[:count][::-1].copy(), force[:, :count][:, ::-1].copy(),
                 torque[:, :count][:, ::-1].copy(), component[:count][::-1].copy())
@@ -397,12 +404,6 @@ class WellModel:
             tvd=interpolate_survey(self.well.survey, md).tvd,
             component=component,
         )
-
-
-_EMPTY = np.empty(1)
-_EMPTY_2D = np.empty((1, 1))
-_EMPTY_INT = np.empty(1, dtype=np.int64)
-_EMPTY_TANGENT = np.empty((1, 3))
 
 
 def torque_drag(
