@@ -32,7 +32,7 @@ def default_steps(config: DaemonConfig, model: LoadModel | None,
                   rig_state: Step | None = None) -> list[Step]:
     """Rig state (``rig_state``, else the detector with ``[rig_state]``'s thresholds), then the
     monitor when a model is available."""
-    steps: list[Step] = [rig_state or RigStateStep(rig_state_thresholds(config))]
+    steps: list[Step] = [rig_state or RigStateStep(rig_state_thresholds(config.rig_state))]
     if model is not None:
         steps.append(MonitorStep(model))
     return steps

@@ -28,7 +28,7 @@ from tdmon.calib.rigstate import (
 from tdmon.daemon.pipeline import Emit, Frame
 
 if TYPE_CHECKING:
-    from tdmon.config.daemon import DaemonConfig
+    from tdmon.config.daemon import DaemonConfig, RigStateConfig
 
 __all__ = ["RigStateStep", "calibration_thresholds", "rig_sample", "rig_state_thresholds"]
 
@@ -99,7 +99,7 @@ def calibration_thresholds(config: DaemonConfig, block_weight: float) -> RigStat
         circulating_flow=rs.circulating_flow, on_bottom=rs.on_bottom)
 
 
-def rig_state_thresholds(config: DaemonConfig) -> RigStateThresholds:
+def rig_state_thresholds(rs: RigStateConfig) -> RigStateThresholds:
     """Thresholds with the calibration off: ``[rig_state]`` as plain thresholds.
 
     ``in_slips_hookload`` is the in-slips margin over a zero block weight; ``steady_frames``
@@ -108,7 +108,6 @@ def rig_state_thresholds(config: DaemonConfig) -> RigStateThresholds:
     hook-load step limit, no standpipe pressure standing in for flow, and weight on bit does not
     widen "on bottom". What stays different is listed in docs/daemon.md (``[rig_state]``).
     """
-    rs = config.rig_state
     return RigStateThresholds(
         block_weight=0.0, in_slips_margin=rs.in_slips_hookload, moving_speed=rs.moving_speed,
         rotating_speed=rs.rotating_rpm, circulating_flow=rs.circulating_flow,
