@@ -1,10 +1,10 @@
 """The friction estimator: what the calibration decides, as pure updates of a frozen state.
 
 :class:`FrictionEstimator` holds what does not change (the prepared well, the settings, the
-shoe depth); :class:`EstimatorState` holds what does: the window being built, the block weight
-from the in-slips samples, the cased-hole friction so far, the deep windows waiting for it, the
-alarms' memory and the friction-profile and mu(T) filters. Two updates, each
-``(state, input) -> (state, outputs)``, as filterpy's ``update``:
+shoe depth); :class:`EstimatorState` (`tdmon.calib.estimator_state`) holds what does: the window
+being built, the block weight from the in-slips samples, the cased-hole friction so far, the
+deep windows waiting for it, the alarms' memory and the friction-profile and mu(T) filters.
+Two updates, each ``(state, input) -> (state, outputs)``, as filterpy's ``update``:
 
 - :meth:`FrictionEstimator.add_sample`, per detected sample: the block weight learnt from steady
   in-slips samples (and its alarm), and the window being built; a window that closes goes
@@ -30,24 +30,32 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from types import MappingProxyType
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tdmon.calib.alarms import Alarm, JumpSettings, friction_jump, limit_alarms, profile_anomaly
+from tdmon.calib.alarms import Alarm, friction_jump, limit_alarms, profile_anomaly
 from tdmon.calib.backcalc import FrictionEstimate, back_calculate_window, shoe_depth
-from tdmon.calib.blockweight import BlockWeightWindow, BuoyancyCheck, add_block_weight
+from tdmon.calib.blockweight import BlockWeightWindow, add_block_weight
 from tdmon.calib.cased import CasedFriction, add_cased, wait_for_cased
+from tdmon.calib.estimator_state import (
+    CalibrationSettings,
+    EstimatorState,
+    Output,
+    SampleState,
+    WindowState,
+    count,
+    put,
+)
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.calib.weightcheck import block_weight_alarm, weight_check
-from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings, add_sample, close
+from tdmon.calib.windows import Window, add_sample, close
 from tdmon.errors import FitError, ModelError
 from tdmon.model.friction import FrictionModel
 from tdmon.model.torque_drag import WellModel
@@ -77,124 +85,8 @@ WEIGHT_CHECK_STATES = frozenset({RigState.STATIC, RigState.CIRCULATING,
 ESTIMATED_STATES = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.ROTATING_OFF_BOTTOM,
                               RigState.REAMING, RigState.BACK_REAMING})
 
-def _empty() -> Mapping[str, Any]:
-    return MappingProxyType({})
-
-
-@dataclass(frozen=True)
-class CalibrationSettings:
-    """Settings of the estimator (SI).
-
-    Attributes
-    ----------
-    windows : window building and checking
-    method : torque-and-drag method of the back-calculation
-    bracket : friction range of the root solve [-]
-    min_open_length : string below the shoe needed to solve open-hole friction [m]
-    profile_bin : depth-bin length of the friction profile [m]
-    prior_mu, prior_std : prior friction per bin [-]
-    process_std : drift per window of the profile and mu(T) filters [-]
-    mu_t_mode : ``"family"`` or ``"scale"`` (when a mu(T) law and temperatures are given)
-    limit_warn : utilisation that raises a limit warning [-]
-    jump : friction-jump settings
-    learn_block_weight : feed the in-slips block weight back into the rig-state threshold
-    block_weight_tolerance : relative deviation from the configured block weight reported [-]
-    """
-
-    windows: WindowSettings = field(default_factory=WindowSettings)
-    method: str = "soft-string"
-    bracket: tuple[float, float] = (0.0, 1.0)
-    min_open_length: float = 30.0
-    profile_bin: float = 30.0
-    prior_mu: float = 0.25
-    prior_std: float = 0.1
-    process_std: float = 0.002
-    mu_t_mode: str = "family"
-    limit_warn: float = 0.8
-    jump: JumpSettings = field(default_factory=JumpSettings)
-    learn_block_weight: bool = True
-    block_weight_tolerance: float = 0.05
-
-
-class Output(NamedTuple):
-    """One message to send: ``topic`` (``"estimate"`` or ``"alarm"``) and its fields."""
-
-    topic: str
-    message: dict[str, Any]
-
-
 def _alarm(alarm: Alarm) -> Output:
     return Output("alarm", alarm.to_message())
-
-
-@dataclass(frozen=True, slots=True)
-class SampleState:
-    """What samples change: the window being built and the in-slips block weight.
-
-    Attributes
-    ----------
-    accumulator : the window being built
-    block_weight : the last steady in-slips hook loads and their block weight
-    block_alarmed : the block-weight alarm has been raised (it is raised once)
-    """
-
-    accumulator: WindowAccumulator = field(default_factory=WindowAccumulator)
-    block_weight: BlockWeightWindow = field(default_factory=BlockWeightWindow)
-    block_alarmed: bool = False
-
-
-@dataclass(frozen=True)
-class WindowState:
-    """What windows change.
-
-    Attributes
-    ----------
-    profile : the local friction profile (a value: never changed once here)
-    mu_t : the mu(T) calibration, None when off (a value too)
-    profile_updates : windows the profile has taken [-]
-    cased : per rig state, the cased-hole friction found so far
-    pending : per rig state, deep windows waiting for the cased friction
-    history : per rig state, the recent window frictions of the jump alarm [-]
-    active_limits : kinds of the load-limit alarms of the last window (reported on onset)
-    anomalous_bins : profile bins already reported as a friction anomaly
-    weight_off : consecutive static hangs whose weight is off [-]
-    weight_checks : the recent weight checks, oldest first
-    rejected : windows rejected or not solved, per reason [-]
-    """
-
-    profile: FrictionProfile
-    mu_t: MuTCalibrator | None = None
-    profile_updates: int = 0
-    cased: Mapping[str, CasedFriction] = field(default_factory=_empty)
-    pending: Mapping[str, tuple[Window, ...]] = field(default_factory=_empty)
-    history: Mapping[str, tuple[float, ...]] = field(default_factory=_empty)
-    active_limits: frozenset[str] = frozenset()
-    anomalous_bins: frozenset[int] = frozenset()
-    weight_off: int = 0
-    weight_checks: tuple[BuoyancyCheck, ...] = ()
-    rejected: Mapping[str, int] = field(default_factory=_empty)
-
-    def mu_cased(self, state: str) -> float | None:
-        """Cased-hole friction of ``state`` found so far [-] (None: not yet)."""
-        cased = self.cased.get(state)
-        return None if cased is None else cased.mu
-
-
-@dataclass(frozen=True, slots=True)
-class EstimatorState:
-    """The whole state: what samples change and what windows change."""
-
-    samples: SampleState
-    windows: WindowState
-
-
-def _put(mapping: Mapping[str, Any], key: str, value: Any) -> Mapping[str, Any]:
-    """A new read-only mapping with ``key`` set (``mapping`` is left as it is)."""
-    return MappingProxyType({**mapping, key: value})
-
-
-def _count(rejected: Mapping[str, int], reason: str) -> Mapping[str, int]:
-    return _put(rejected, reason, rejected.get(reason, 0) + 1)
 
 
 #: weight checks kept in the state (the rule itself needs only the count of odd ones)
@@ -341,7 +233,7 @@ class FrictionEstimator:
                 ) -> tuple[WindowState, list[Output]]:
         out: list[Output] = []
         if window.rejected is not None:
-            w = replace(w, rejected=_count(w.rejected, window.rejected.split(":")[0]))
+            w = replace(w, rejected=count(w.rejected, window.rejected.split(":")[0]))
             if not window.rejected.startswith("too_few"):
                 out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                         f"{window.state} window rejected: {window.rejected}")))
@@ -355,7 +247,7 @@ class FrictionEstimator:
         except FitError as exc:
             out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                     f"{window.state} window at {window.bit_depth:.0f} m: {exc}")))
-            return replace(w, rejected=_count(w.rejected, "not_bracketed")), out
+            return replace(w, rejected=count(w.rejected, "not_bracketed")), out
         out.append(Output("estimate", self._window_message(window, estimate, block)))
         if window.state in REAMING_AXIAL_OPERATION:
             return w, out  # combined motion: not a reference for the cased value, profile or mu(T)
@@ -379,7 +271,7 @@ class FrictionEstimator:
         state = window.state
         if estimate.section in ("cased", "all") and window.bit_depth <= self.shoe:
             cased = add_cased(w.cased.get(state, CasedFriction()), estimate.mu, estimate.mu_std)
-            w = replace(w, cased=_put(w.cased, state, cased))
+            w = replace(w, cased=put(w.cased, state, cased))
             return self._revise(w, block, state, out)
         if (estimate.section == "all"
                 and window.bit_depth > self.shoe + self.settings.min_open_length
@@ -387,7 +279,7 @@ class FrictionEstimator:
             # tripping out from below the shoe: open-hole friction needs the cased value,
             # known only once the bit is inside casing; these windows are solved again then
             waiting = wait_for_cased(w.pending.get(state, ()), window)
-            return replace(w, pending=_put(w.pending, state, waiting))
+            return replace(w, pending=put(w.pending, state, waiting))
         return w
 
     def _revise(self, w: WindowState, block: BlockWeightWindow, state: str,
@@ -398,12 +290,12 @@ class FrictionEstimator:
         mu_cased = None if cased is None else cased.mu
         if not pending or cased is None or mu_cased is None or not cased.known:
             return w  # nothing waits, or the cased friction rests on too few windows
-        w = replace(w, pending=_put(w.pending, state, ()))
+        w = replace(w, pending=put(w.pending, state, ()))
         for window in pending:
             try:
                 estimate = self._solve(window, mu_cased)
             except FitError:
-                w = replace(w, rejected=_count(w.rejected, "not_bracketed"))
+                w = replace(w, rejected=count(w.rejected, "not_bracketed"))
                 continue
             out.append(Output("estimate", {**self._window_message(window, estimate, block),
                                            "revised": True, "mu_cased": mu_cased}))
@@ -436,7 +328,7 @@ class FrictionEstimator:
         if alarm is not None:
             out.append(_alarm(alarm))
         history = (*history, estimate.mu)[-self.settings.jump.history:]
-        return replace(w, history=_put(w.history, window.state, history))
+        return replace(w, history=put(w.history, window.state, history))
 
     def _limits(self, w: WindowState, window: Window, estimate: FrictionEstimate,
                 out: list[Output]) -> WindowState:
@@ -482,7 +374,8 @@ class FrictionEstimator:
     def _feed_profile(self, w: WindowState, window: Window, out: list[Output]) -> WindowState:
         profile = copy.copy(w.profile)
         if not profile.add_window(window):
-            return w
+            # a gated window changes only the profile's count of gated windows
+            return w if profile.gated == w.profile.gated else replace(w, profile=profile)
         out.append(Output("estimate", _profile_message(profile, window)))
         alarm, anomalous = profile_anomaly(
             window.t_end, profile.grid.edges, profile.state.mu, profile.state.covariance,
