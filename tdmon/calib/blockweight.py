@@ -18,9 +18,10 @@ modelled weight in air gives the buoyancy factor and the fluid density the rig a
 from __future__ import annotations
 
 import math
+from array import array
 from bisect import bisect_left, bisect_right
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -93,13 +94,19 @@ def update_block_weight(state: BlockWeightState, hookload: float, *, keep: int =
     return BlockWeightState(recent, block_weight_from_samples(recent))
 
 
+def _doubles() -> array[float]:
+    return array("d")
+
+
 @dataclass(frozen=True)
 class BlockWeightWindow:
     """The last steady in-slips hook loads as a value: in arrival order and sorted.
 
     The frozen, incremental form of :class:`BlockWeightState`: :func:`add_block_weight` keeps
-    the sorted copy up to date (one binary search and one tuple copy per sample) instead of
-    sorting the whole window again, and gives the same estimate to the last bit.
+    the sorted copy up to date (one binary search and one copy of the doubles per sample)
+    instead of sorting the whole window again, and gives the same estimate to the last bit.
+    The arrays are never changed once in a window (plain doubles: a copy is one memory copy,
+    where a tuple of floats would touch every element).
 
     Attributes
     ----------
@@ -108,8 +115,8 @@ class BlockWeightWindow:
     estimate : the estimate of the window (None while it is empty)
     """
 
-    recent: tuple[float, ...] = ()
-    ordered: tuple[float, ...] = ()
+    recent: array[float] = field(default_factory=_doubles)
+    ordered: array[float] = field(default_factory=_doubles)
     estimate: BlockWeightEstimate | None = None
 
 
@@ -122,24 +129,26 @@ def add_block_weight(window: BlockWeightWindow, hookload: float, *, keep: int = 
     if not math.isfinite(hookload):
         return window
     value = float(hookload)
-    recent, ordered = (*window.recent, value), window.ordered
-    index = bisect_right(ordered, value)
-    ordered = (*ordered[:index], value, *ordered[index:])
-    if len(recent) > keep:
-        ordered = _without(ordered, recent[0])
-        recent = recent[1:]
+    # copies, changed before anyone else sees them: the arrays of `window` stay as they are
+    full = len(window.recent) >= keep
+    recent = window.recent[1:] if full else window.recent[:]
+    recent.append(value)
+    ordered = window.ordered[:]
+    ordered.insert(bisect_right(ordered, value), value)
+    if full:
+        del ordered[_index_of(ordered, window.recent[0])]
     return BlockWeightWindow(recent, ordered, _estimate_of_sorted(ordered))
 
 
-def _without(ordered: tuple[float, ...], value: float) -> tuple[float, ...]:
-    """``ordered`` less one occurrence of ``value`` (which it holds)."""
+def _index_of(ordered: Sequence[float], value: float) -> int:
+    """Index of one occurrence of ``value`` in ``ordered`` (which holds it)."""
     index = bisect_left(ordered, value)
     if value == 0.0:
         # 0.0 and -0.0 compare equal: take out the one that went in
         sign = math.copysign(1.0, value)
         while math.copysign(1.0, ordered[index]) != sign:
             index += 1
-    return ordered[:index] + ordered[index + 1:]
+    return index
 
 
 class BlockWeightTracker:
@@ -164,7 +173,7 @@ class BlockWeightTracker:
     @property
     def recent(self) -> tuple[float, ...]:
         """The hook loads in the window, oldest first [N]."""
-        return self.window.recent
+        return tuple(self.window.recent)
 
     @property
     def estimate(self) -> BlockWeightEstimate | None:

@@ -200,5 +200,5 @@ def test_block_weight_window_equals_the_batch_median() -> None:
     assert window.estimate is not None
     assert (window.estimate.value, window.estimate.std, window.estimate.n) == (
         batch.value, batch.std, 25)
-    assert window.ordered == tuple(sorted(values[-25:]))
+    assert tuple(window.ordered) == tuple(sorted(values[-25:]))
     assert add_block_weight(window, float("nan")) is window

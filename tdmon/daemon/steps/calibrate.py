@@ -66,12 +66,15 @@ class CalibrationStep:
         sample, detection = self.rig_state.last_sample, self.rig_state.last_detection
         if sample is None or detection is None or sample.t != frame.t:
             return
+        block = self.state.samples.block_weight
         self.state, outputs = self.estimator.add_sample(self.state, sample, detection)
-        learnt = self.estimator.learnt_block_weight(self.state)
-        thresholds = self.rig_state.thresholds
-        if learnt is not None and thresholds.block_weight != learnt:
-            self.rig_state.thresholds = replace(thresholds, block_weight=learnt)
-        _send(outputs, emit)
+        if self.state.samples.block_weight is not block:  # a new in-slips sample
+            learnt = self.estimator.learnt_block_weight(self.state)
+            thresholds = self.rig_state.thresholds
+            if learnt is not None and thresholds.block_weight != learnt:
+                self.rig_state.thresholds = replace(thresholds, block_weight=learnt)
+        if outputs:
+            _send(outputs, emit)
 
     def on_window(self, window: Window, emit: Emit) -> None:
         """Everything one closed window gives."""
