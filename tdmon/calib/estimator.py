@@ -84,6 +84,9 @@ WEIGHT_CHECK_STATES = frozenset({RigState.STATIC, RigState.CIRCULATING,
 #: states whose windows give a friction factor
 ESTIMATED_STATES = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.ROTATING_OFF_BOTTOM,
                               RigState.REAMING, RigState.BACK_REAMING})
+#: steady in-slips samples before the learnt block weight is used and compared [-]
+MIN_BLOCK_WEIGHT_SAMPLES = 20
+
 
 def _alarm(alarm: Alarm) -> Output:
     return Output("alarm", alarm.to_message())
@@ -157,9 +160,10 @@ class FrictionEstimator:
         return self._learnt(state.samples.block_weight)
 
     def _learnt(self, block: BlockWeightWindow) -> float | None:
-        # the in-slips median, once it has 20 samples and learning is on
+        # the in-slips median, once it rests on enough samples and learning is on
         estimate = block.estimate
-        if estimate is None or estimate.n < 20 or not self.settings.learn_block_weight:
+        if (estimate is None or estimate.n < MIN_BLOCK_WEIGHT_SAMPLES
+                or not self.settings.learn_block_weight):
             return None
         return estimate.value
 
