@@ -1,12 +1,13 @@
 """Block weight from in-slips periods, and the weight and buoyancy check.
 
 In slips the hook carries only the travelling equipment (block, top drive, elevators), so the
-hook load then *is* the block weight (REFERENCE.md section 5; Volve F-4: about 655 kN). Samples
-where the empty block is hoisted or lowered carry inertia and guide friction, so only steady
-in-slips samples count, and a running median keeps the pulls of the empty block out. The daemon
-keeps that median with :class:`BlockWeightTracker` (a sorted window, updated per sample in
-O(log n) plus a memory move), which gives the numbers of :func:`update_block_weight` (the pure
-reference, which sorts the whole window again on every sample).
+hook load then *is* the block weight (docs/back-calculation.md; Volve F-4: about 655 kN).
+Samples where the empty block is hoisted or lowered carry inertia and guide friction, so only
+steady in-slips samples count, and a running median keeps the pulls of the empty block out. The
+estimator (`tdmon.calib.estimator`) keeps that median as a :class:`BlockWeightWindow` (a sorted
+window, updated per sample by :func:`add_block_weight` with one binary search and one copy),
+which gives the numbers of :func:`update_block_weight` (the plain reference, which sorts the
+whole window again on every sample); :class:`BlockWeightTracker` is its stateful wrapper.
 
 Static and rotating-off-bottom hook loads carry no axial friction: the string's weight less the
 block weight checks the weights and the buoyancy the model uses. Static hook load is linear in
@@ -17,9 +18,10 @@ modelled weight in air gives the buoyancy factor and the fluid density the rig a
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, insort
-from collections import deque
-from dataclasses import dataclass
+from array import array
+from bisect import bisect_left, bisect_right
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -31,7 +33,9 @@ __all__ = [
     "BlockWeightEstimate",
     "BlockWeightState",
     "BlockWeightTracker",
+    "BlockWeightWindow",
     "BuoyancyCheck",
+    "add_block_weight",
     "block_weight_from_samples",
     "buoyancy_check",
     "update_block_weight",
@@ -90,13 +94,70 @@ def update_block_weight(state: BlockWeightState, hookload: float, *, keep: int =
     return BlockWeightState(recent, block_weight_from_samples(recent))
 
 
+def _doubles() -> array[float]:
+    return array("d")
+
+
+@dataclass(frozen=True)
+class BlockWeightWindow:
+    """The last steady in-slips hook loads as a value: in arrival order and sorted.
+
+    The frozen, incremental form of :class:`BlockWeightState`: :func:`add_block_weight` keeps
+    the sorted copy up to date (one binary search and one copy of the doubles per sample)
+    instead of sorting the whole window again, and gives the same estimate to the last bit.
+    The arrays are never changed once in a window (plain doubles: a copy is one memory copy,
+    where a tuple of floats would touch every element).
+
+    Attributes
+    ----------
+    recent : hook loads in the window, oldest first [N]
+    ordered : the same values sorted ascending [N]
+    estimate : the estimate of the window (None while it is empty)
+    """
+
+    recent: array[float] = field(default_factory=_doubles)
+    ordered: array[float] = field(default_factory=_doubles)
+    estimate: BlockWeightEstimate | None = None
+
+
+def add_block_weight(window: BlockWeightWindow, hookload: float, *, keep: int = 400
+                     ) -> BlockWeightWindow:
+    """Add one steady in-slips hook load [N] to a window of ``keep`` values.
+
+    A non-finite hook load returns ``window`` itself (the prior estimate stays).
+    """
+    if not math.isfinite(hookload):
+        return window
+    value = float(hookload)
+    # copies, changed before anyone else sees them: the arrays of `window` stay as they are
+    full = len(window.recent) >= keep
+    recent = window.recent[1:] if full else window.recent[:]
+    recent.append(value)
+    ordered = window.ordered[:]
+    ordered.insert(bisect_right(ordered, value), value)
+    if full:
+        del ordered[_index_of(ordered, window.recent[0])]
+    return BlockWeightWindow(recent, ordered, _estimate_of_sorted(ordered))
+
+
+def _index_of(ordered: Sequence[float], value: float) -> int:
+    """Index of one occurrence of ``value`` in ``ordered`` (which holds it)."""
+    index = bisect_left(ordered, value)
+    if value == 0.0:
+        # 0.0 and -0.0 compare equal: take out the one that went in
+        sign = math.copysign(1.0, value)
+        while math.copysign(1.0, ordered[index]) != sign:
+            index += 1
+    return index
+
+
 class BlockWeightTracker:
     """Running block weight over the last ``keep`` steady in-slips hook loads.
 
-    The stateful, incremental form of :func:`update_block_weight`: the same window and the same
-    estimate (median and MAD computed from a sorted copy of the window, so equal to NumPy's to
-    the last bit), at O(log n) comparisons and one memory move per sample instead of a sort of
-    the whole window. ``estimate`` is None until a finite hook load has been added.
+    The stateful wrapper of :func:`add_block_weight`: the same window and the same estimate as
+    :func:`update_block_weight` (median and MAD from a sorted copy of the window, so equal to
+    NumPy's to the last bit) without sorting the whole window on every sample. ``estimate`` is
+    None until a finite hook load has been added.
 
     Parameters
     ----------
@@ -107,40 +168,25 @@ class BlockWeightTracker:
         if keep < 1:
             raise ValueError("keep must be at least 1")
         self.keep = keep
-        self._window: deque[float] = deque()
-        self._sorted: list[float] = []
-        self.estimate: BlockWeightEstimate | None = None
+        self.window = BlockWeightWindow()
 
     @property
     def recent(self) -> tuple[float, ...]:
         """The hook loads in the window, oldest first [N]."""
-        return tuple(self._window)
+        return tuple(self.window.recent)
+
+    @property
+    def estimate(self) -> BlockWeightEstimate | None:
+        """The current estimate (None before the first finite hook load)."""
+        return self.window.estimate
 
     def add(self, hookload: float) -> BlockWeightEstimate | None:
         """Add one steady in-slips hook load [N]; a non-finite one keeps the prior estimate."""
-        if not math.isfinite(hookload):
-            return self.estimate
-        value = float(hookload)
-        window, ordered = self._window, self._sorted
-        window.append(value)
-        insort(ordered, value)
-        if len(window) > self.keep:
-            _remove_sorted(ordered, window.popleft())
-        self.estimate = _estimate_of_sorted(ordered)
-        return self.estimate
+        self.window = add_block_weight(self.window, hookload, keep=self.keep)
+        return self.window.estimate
 
 
-def _remove_sorted(ordered: list[float], value: float) -> None:
-    index = bisect_left(ordered, value)
-    if value == 0.0:
-        # 0.0 and -0.0 compare equal: take out the one that went in
-        sign = math.copysign(1.0, value)
-        while math.copysign(1.0, ordered[index]) != sign:
-            index += 1
-    del ordered[index]
-
-
-def _estimate_of_sorted(ordered: list[float]) -> BlockWeightEstimate:
+def _estimate_of_sorted(ordered: Sequence[float]) -> BlockWeightEstimate:
     """`block_weight_from_samples` of a sorted, finite, non-empty list, without sorting it.
 
     The absolute deviations from the median are two sorted runs (the values below the median
@@ -162,7 +208,7 @@ def _estimate_of_sorted(ordered: list[float]) -> BlockWeightEstimate:
     return BlockWeightEstimate(median, 1.2533 * spread / math.sqrt(n), n)
 
 
-def _middle_deviations(ordered: list[float], median: float, k: int) -> tuple[float, float]:
+def _middle_deviations(ordered: Sequence[float], median: float, k: int) -> tuple[float, float]:
     """The k-th and (k + 1)-th smallest (from 0) of ``|x - median|`` over ``ordered`` (sorted
     ascending, ``median`` its median); the second is inf when there are only k + 1 values.
 

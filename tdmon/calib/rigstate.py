@@ -68,6 +68,8 @@ class RigStateThresholds:
     drilling_wob : with a weight-on-bit channel, rotating on bottom needs more than this [N]
     on_bottom_with_wob : with weight on bit, the bit counts as on bottom this far off the
         reported hole depth (hole-depth channels are coarse) [m]
+    settle_samples : a state must also have lasted this many samples (this one included)
+        before its samples are steady [-]
     """
 
     block_weight: float = 0.0
@@ -86,6 +88,7 @@ class RigStateThresholds:
     velocity_disagreement: float = 0.25
     drilling_wob: float = 10e3
     on_bottom_with_wob: float = 30.0
+    settle_samples: int = 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +140,7 @@ class DetectorState:
     hookload: float | None = None
     state: RigState = RigState.UNKNOWN
     state_since: float = -math.inf
+    run: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -302,9 +306,12 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     else:
         on_bottom = off_bottom is not None and off_bottom <= thresholds.on_bottom
     state = classify(hookload, velocity, rpm, circulating, on_bottom, thresholds)
-    since = prior.state_since if (state == prior.state and not fresh) else t
+    same = state == prior.state and not fresh
+    since = prior.state_since if same else t
+    run = prior.run + 1 if same else 1
     prior_hookload = prior.hookload
     steady = (state != RigState.UNKNOWN and not fresh and t - since >= thresholds.settle_time
+              and run >= thresholds.settle_samples
               and hookload is not None and prior_hookload is not None)
     if steady and velocity is not None and prior.velocity is not None:
         steady = abs(velocity - prior.velocity) / dt <= thresholds.max_acceleration
@@ -317,7 +324,7 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     new = DetectorState(t=t, bit_depth=bit_depth, bit_time=bit_time,
                         block_position=block_position, block_time=block_time,
                         block_loaded=block_loaded, velocity=velocity, hookload=hookload,
-                        state=state, state_since=since)
+                        state=state, state_since=since, run=run)
     return new, Detection(state, bool(steady), velocity)
 
 

@@ -12,10 +12,12 @@ from daemon_support import CollectSink, linear_model
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tdmon.calib.rigstate import classify
+from tdmon.config.daemon import RigStateConfig
 from tdmon.daemon.aligner import Aligner
 from tdmon.daemon.monitor import GridLoadModel, MonitorStep
 from tdmon.daemon.pipeline import Emit, Frame, Pipeline, Sink, Step
-from tdmon.daemon.rigstate import RigStateThresholds, SimpleRigState, classify
+from tdmon.daemon.steps.rig_state import RigStateStep, rig_state_thresholds
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.types import RawMessage, Sample
 
@@ -81,28 +83,48 @@ class TestAligner:
         assert frame.values["bit_depth"] == 100.0  # the value at or before t, not after
 
 
+def _rig_frames(rows: list[tuple[float, dict[str, float]]]) -> list[Frame]:
+    return [Frame(t, 0, values, {}) for t, values in rows]
+
+
 class TestRigState:
-    limits = RigStateThresholds()
+    """The detector of `tdmon.calib.rigstate` with ``[rig_state]``'s plain thresholds (the
+    daemon without calibration)."""
+
+    thresholds = rig_state_thresholds(RigStateConfig())
 
     @pytest.mark.parametrize(("args", "state"), [
-        ((None, 0.0, 0.0, 0.0, 10.0), "unknown"),
-        ((1e5, 0.0, 0.0, 0.0, 10.0), "in_slips"),
-        ((1e6, -0.5, 0.0, 0.0, 10.0), "pick_up"),
-        ((1e6, 0.5, 0.0, 0.0, 10.0), "slack_off"),
-        ((1e6, 0.0, 10.0, 0.0, 10.0), "rotating_off_bottom"),
-        ((1e6, 0.5, 10.0, 0.0, 10.0), "reaming"),
-        ((1e6, -0.5, 10.0, 0.0, 10.0), "back_reaming"),
-        ((1e6, 0.01, 10.0, 0.0, 0.1), "drilling"),
-        ((1e6, 0.0, 0.0, 0.05, 10.0), "circulating"),
-        ((1e6, 0.0, 0.0, 0.0, 10.0), "static"),
+        ((None, 0.0, 0.0, False, False), "unknown"),
+        ((1e5, 0.0, 0.0, False, False), "in_slips"),
+        ((399.9e3, -0.5, 0.0, False, False), "in_slips"),
+        ((400e3, -0.5, 0.0, False, False), "pick_up"),
+        ((1e6, -0.5, 0.0, False, False), "pick_up"),
+        ((1e6, 0.5, 0.0, False, False), "slack_off"),
+        ((1e6, 0.04, 0.0, False, False), "static"),
+        ((1e6, 0.0, 10.0, False, False), "rotating_off_bottom"),
+        ((1e6, 0.5, 10.0, False, False), "reaming"),
+        ((1e6, -0.5, 10.0, False, False), "back_reaming"),
+        ((1e6, 0.01, 10.0, False, True), "drilling"),
+        ((1e6, 0.0, 0.0, True, False), "circulating"),
+        ((1e6, 0.0, 0.0, False, False), "static"),
     ])
     def test_classify(self, args: tuple[Any, ...], state: str) -> None:
-        assert classify(*args, self.limits) == state
+        # in slips below [rig_state] in_slips_hookload (400 kN), as the plain thresholds had it
+        assert classify(*args, self.thresholds) == state
+
+    def test_plain_thresholds_are_mapped(self) -> None:
+        config = RigStateConfig(in_slips_hookload=800e3, moving_speed=0.1, rotating_rpm=1.0,
+                                circulating_flow=0.002, on_bottom=2.0, steady_frames=4)
+        t = rig_state_thresholds(config)
+        assert t.block_weight + t.in_slips_margin == 800e3
+        assert (t.moving_speed, t.rotating_speed, t.circulating_flow, t.on_bottom,
+                t.settle_samples, t.settle_time) == (0.1, 1.0, 0.002, 2.0, 4, 0.0)
 
     def test_step_emits_on_change_and_marks_steady(self) -> None:
-        step = SimpleRigState(RigStateThresholds(steady_frames=2), every=100.0)
+        step = RigStateStep(rig_state_thresholds(RigStateConfig(steady_frames=2)), every=100.0)
         sent: list[dict[str, Any]] = []
-        frames = [Frame(t, 0, {"hookload": 1e6, "bit_depth": 1000 - t}, {}) for t in range(5)]
+        frames = _rig_frames([(t, {"hookload": 1e6, "bit_depth": 1000.0 - t})
+                              for t in range(5)])
         for frame in frames:
             step.on_frame(frame, lambda name, m: sent.append(m))
         assert [f.state for f in frames] == ["static", "pick_up", "pick_up", "pick_up",
@@ -110,6 +132,31 @@ class TestRigState:
         assert [f.steady for f in frames] == [False, False, True, True, True]
         assert [(m["state"], m["steady"]) for m in sent] == [
             ("static", False), ("pick_up", False), ("pick_up", True)]
+        assert sent[-1]["bit_depth_m"] == 998.0
+
+    def test_no_glitch_speed_gap_or_hookload_step_limits(self) -> None:
+        # 5 m/s, a 120 s gap and a 300 kN step: the plain thresholds took them as they came
+        step = RigStateStep(rig_state_thresholds(RigStateConfig(steady_frames=1)))
+        frames = _rig_frames([(0.0, {"hookload": 1e6, "bit_depth": 2000.0}),
+                              (0.1, {"hookload": 1e6, "bit_depth": 1999.5}),
+                              (120.1, {"hookload": 1.3e6, "bit_depth": 1900.0}),
+                              (120.2, {"hookload": 1.3e6, "bit_depth": 1900.0, "spp": 50e5})])
+        for frame in frames:
+            step.on_frame(frame, lambda name, m: None)
+        assert [f.state for f in frames] == ["static", "pick_up", "pick_up", "static"]
+        # standpipe pressure alone does not mean circulating, as before
+        assert [f.steady for f in frames] == [False, True, True, True]
+
+    def test_the_channel_own_time_gives_the_velocity(self) -> None:
+        # deliberate change from the plain step: a frame repeating the last bit-depth sample
+        # (aligned at the hook load's rate) keeps the velocity instead of reading zero
+        step = RigStateStep(rig_state_thresholds(RigStateConfig(steady_frames=1)))
+        frames = [Frame(0.0, 0, {"hookload": 1e6, "bit_depth": 1000.0}, {}),
+                  Frame(1.0, 0, {"hookload": 1e6, "bit_depth": 999.0}, {}),
+                  Frame(1.5, 0, {"hookload": 1e6, "bit_depth": 999.0}, {"bit_depth": 0.5})]
+        for frame in frames:
+            step.on_frame(frame, lambda name, m: None)
+        assert [f.state for f in frames] == ["static", "pick_up", "pick_up"]
 
 
 class TestMonitor:
@@ -223,7 +270,7 @@ class Exploding:
 def test_pipeline_records_before_steps_and_survives_a_failing_step() -> None:
     sink = CollectSink()
     check = OrderCheck(sink)
-    steps: list[Step] = [SimpleRigState(), MonitorStep(linear_model()), Exploding(), check]
+    steps: list[Step] = [RigStateStep(), MonitorStep(linear_model()), Exploding(), check]
     decoder = Decoder("rig", [ChannelSpec("hookload", "hookload", "N"),
                               ChannelSpec("bit_depth", "bit_depth", "m")])
     sinks: list[Sink] = [sink]

@@ -1,0 +1,415 @@
+"""The friction estimator: what the calibration decides, as pure updates of a frozen state.
+
+:class:`FrictionEstimator` holds what does not change (the prepared well, the settings, the
+shoe depth); :class:`EstimatorState` (`tdmon.calib.estimator_state`) holds what does: the window
+being built, the block weight from the in-slips samples, the cased-hole friction so far, the
+deep windows waiting for it, the alarms' memory and the friction-profile and mu(T) filters.
+Two updates, each ``(state, input) -> (state, outputs)``, as filterpy's ``update``:
+
+- :meth:`FrictionEstimator.add_sample`, per detected sample: the block weight learnt from steady
+  in-slips samples (and its alarm), and the window being built; a window that closes goes
+  through `update` at once.
+- :meth:`FrictionEstimator.update`, per window: rejected windows, the weight check of static
+  hangs (:mod:`tdmon.calib.weightcheck`), the friction of the window (`back_calculate_window`
+  with the cased friction found so far), the cased friction's inverse-variance weighted mean
+  and the deep windows solved again once it is known (:mod:`tdmon.calib.cased`), the
+  friction-jump and load-limit alarms, and the windows fed to the friction profile and the
+  mu(T) calibration.
+
+Outputs are :class:`Output` pairs (``estimate`` and ``alarm`` messages as plain dicts) in the
+order they are to be sent: nothing is emitted, logged or written here. The daemon's steps
+(`tdmon.daemon.steps`) adapt this in a few lines. See docs/back-calculation.md.
+
+The two filters are objects (:class:`~tdmon.calib.profile.FrictionProfile`,
+:class:`~tdmon.calib.mu_calibration.MuTCalibrator`) used as values: once in a state they are
+never changed; a window updates a shallow copy (their ``add_window`` rebinds their ``state``,
+it does not change arrays in place).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tdmon.calib.alarms import Alarm, friction_jump, limit_alarms, profile_anomaly
+from tdmon.calib.backcalc import FrictionEstimate, back_calculate_window, shoe_depth
+from tdmon.calib.blockweight import BlockWeightWindow, add_block_weight
+from tdmon.calib.cased import CasedFriction, add_cased, wait_for_cased
+from tdmon.calib.estimator_state import (
+    CalibrationSettings,
+    EstimatorState,
+    Output,
+    SampleState,
+    WindowState,
+    count,
+    put,
+)
+from tdmon.calib.mu_calibration import MuTCalibrator
+from tdmon.calib.profile import FrictionProfile
+from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.calib.weightcheck import block_weight_alarm, weight_check
+from tdmon.calib.windows import Window, add_sample, close
+from tdmon.errors import FitError, ModelError
+from tdmon.model.friction import FrictionModel
+from tdmon.model.torque_drag import WellModel
+from tdmon.model.well import Fluid
+from tdmon.vocabulary import (
+    REAMING_AXIAL_OPERATION,
+    AlarmKind,
+    EstimateKind,
+    Operation,
+    RigState,
+    Severity,
+)
+
+__all__ = [
+    "CalibrationSettings",
+    "EstimatorState",
+    "FrictionEstimator",
+    "Output",
+    "SampleState",
+    "WindowState",
+]
+
+#: states whose steady windows check the string's weight (no axial friction)
+WEIGHT_CHECK_STATES = frozenset({RigState.STATIC, RigState.CIRCULATING,
+                                 RigState.ROTATING_OFF_BOTTOM})
+#: states whose windows give a friction factor
+ESTIMATED_STATES = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.ROTATING_OFF_BOTTOM,
+                              RigState.REAMING, RigState.BACK_REAMING})
+#: steady in-slips samples before the learnt block weight is used and compared [-]
+MIN_BLOCK_WEIGHT_SAMPLES = 20
+
+
+def _alarm(alarm: Alarm) -> Output:
+    return Output("alarm", alarm.to_message())
+
+
+#: weight checks kept in the state (the rule itself needs only the count of odd ones)
+_WEIGHT_CHECKS_KEPT = 500
+
+
+@dataclass(frozen=True)
+class FrictionEstimator:
+    """The estimator's fixed part: the well and the settings.
+
+    Parameters
+    ----------
+    model : the prepared well
+    settings : estimator settings
+    """
+
+    model: WellModel
+    settings: CalibrationSettings = field(default_factory=CalibrationSettings)
+
+    @cached_property
+    def shoe(self) -> float:
+        """MD of the casing shoe [m] (0 without casing)."""
+        return shoe_depth(self.model)
+
+    @cached_property
+    def air_model(self) -> WellModel | None:
+        """The well with its fluid taken out, for the weight check (None: not buildable)."""
+        try:
+            return WellModel(replace(self.model.well, fluid=Fluid(0.0)))
+        except ModelError:
+            return None
+
+    # -- state ----------------------------------------------------------------------------
+
+    def initial_state(self, *, temperature: NDArray[np.float64] | None = None,
+                      friction_law: FrictionModel | None = None,
+                      mu_t_mask: NDArray[np.bool_] | None = None,
+                      mu_t_base: float | NDArray[np.float64] = 0.0,
+                      mu_t_prior_std: Sequence[float] | None = None) -> EstimatorState:
+        """The state before any sample: prior profile, and mu(T) when a law is given.
+
+        Parameters
+        ----------
+        temperature : annulus temperature per hole-grid element [degC] (enables mu(T))
+        friction_law : the configured mu(T) (family mode) or the lab fit (scale mode)
+        mu_t_mask : elements the law applies to (None: all)
+        mu_t_base : friction of the other elements [-]
+        mu_t_prior_std : prior spread of each parameter
+
+        Raises
+        ------
+        FitError
+            The mu(T) calibration cannot start (e.g. a law undefined at these temperatures).
+        """
+        s = self.settings
+        profile = FrictionProfile(self.model, bin_length=s.profile_bin, prior_mu=s.prior_mu,
+                                  prior_std=s.prior_std, process_std=s.process_std,
+                                  method=s.method)
+        mu_t = None
+        if temperature is not None and friction_law is not None:
+            mu_t = MuTCalibrator(self.model, temperature, friction_law, mode=s.mu_t_mode,
+                                 method=s.method, mask=mu_t_mask, base_mu=mu_t_base,
+                                 prior_std=mu_t_prior_std)
+        return EstimatorState(SampleState(), WindowState(profile, mu_t))
+
+    def learnt_block_weight(self, state: EstimatorState) -> float | None:
+        """The block weight the rig-state detector should use [N] (None: keep its own)."""
+        return self._learnt(state.samples.block_weight)
+
+    def _learnt(self, block: BlockWeightWindow) -> float | None:
+        # the in-slips median, once it rests on enough samples and learning is on
+        estimate = block.estimate
+        if (estimate is None or estimate.n < MIN_BLOCK_WEIGHT_SAMPLES
+                or not self.settings.learn_block_weight):
+            return None
+        return estimate.value
+
+    # -- samples --------------------------------------------------------------------------
+
+    def add_sample(self, state: EstimatorState, sample: RigSample, detection: Detection
+                   ) -> tuple[EstimatorState, tuple[Output, ...]]:
+        """One detected sample: block weight in slips, the window being built.
+
+        Parameters
+        ----------
+        state : the state so far
+        sample : this sample
+        detection : its rig state and steadiness
+
+        Returns
+        -------
+        (EstimatorState, outputs)
+        """
+        samples = state.samples
+        block, alarmed = samples.block_weight, samples.block_alarmed
+        outputs: tuple[Output, ...] = ()
+        if (detection.state == RigState.IN_SLIPS and detection.steady
+                and sample.hookload is not None):
+            block = add_block_weight(block, sample.hookload)
+            learnt = self._learnt(block)
+            if learnt is not None and not alarmed:
+                alarm = block_weight_alarm(sample.t, learnt, self.model.well.block_weight,
+                                           self.settings.block_weight_tolerance)
+                if alarm is not None:
+                    alarmed, outputs = True, (_alarm(alarm),)
+        accumulator, window = add_sample(samples.accumulator, sample, detection,
+                                         self.settings.windows)
+        if (accumulator is samples.accumulator and block is samples.block_weight
+                and window is None):
+            return state, outputs
+        state = EstimatorState(SampleState(accumulator, block, alarmed), state.windows)
+        if window is None:
+            return state, outputs
+        state, more = self.update(state, window)
+        return state, outputs + more
+
+    def close(self, state: EstimatorState) -> tuple[EstimatorState, tuple[Output, ...]]:
+        """End of input: the window being built is closed and used."""
+        samples = state.samples
+        accumulator, window = close(samples.accumulator, self.settings.windows)
+        state = EstimatorState(replace(samples, accumulator=accumulator), state.windows)
+        if window is None:
+            return state, ()
+        return self.update(state, window)
+
+    # -- windows --------------------------------------------------------------------------
+
+    def update(self, state: EstimatorState, window: Window
+               ) -> tuple[EstimatorState, tuple[Output, ...]]:
+        """Everything one closed window gives.
+
+        Parameters
+        ----------
+        state : the state so far
+        window : a closed window
+
+        Returns
+        -------
+        (EstimatorState, outputs)
+        """
+        windows, outputs = self._update(state.windows, state.samples.block_weight, window)
+        return EstimatorState(state.samples, windows), tuple(outputs)
+
+    def _update(self, w: WindowState, block: BlockWeightWindow, window: Window
+                ) -> tuple[WindowState, list[Output]]:
+        out: list[Output] = []
+        if window.rejected is not None:
+            w = replace(w, rejected=count(w.rejected, window.rejected.split(":")[0]))
+            if not window.rejected.startswith("too_few"):
+                out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
+                                        f"{window.state} window rejected: {window.rejected}")))
+            return w, out
+        if window.state in WEIGHT_CHECK_STATES:
+            w = self._weight_check(w, block, window, out)
+        if window.state not in ESTIMATED_STATES:
+            return w, out
+        try:
+            estimate = self._solve(window, w.mu_cased(window.state))
+        except FitError as exc:
+            out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
+                                    f"{window.state} window at {window.bit_depth:.0f} m: {exc}")))
+            return replace(w, rejected=count(w.rejected, "not_bracketed")), out
+        out.append(Output("estimate", self._window_message(window, estimate, block)))
+        if window.state in REAMING_AXIAL_OPERATION:
+            return w, out  # combined motion: not a reference for the cased value, profile or mu(T)
+        w = self._cased_or_pending(w, block, window, estimate, out)
+        w = self._jump(w, window, estimate, out)
+        w = self._limits(w, window, estimate, out)
+        w = self._feed_profile(w, window, out)
+        w = self._feed_mu_t(w, window, estimate, out)
+        return w, out
+
+    def _solve(self, window: Window, mu_cased: float | None) -> FrictionEstimate:
+        s = self.settings
+        return back_calculate_window(self.model, window, mu_cased=mu_cased,
+                                     min_open_length=s.min_open_length, bracket=s.bracket,
+                                     method=s.method)
+
+    def _cased_or_pending(self, w: WindowState, block: BlockWeightWindow, window: Window,
+                          estimate: FrictionEstimate, out: list[Output]) -> WindowState:
+        """Add a cased window to the cased friction (and revise the waiting windows), or keep
+        a deep window solved over the whole string until the cased friction is known."""
+        state = window.state
+        if estimate.section in ("cased", "all") and window.bit_depth <= self.shoe:
+            cased = add_cased(w.cased.get(state, CasedFriction()), estimate.mu, estimate.mu_std)
+            w = replace(w, cased=put(w.cased, state, cased))
+            return self._revise(w, block, state, out)
+        if (estimate.section == "all"
+                and window.bit_depth > self.shoe + self.settings.min_open_length
+                and self.shoe > 0.0):
+            # tripping out from below the shoe: open-hole friction needs the cased value,
+            # known only once the bit is inside casing; these windows are solved again then
+            waiting = wait_for_cased(w.pending.get(state, ()), window)
+            return replace(w, pending=put(w.pending, state, waiting))
+        return w
+
+    def _revise(self, w: WindowState, block: BlockWeightWindow, state: str,
+                out: list[Output]) -> WindowState:
+        """Solve the open-hole friction of earlier deep windows once cased friction is known."""
+        pending = w.pending.get(state)
+        cased = w.cased.get(state)
+        mu_cased = None if cased is None else cased.mu
+        if not pending or cased is None or mu_cased is None or not cased.known:
+            return w  # nothing waits, or the cased friction rests on too few windows
+        w = replace(w, pending=put(w.pending, state, ()))
+        for window in pending:
+            try:
+                estimate = self._solve(window, mu_cased)
+            except FitError:
+                w = replace(w, rejected=count(w.rejected, "not_bracketed"))
+                continue
+            out.append(Output("estimate", {**self._window_message(window, estimate, block),
+                                           "revised": True, "mu_cased": mu_cased}))
+        return w
+
+    def _window_message(self, window: Window, estimate: FrictionEstimate,
+                        block: BlockWeightWindow) -> dict[str, Any]:
+        operation = (window.state if window.state in REAMING_AXIAL_OPERATION
+                     else estimate.operation)
+        message: dict[str, Any] = {
+            "t": window.t_end, "kind": EstimateKind.WINDOW, "operation": operation,
+            "mu": estimate.mu, "mu_std": estimate.mu_std, "bit_depth_m": window.bit_depth,
+            "section": estimate.section, "samples": window.n, "t_start": window.t_start,
+            "low_confidence": bool(window.low_confidence), "flags": list(window.flags),
+            "measured": estimate.measured, "measured_se": estimate.measured_se,
+            "quantity": estimate.quantity,
+        }
+        if block.estimate is not None:
+            message["block_weight_N"] = block.estimate.value
+        return message
+
+    # -- alarms ---------------------------------------------------------------------------
+
+    def _jump(self, w: WindowState, window: Window, estimate: FrictionEstimate,
+              out: list[Output]) -> WindowState:
+        history = w.history.get(window.state, ())
+        alarm = friction_jump(history, estimate.mu, estimate.mu_std, window.t_end,
+                              self.settings.jump, operation=estimate.operation,
+                              bit_depth=window.bit_depth)
+        if alarm is not None:
+            out.append(_alarm(alarm))
+        history = (*history, estimate.mu)[-self.settings.jump.history:]
+        return replace(w, history=put(w.history, window.state, history))
+
+    def _limits(self, w: WindowState, window: Window, estimate: FrictionEstimate,
+                out: list[Output]) -> WindowState:
+        """Load-limit alarms at the window's friction, each reported when it starts."""
+        try:
+            loads = self.model.loads(window.bit_depth, self._friction_of(w, estimate),
+                                     method=self.settings.method)
+            alarms = limit_alarms(self.model.well, loads, estimate.operation, window.t_end,
+                                  warn=self.settings.limit_warn)
+        except (ModelError, ValueError):
+            return w  # the model does not reach this depth: no check, the memory stays
+        out.extend(_alarm(a) for a in alarms if a.kind not in w.active_limits)
+        return replace(w, active_limits=frozenset(a.kind for a in alarms))
+
+    def _friction_of(self, w: WindowState, estimate: FrictionEstimate) -> NDArray[np.float64]:
+        kind = self.model.grid.element_kind
+        if estimate.section == "open":
+            cased = w.mu_cased(RigState.PICK_UP if estimate.operation == Operation.PICK_UP
+                               else RigState.SLACK_OFF)
+            return np.where(kind == "open", estimate.mu, cased if cased is not None
+                            else estimate.mu)
+        return np.full(self.model.n_elements, estimate.mu)
+
+    def _weight_check(self, w: WindowState, block: BlockWeightWindow, window: Window,
+                      out: list[Output]) -> WindowState:
+        air_model = self.air_model
+        if air_model is None:
+            return w
+        block_weight = (block.estimate.value if block.estimate is not None
+                        else self.model.well.block_weight)
+        checked = weight_check(self.model, air_model, window, block_weight, w.weight_off,
+                               self.settings.block_weight_tolerance)
+        if checked is None:
+            return w
+        check, weight_off, alarm = checked
+        if alarm is not None:
+            out.append(_alarm(alarm))
+        return replace(w, weight_off=weight_off,
+                       weight_checks=(*w.weight_checks, check)[-_WEIGHT_CHECKS_KEPT:])
+
+    # -- filters --------------------------------------------------------------------------
+
+    def _feed_profile(self, w: WindowState, window: Window, out: list[Output]) -> WindowState:
+        profile = copy.copy(w.profile)
+        if not profile.add_window(window):
+            # a gated window changes only the profile's count of gated windows
+            return w if profile.gated == w.profile.gated else replace(w, profile=profile)
+        out.append(Output("estimate", _profile_message(profile, window)))
+        alarm, anomalous = profile_anomaly(
+            window.t_end, profile.grid.edges, profile.state.mu, profile.state.covariance,
+            self.settings.prior_std, self.settings.jump, known=w.anomalous_bins)
+        if alarm is not None:
+            out.append(_alarm(alarm))
+        return replace(w, profile=profile, profile_updates=w.profile_updates + 1,
+                       anomalous_bins=anomalous)
+
+    def _feed_mu_t(self, w: WindowState, window: Window, estimate: FrictionEstimate,
+                   out: list[Output]) -> WindowState:
+        if w.mu_t is None:
+            return w
+        mu_t = copy.copy(w.mu_t)
+        if not mu_t.add_window(window):
+            return w
+        fields = mu_t.message_fields()
+        if math.isfinite(float(fields["mu"])):  # type: ignore[arg-type]
+            out.append(Output("estimate", {"t": window.t_end, "kind": EstimateKind.MU_T,
+                                           "operation": estimate.operation, **fields}))
+        return replace(w, mu_t=mu_t)
+
+
+def _profile_message(profile: FrictionProfile, window: Window) -> dict[str, Any]:
+    """The ``estimate`` message of kind ``profile`` after ``window``: the bin at the bit."""
+    fields = profile.message_fields()
+    grid = profile.grid
+    k = int(np.clip(np.searchsorted(grid.edges, window.bit_depth) - 1, 0, grid.n_bins - 1))
+    operation = (window.state if window.state != RigState.ROTATING_OFF_BOTTOM
+                 else Operation.ROTATING)
+    return {"t": window.t_end, "kind": EstimateKind.PROFILE, "operation": operation,
+            "mu": float(profile.state.mu[k]), "mu_std": float(profile.state.std[k]),
+            "bit_depth_m": window.bit_depth, **fields}

@@ -1,0 +1,80 @@
+"""Weight alarms: the learnt block weight against the configured one, and hangs against the
+model's string weight.
+
+Static hangs keep part of the last pull's or run's drag locked in, so one odd hang is not news:
+the weight check alarms when :data:`ODD_HANGS` hangs in a row are off by more than the
+tolerance, once, and again only after the weights have agreed in between
+(docs/back-calculation.md, "Block weight and weight check").
+"""
+
+from __future__ import annotations
+
+import math
+
+from tdmon.calib.alarms import Alarm
+from tdmon.calib.blockweight import BuoyancyCheck, buoyancy_check
+from tdmon.calib.windows import Window
+from tdmon.errors import FitError, ModelError
+from tdmon.model.torque_drag import WellModel
+from tdmon.vocabulary import AlarmKind, Operation, Severity
+
+__all__ = ["ODD_HANGS", "block_weight_alarm", "weight_check"]
+
+#: consecutive hangs whose weight is off that raise the weight-check alarm [-]
+ODD_HANGS = 3
+
+
+def block_weight_alarm(t: float, learnt: float, configured: float, tolerance: float
+                       ) -> Alarm | None:
+    """Alarm when the block weight learnt in slips differs from the configured one.
+
+    Parameters
+    ----------
+    t : [s]
+    learnt : block weight from the in-slips samples [N]
+    configured : the well file's block weight [N] (0: none given, no alarm)
+    tolerance : relative deviation that is reported [-]
+    """
+    if configured > 0 and abs(learnt - configured) > tolerance * configured:
+        return Alarm(t, AlarmKind.BLOCK_WEIGHT, Severity.INFO,
+                     f"block weight from in-slips periods {learnt / 1e3:.0f} kN differs from "
+                     f"the configured {configured / 1e3:.0f} kN", learnt, configured)
+    return None
+
+
+def weight_check(model: WellModel, air_model: WellModel, window: Window, block_weight: float,
+                 odd: int, tolerance: float
+                 ) -> tuple[BuoyancyCheck, int, Alarm | None] | None:
+    """Check one static (or circulating, or rotating off bottom) window's string weight.
+
+    Parameters
+    ----------
+    model : the prepared well
+    air_model : the same well without fluid
+    window : a usable window without axial friction
+    block_weight : block weight (learnt in slips, else configured) [N]
+    odd : hangs in a row whose weight was off before this one [-]
+    tolerance : relative deviation of the weight ratio that counts as off [-]
+
+    Returns
+    -------
+    (check, odd hangs in a row now, alarm or None), or None when the model has no weight here
+    """
+    try:
+        modelled = model.evaluate(Operation.STATIC, window.bit_depth, 0.0)[0]
+        in_air = air_model.evaluate(Operation.STATIC, window.bit_depth, 0.0)[0]
+        check = buoyancy_check(window.hookload, block_weight, modelled, in_air,
+                               model.well.block_weight)
+    except (FitError, ModelError):
+        return None
+    odd = odd + 1 if abs(check.ratio - 1.0) > tolerance else 0
+    if odd != ODD_HANGS or not math.isfinite(check.ratio):
+        return check, odd, None
+    buoyed_given = abs(in_air - modelled) < 1e-6 * max(abs(modelled), 1.0)
+    density = ("" if buoyed_given or not math.isfinite(check.fluid_density)
+               else f" (implied fluid density {check.fluid_density:.0f} kg/m3)")
+    return check, odd, Alarm(
+        window.t_end, AlarmKind.WEIGHT_CHECK, Severity.INFO,
+        f"{window.state} string weight at {window.bit_depth:.0f} m is "
+        f"{100 * check.ratio:.0f} % of the model's for three hangs in a row{density}",
+        check.measured_weight, check.modelled_weight)

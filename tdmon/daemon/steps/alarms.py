@@ -1,0 +1,75 @@
+"""The per-frame alarm step: hook load trending out of the monitor's band, stale and
+implausible sensors (the window-level alarms come from the estimator, `steps.calibrate`).
+
+Frame fields read: ``values`` (``hookload`` [N] and what the sensor checks look at),
+``frame.stale``, ``frame.state``/``frame.steady`` (from the rig-state step) and
+``frame.results["model"]`` (the monitor's band).
+"""
+
+from __future__ import annotations
+
+import math
+
+from tdmon.calib.alarms import (
+    BandSettings,
+    BandTrendState,
+    SensorSettings,
+    SensorState,
+    sensor_alarms,
+    update_band_trend,
+)
+from tdmon.calib.windows import WindowSettings
+from tdmon.daemon.pipeline import Emit, Frame
+from tdmon.vocabulary import MOVING_STATES, RigState
+
+__all__ = ["AlarmStep"]
+
+
+def _value(values: dict[str, float], name: str) -> float | None:
+    value = values.get(name)
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+class AlarmStep:
+    """Step: per-frame alarms (band trend from the monitor's ``model`` message, sensors)."""
+
+    name = "alarms"
+
+    def __init__(self, band: BandSettings | None = None, sensors: SensorSettings | None = None,
+                 windows: WindowSettings | None = None) -> None:
+        self.band = band or BandSettings()
+        self.sensors = sensors or SensorSettings()
+        self.windows = windows or WindowSettings()
+        self.trend: dict[str, BandTrendState] = {}
+        self.sensor_state = SensorState()
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        rig_state = frame.state
+        self.sensor_state, alarms = sensor_alarms(
+            self.sensor_state, frame.t, frame.values, frame.stale,
+            rig_state in MOVING_STATES, self.sensors)
+        for sensor_alarm in alarms:
+            emit("alarm", sensor_alarm.to_message())
+        if not frame.steady or rig_state not in (RigState.PICK_UP, RigState.SLACK_OFF):
+            return
+        model = frame.results.get("model")
+        hookload = _value(frame.values, "hookload")
+        if model is None or hookload is None:
+            return
+        band = model.get("band", {})
+        curve = band.get("pick_up_N" if rig_state == RigState.PICK_UP else "slack_off_N") or []
+        values = [float(x) for x in curve if x is not None and math.isfinite(x)]
+        if not values:
+            return
+        noise = max(self.windows.noise_floor, self.windows.noise_floor_fraction * hookload)
+        state = self.trend.get(rig_state)
+        if state is None:
+            state = BandTrendState()
+        state, alarm = update_band_trend(state, frame.t, hookload, min(values), max(values),
+                                         noise, self.band, what=f"{rig_state} hook load")
+        self.trend[rig_state] = state
+        if alarm is not None:
+            emit("alarm", alarm.to_message())
+
+    def close(self, emit: Emit) -> None:
+        """Nothing buffered."""
