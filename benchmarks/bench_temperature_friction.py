@@ -27,7 +27,7 @@ Each is timed two ways:
 The ``numerical`` temperature model (``solve_bvp`` along MD) is timed too, for information.
 
 Cases: the thesis's Case 2 well file (Example 7.1, 10 m elements, bit depths every 30 m as the
-broomstick command's default) and the 6000 m well of REFERENCE.md section 6 (vertical 1000 m,
+broomstick command's default) and the 6000 m well of docs/reference-values.md §6 (vertical 1000 m,
 build 3 deg/30 m to 80 deg, tangent; 1 m elements; 20 bit depths) with the same thermal inputs.
 """
 
@@ -81,7 +81,7 @@ def case_2() -> tuple[Well, Geotherm, CirculationParameters, np.ndarray]:
 
 
 def long_well() -> tuple[Well, Geotherm, CirculationParameters, np.ndarray]:
-    """REFERENCE.md 6's 6000 m well with 1 m elements and Case 2's thermal inputs."""
+    """docs/reference-values.md §6's 6000 m well with 1 m elements and Case 2's thermal inputs."""
     _, geotherm, circulation, _ = case_2()
     md = np.union1d(np.arange(0.0, 6000.5, 1.0), [1000.0, 1800.0])
     inclination = np.clip((md - 1000.0) * 3.0 / 30.0, 0.0, 80.0)
@@ -94,7 +94,7 @@ def long_well() -> tuple[Well, Geotherm, CirculationParameters, np.ndarray]:
     well = Well(survey=survey, string=DrillString((pipe,)),
                 sections=(HoleSection(top=0.0, bottom=6000.0, diameter=8.5 * inch, kind="open",
                                       friction=CONSTANT_MU),),
-                fluid=Fluid(density=1200.0), element_length=1.0, name="REFERENCE.md 6")
+                fluid=Fluid(density=1200.0), element_length=1.0, name="docs/reference-values.md §6")
     return well, geotherm, circulation, np.linspace(300.0, 6000.0, 20)
 
 
@@ -184,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
     args = parser.parse_args(argv)
     results = [measure("thesis Case 2 (Example 7.1, 10 m)", *case_2(), args.repeat),
-               measure("REFERENCE.md 6 well (6000 m, 1 m)", *long_well(), args.repeat)]
+               measure("docs/reference-values.md §6 well (6000 m, 1 m)", *long_well(), args.repeat)]
     report(results)
     worst = max(max(r["ratio_from_well"], r["ratio_prepared"]) for r in results)
     print()

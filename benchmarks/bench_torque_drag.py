@@ -1,6 +1,6 @@
 """Torque-and-drag benchmark: tdmon against welleng 0.30 and torque_drag 0.1.1, in one run.
 
-The case (REFERENCE.md section 6): a 6000 m well, vertical to 1000 m, build 3 deg/30 m to
+The case (docs/reference-values.md §6): a 6000 m well, vertical to 1000 m, build 3 deg/30 m to
 80 deg, then tangent; 5" x 4.276" drill pipe only (eq 41 weight, 262.1 N/m in air), 8.5" hole,
 1.2 s.g. mud, friction 0.25; survey and elements every 1 m; 20 bit depths. At each depth:
 pick-up and slack-off hook load and rotating off-bottom torque.

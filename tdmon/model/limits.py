@@ -153,8 +153,8 @@ def helical_buckling_load(sinusoidal_load: ArrayLike,
     -----
     ``F_hel = k F_sin`` with ``k = sqrt(2)`` in eq. 31 of the seed thesis. Chen and Cheatham's
     full helical load ``2 (2 sqrt 2 - 1) sqrt(E I w sin a / r)`` is ``k = 2 sqrt 2 - 1 ~ 1.83``
-    times eq 30 (REFERENCE.md writes the ratio as 2(2 sqrt 2 - 1), which is 3.66). The factor
-    is a setting (`tdmon.model.well.LimitSettings.helical_factor`).
+    times eq 30 (a ratio sometimes misquoted as 2 (2 sqrt 2 - 1), which is 3.66). The factor is a
+    setting (`tdmon.model.well.LimitSettings.helical_factor`).
     """
     return np.asarray(helical_factor * np.asarray(sinusoidal_load, dtype=np.float64))
 

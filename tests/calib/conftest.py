@@ -37,7 +37,7 @@ KOP = 1500.0
 END_OF_BUILD = KOP + 500.0 * math.radians(60.0)
 TOTAL_DEPTH = END_OF_BUILD + 2200.0
 BLOCK_WEIGHT = 400e3
-# geothermal profile of REFERENCE.md section 2: 15.3 degC at surface, 85.5 degC at 3033 m TVD
+# geothermal profile of docs/reference-values.md §2: 15.3 degC at surface, 85.5 degC at 3033 m TVD
 SURFACE_TEMPERATURE = 15.3
 GEOTHERMAL_GRADIENT = (85.5 - 15.3) / 3033.0
 

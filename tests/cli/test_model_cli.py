@@ -23,8 +23,8 @@ def run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
-# REFERENCE.md 1, Example 7.1 at TD off bottom, mu 0.15: (static, pick-up, slack-off) [kN]
-# and rotating torque [kN m]; tolerance as the issue states it.
+# docs/reference-values.md §1, Example 7.1 at TD off bottom, mu 0.15: (static, pick-up, slack-off)
+# [kN] and rotating torque [kN m]; tolerance as the issue states it.
 @pytest.mark.parametrize(
     ("method", "expected", "tolerance"),
     [
@@ -95,7 +95,7 @@ def test_broomstick_png_is_drawn(tmp_path, capsys):
 
 def test_volve_well_file_loads_and_is_plausible(capsys):
     # F-4 trip out starts with the 7" tubing at 2574 m; the log's static off-slips hook load is
-    # about 1.54 MN and the pick-up about 1.62-1.64 MN (../shared/data/volve-f4/README.md).
+    # about 1.54 MN and the pick-up about 1.62-1.64 MN (data/README.md, docs/back-calculation.md).
     document = run_json(capsys, "model", "loads", "--well", str(VOLVE), "--json")
     hookload = document["hookload_N"]
     assert 1.45e6 < hookload["static"] < 1.62e6

@@ -78,7 +78,7 @@ def test_tables_11_and_12_at_surface_and_td(capsys):
     document = run_json(capsys, APAK)
     surface, bottom = document["surface"], document["bottom"]
     assert bottom["tvd_m"] == pytest.approx(3032.8, abs=0.5)  # 9950 ft
-    # Table 11 / REFERENCE.md 2: Ta(0) = 67.8 F, Ta(H) = 135.85-135.88 F (57.7 C)
+    # Table 11 / docs/reference-values.md §2: Ta(0) = 67.8 F, Ta(H) = 135.85-135.88 F (57.7 C)
     assert fahrenheit(surface["annulus_C"]) == pytest.approx(67.8, abs=0.1)
     assert fahrenheit(bottom["annulus_C"]) == pytest.approx(135.88, abs=0.1)
     assert bottom["annulus_C"] == pytest.approx(57.7, abs=0.05)
@@ -106,7 +106,7 @@ def test_geothermal_well_file(capsys):
     assert document["model"] == "geothermal"
     assert document["coefficients"] is None
     assert document["annulus_C"] == document["formation_C"] == document["pipe_C"]
-    # REFERENCE.md 2: 15.3 C at surface, 85.5 C at 3033 m; Table 12: 0.250 -> 0.341
+    # docs/reference-values.md §2: 15.3 C at surface, 85.5 C at 3033 m; Table 12: 0.250 -> 0.341
     assert document["surface"]["annulus_C"] == pytest.approx(15.28, abs=0.01)
     assert document["bottom"]["annulus_C"] == pytest.approx(85.49, abs=0.01)
     assert document["surface"]["friction"] == pytest.approx(0.250, abs=0.0005)

@@ -31,9 +31,9 @@ from tdmon.replay.simulate import simulate_to_mcap
 TRUTH_SLOPE = 0.0013  # Glydril, 1/K
 TDMON = [sys.executable, "-m", "tdmon"]
 
-# Example 7.1 (Aadnoy) with a 300 kN block, open hole to TD, Glydril friction at the
-# geothermal temperature (15.3 degC at surface, 85.5 degC at 3033 m TVD; REFERENCE.md 2).
-# 40 m elements keep the replay short; the truth and the daemon share the grid.
+# Example 7.1 (Aadnoy) with a 300 kN block, open hole to TD, Glydril friction at the geothermal
+# temperature (15.3 degC at surface, 85.5 degC at 3033 m TVD; docs/reference-values.md §2). 40 m
+# elements keep the replay short; the truth and the daemon share the grid.
 WELL = """
 [well]
 name = "Example 7.1, Glydril mu(T), geothermal"

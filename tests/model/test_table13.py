@@ -2,7 +2,8 @@
 versus geothermal mud temperature (Case 2, Example 7.1 geometry), through the shipped well files
 and ``tdmon model loads`` exactly as a user runs them.
 
-Provenance of the expected values: REFERENCE.md sections 2 and 3 (the thesis's Table 13 for the
+Provenance of the expected values: docs/reference-values.md sections 2 and 3
+(the thesis's Table 13 for the
 relative changes; an element-wise integration with the local mu at each element's TVD for the
 absolute values, which Table 13 prints about ten times too small).
 """
@@ -29,13 +30,13 @@ METHODS = ("aadnoy", "soft-string")
 
 # Table 13, Apak relative to geothermal [%]: pick-up, slack-off, rotating torque
 THESIS_CHANGE = {"pick_up": -2.6, "slack_off": 3.5, "torque": -6.1}
-# REFERENCE.md 3, element-wise [%]
+# docs/reference-values.md section 3, element-wise [%]
 ELEMENT_WISE_CHANGE = {
     "aadnoy": {"pick_up": -2.6, "slack_off": 2.9, "torque": -6.0},
     "soft-string": {"pick_up": -2.6, "slack_off": 2.9, "torque": -6.2},
 }
-# REFERENCE.md 3, element-wise absolute values at TD, bit off bottom, (Apak, geothermal):
-# pick-up and slack-off [kN], rotating torque [kN m]
+# docs/reference-values.md section 3, element-wise absolute values at TD, bit off bottom, (Apak,
+# geothermal): pick-up and slack-off [kN], rotating torque [kN m]
 ELEMENT_WISE = {
     "aadnoy": {"pick_up": (1874, 1924), "slack_off": (790, 768), "torque": (43.3, 46.0)},
     "soft-string": {"pick_up": (1819, 1868), "slack_off": (790, 768), "torque": (39.7, 42.4)},
@@ -45,10 +46,10 @@ ELEMENT_WISE = {
 # test_aadnoy_torque_differs_by_the_closed_form_build_term)
 AADNOY_TORQUE = (46.82, 49.65)
 
-# Tolerances. REFERENCE.md prints forces to 1 kN and torques to 0.1 kN m, so the rounding alone
-# is 0.5 kN and 0.05 kN m. The model's own discretisation adds less than that: element lengths
-# from 1 m to 100 m change the Table 13 loads by < 0.3 kN and < 0.01 kN m (measured when these
-# tests were written). Hence 1 kN and 0.1 kN m: twice the rounding, no more.
+# Tolerances. docs/reference-values.md prints forces to 1 kN and torques to 0.1 kN m, so the
+# rounding alone is 0.5 kN and 0.05 kN m. The model's own discretisation adds less than that:
+# element lengths from 1 m to 100 m change the Table 13 loads by < 0.3 kN and < 0.01 kN m (measured
+# when these tests were written). Hence 1 kN and 0.1 kN m: twice the rounding, no more.
 FORCE_TOLERANCE_KN = 1.0
 TORQUE_TOLERANCE_KNM = 0.1
 
@@ -90,8 +91,8 @@ def test_relative_changes_match_table_13(table_13, method, quantity):
     change = _change(table_13[method][quantity])
     # the thesis's Table 13, within 1 percentage point (the issue's tolerance)
     assert change == pytest.approx(THESIS_CHANGE[quantity], abs=1.0)
-    # the element-wise figures of REFERENCE.md 3; aadnoy's torque is 0.3 points off because of
-    # the closed-form build term (see below), everything else within 0.1 point
+    # the element-wise figures of docs/reference-values.md section 3; aadnoy's torque is 0.3 points
+    # off because of the closed-form build term (see below), everything else within 0.1 point
     assert change == pytest.approx(ELEMENT_WISE_CHANGE[method][quantity], abs=0.5)
 
 
@@ -118,7 +119,7 @@ def test_the_temperature_model_is_the_only_difference(table_13):
     for method in METHODS:
         static_apak, static_geothermal = table_13[method]["static"]
         assert static_apak == pytest.approx(static_geothermal, rel=1e-12)
-        assert static_apak == pytest.approx(1179.9, abs=0.1)  # REFERENCE.md 1
+        assert static_apak == pytest.approx(1179.9, abs=0.1)  # docs/reference-values.md section 1
         pick_up, slack_off, torque = (table_13[method][key]
                                       for key in ("pick_up", "slack_off", "torque"))
         assert pick_up[0] < pick_up[1] and slack_off[0] > slack_off[1] and torque[0] < torque[1]
@@ -139,7 +140,7 @@ def _element_wise_torque(well_file: Path) -> float:
     normal force N = |F| d(alpha) + w dL sin(alpha), each element at its own local mu.
 
     An independent, deliberately plain implementation (planar well, no kernels): it is how
-    REFERENCE.md's element-wise figures were obtained.
+    the reference values' element-wise figures were obtained.
     """
     well, mu = load_well_with_friction(well_file)
     grid = hole_grid(well)
@@ -180,7 +181,8 @@ def test_element_wise_torque_reproduces_reference(well_file, index):
 def test_aadnoy_torque_differs_by_the_closed_form_build_term(table_13, well_file, index):
     """Aadnoy's build torque T4 = T3 + mu r ((F3 + w R sin a) a + 2 w R (1 - cos a)) exceeds
     the integral of N = F/R + w sin(alpha) over the arc, (F3 + w R sin a) a, by exactly
-    mu r 2 w R (1 - cos a): 3.5 kN m here (1.8 kN m at mu 0.15, where REFERENCE.md 1 lists
+    mu r 2 w R (1 - cos a): 3.5 kN m here (1.8 kN m at mu 0.15, where docs/reference-values.md
+    section 1 lists
     23.45 and 21.64 kN m). The rest of the two calculations agree."""
     gap = table_13["aadnoy"]["torque"][index] - _element_wise_torque(well_file)
     assert gap == pytest.approx(_build_term(well_file), abs=0.02)

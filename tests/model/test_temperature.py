@@ -93,7 +93,7 @@ def example_7_1_tvd(md: np.ndarray) -> np.ndarray:
 def test_geothermal_hand_value_and_table_12() -> None:
     # hand: 15 + 0.03 * 2000 = 75 degC
     assert geothermal_temperature(2000.0, 15.0, 0.03) == pytest.approx(75.0, abs=1e-12)
-    # Table 12: 15 degC at surface, 86 degC at 3033 m; REFERENCE.md: 15.3 and 85.5
+    # Table 12: 15 degC at surface, 86 degC at 3033 m; docs/reference-values.md: 15.3 and 85.5
     t = geothermal_temperature([0.0, H], GEOTHERM.surface_temperature, GEOTHERM.gradient)
     assert t == pytest.approx([15.28, 85.48], abs=0.01)
 
@@ -142,7 +142,7 @@ def test_heat_transfer_from_scratch() -> None:
     ht = heat_transfer(FROM_SCRATCH)
     assert ht.prandtl is not None and ht.reynolds_pipe is not None
     assert ht.reynolds_annulus is not None and ht.h_annulus is not None
-    # REFERENCE.md: Pr = mu c / k = 46 * 0.4 / 1 = 18.4 (the thesis prints 44)
+    # docs/reference-values.md: Pr = mu c / k = 46 * 0.4 / 1 = 18.4 (the thesis prints 44)
     assert ht.prandtl == pytest.approx(18.4, rel=1e-6)
     # hand: v = q / (pi r_pi^2) = 0.013249 / 0.020651 = 0.6416 m/s;
     # Re = 1557.7 * 0.6416 * 0.16215 / 0.019015 = 8522
@@ -158,13 +158,13 @@ def test_heat_transfer_from_scratch() -> None:
 
 def test_apak_reproduces_table_11() -> None:
     result = apak_temperature([0.0, H], H, GEOTHERM, TABLE_11)
-    # Table 11 / REFERENCE.md 2: annulus 67.8 F at surface, 135.88 F at 9950 ft; the Table 11
-    # inputs are rounded to 4 digits, hence 0.3 F
+    # Table 11 / docs/reference-values.md §2: annulus 67.8 F at surface, 135.88 F at 9950 ft; the
+    # Table 11 inputs are rounded to 4 digits, hence 0.3 F
     assert degf(result.annulus) == pytest.approx([67.8, 135.88], abs=0.3)
     k = result.coefficients
     assert k is not None and k.C1 is not None and k.C2 is not None
-    # REFERENCE.md: A = 0.0011366/ft, B = 6.647e-5/ft, theta1 = 3.099e-4 (from B rounded to
-    # 6.64e-5), theta2 = -2.435e-4, C1 = -1.833 F, C2 = 13.51 F; tolerance 0.5 % covers the
+    # docs/reference-values.md: A = 0.0011366/ft, B = 6.647e-5/ft, theta1 = 3.099e-4 (from B rounded
+    # to 6.64e-5), theta2 = -2.435e-4, C1 = -1.833 F, C2 = 13.51 F; tolerance 0.5 % covers the
     # rounding of the printed inputs
     per_ft = {"A": k.A * FT, "B": k.B * FT, "theta1": k.theta1 * FT, "theta2": k.theta2 * FT}
     assert per_ft["A"] == pytest.approx(0.0011366, rel=1e-3)

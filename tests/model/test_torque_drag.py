@@ -45,7 +45,8 @@ def test_example_71_aadnoy_reproduces_the_thesis(example_71: Well) -> None:
 
 
 def test_example_71_soft_string_reproduces_the_consistent_solution(example_71: Well) -> None:
-    # REFERENCE.md 1: numerical integration of the soft-string ODE with N = |F/R - w sin a|
+    # docs/reference-values.md §1: numerical integration of the soft-string ODE with N = |F/R - w
+    # sin a|
     loads = torque_drag(example_71, TOTAL_DEPTH, 0.15, method="soft-string")
     assert loads.hookload["static"] == pytest.approx(1179.9 * KN, rel=3e-3)
     assert loads.hookload["pick_up"] == pytest.approx(1461.5 * KN, rel=3e-3)
@@ -329,10 +330,10 @@ def test_bad_inputs_are_errors(example_71: Well) -> None:
 
 
 def test_case_2_geothermal_local_friction(example_71: Well) -> None:
-    # REFERENCE.md 3, Case 2 geothermal: Glydril mu = 0.23 + 0.0013 T with T linear in TVD from
-    # 15.3 C at surface to 85.5 C at 3033 m, each element at its own temperature. Consistent
-    # soft string: 1868 / 768 kN, 42.4 kN m; element-wise thesis-style normal forces: pick-up
-    # 1924 kN, slack-off 768 kN.
+    # docs/reference-values.md section 3, Case 2 geothermal: Glydril mu = 0.23 + 0.0013 T with T
+    # linear in TVD from 15.3 C at surface to 85.5 C at 3033 m, each element at its own temperature.
+    # Consistent soft string: 1868 / 768 kN, 42.4 kN m; element-wise thesis-style normal forces:
+    # pick-up 1924 kN, slack-off 768 kN.
     grid = hole_grid(example_71)
     tvd = interpolate_survey(example_71.survey, grid.element_mid_md).tvd
     mu = 0.23 + 0.0013 * (15.3 + (85.5 - 15.3) * tvd / 3033.0)
