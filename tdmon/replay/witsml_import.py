@@ -8,8 +8,8 @@ and attribution: given, or Equinor's when the well is a Volve one, ``15/9-F-*``)
 
 Several files (or several ``<log>`` chunks of one log) are joined in time order: the files are
 merged on their row times, each file being read in order; a row whose time was already written
-(an overlap between chunks) is a duplicate and is dropped, the first one read wins; a row earlier
-than one already written is dropped and counted as out of order. Memory stays flat: rows stream
+(an overlap between chunks) is a duplicate and is dropped (on equal times the file given first
+wins); a row earlier than one already written is dropped and counted as out of order. Memory stays flat: rows stream
 from the parser (:func:`tdmon.ingest.witsml.iter_log`) to the recorder. See docs/witsml.md.
 """
 
@@ -231,6 +231,27 @@ def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
                               out_of_order=tally["out_of_order"], curves=curves)
 
 
+_DATA_END: Final = re.compile(rb"</(?:[\w.-]+:)?data>")
+
+
+def count_rows(path: Path) -> int:
+    """``<data>`` rows in a file, counted on the bytes (1 MB at a time, flat memory): the
+    ``rows`` of ``/reference/source``, written before the rows are parsed."""
+    count = 0
+    tail = b""
+    try:
+        with path.open("rb") as handle:
+            while chunk := handle.read(1 << 20):
+                block = tail + chunk
+                matches = list(_DATA_END.finditer(block))
+                count += len(matches)
+                keep = max(len(block) - 32, matches[-1].end() if matches else 0)
+                tail = block[keep:]
+    except OSError as exc:
+        raise IngestError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    return count
+
+
 def _size(path: Path) -> int:
     try:
         return os.stat(path).st_size
@@ -252,7 +273,8 @@ def _source_message(t: float, streams: list[_Stream], licence: str | None,
     curves = next(stream.curves for stream in streams if stream.blocks)
     return {"t": t, "file": Path(streams[0].source).name,
             "files": [Path(stream.source).name for stream in streams],
-            "layout": "witsml-1.4.1.1", "rows": 0, "licence": licence,
+            "layout": "witsml-1.4.1.1",
+            "rows": sum(count_rows(Path(stream.source)) for stream in streams), "licence": licence,
             "attribution": attribution, "well": block.well, "wellbore": block.wellbore,
             "log_name": block.name, "log_uid": block.uid,
             "service_company": block.service_company,
