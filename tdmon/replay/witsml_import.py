@@ -9,8 +9,9 @@ and attribution: given, or Equinor's when the well is a Volve one, ``15/9-F-*``)
 Several files (or several ``<log>`` chunks of one log) are joined in time order: the files are
 merged on their row times, each file being read in order; a row whose time was already written
 (an overlap between chunks) is a duplicate and is dropped (on equal times the file given first
-wins); a row earlier than one already written is dropped and counted as out of order. Memory stays flat: rows stream
-from the parser (:func:`tdmon.ingest.witsml.iter_log`) to the recorder. See docs/witsml.md.
+wins); a row earlier than one already written is dropped and counted as out of order. Memory
+stays flat: rows stream from the parser (:func:`tdmon.ingest.witsml.iter_log`) to the recorder.
+See docs/witsml.md.
 """
 
 from __future__ import annotations

@@ -115,9 +115,8 @@ def test_drafted_well_gives_the_static_hook_load(tmp_path: Path) -> None:
         assert theirs > 700e3  # block weight plus string: a real comparison
 
 
-def test_draft_without_fill_lists_what_is_missing_and_does_not_load(tmp_path: Path,
-                                                                    capsys: pytest.CaptureFixture[str]
-                                                                    ) -> None:
+def test_draft_without_fill_lists_what_is_missing_and_does_not_load(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "d.toml"
     code = main(["import", "witsml", str(WITSML / "trajectory.xml"),
                  str(WITSML / "tubular-3.xml"), str(WITSML / "wbGeometry.xml"),
