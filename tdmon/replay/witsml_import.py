@@ -118,6 +118,10 @@ class _Stream:
     def rows(self, order: int) -> Iterator[tuple[float, int, list[tuple[str, float]], int | None]]:
         for item in self.events:
             if isinstance(item, LogBlock):
+                if self.blocks and item.uid != self.blocks[0].uid:
+                    raise IngestError(f"{self.source}: holds different logs (uids "
+                                      f"{self.blocks[0].uid}, {item.uid}); import one log at "
+                                      "a time")
                 self.curves = resolve_curves(item, self.source, overrides=self.overrides,
                                              table=self.table)
                 self.activity = rig_activity_column(item)
@@ -214,18 +218,12 @@ def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
                 if activity is not None:
                     counts["/reference/rig_activity"] += 1
                     yield log_ns, "/reference/rig_activity", {"t": t, **rig_activity(activity)}
+            if last is None:
+                raise IngestError(f"{', '.join(map(str, paths))}: no data rows (empty logData)")
 
         written = write_mcap(out, records(), WITSML_SCHEMAS)
-        uids = {block.uid or block.name for stream in streams for block in stream.blocks}
-        if len(uids) > 1:
-            # checked after the fact too: a file whose first block came late in the merge
-            raise IngestError(f"the files hold different logs (uids {', '.join(sorted(uids))}); "
-                              "import one log at a time")
-    first = next((stream.blocks[0] for stream in streams if stream.blocks), None)
-    curves = ({curve.channel: f"{curve.mnemonic} [{curve.unit}]" for curve in streams[0].curves}
-              if first is not None else {})
-    if first is None:
-        raise IngestError(f"{', '.join(map(str, paths))}: no data rows (empty logData)")
+    first = next(stream for stream in streams if stream.blocks)
+    curves = {curve.channel: f"{curve.mnemonic} [{curve.unit}]" for curve in first.curves}
     return WitsmlImportResult(path=Path(out), rows=tally["rows"], messages=written,
                               per_channel=dict(counts), first_t=span[0] if span else None,
                               last_t=span[1] if span else None, duplicates=tally["duplicates"],

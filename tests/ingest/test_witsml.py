@@ -249,3 +249,33 @@ def test_unknown_uom_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]
                     .replace(b"<unit>kkgf</unit>", b"<unit>blorp</unit>"))
     code, err = _run(capsys, str(bad), "--out", str(tmp_path / "o.mcap"))
     assert code == 2 and err.count("\n") == 1 and "blorp" in err and "HKLA" in err
+
+
+def test_empty_log_and_two_logs_are_errors(tmp_path: Path) -> None:
+    empty = tmp_path / "empty.xml"
+    empty.write_bytes(_log([]))
+    with pytest.raises(IngestError, match="no data rows"):
+        import_witsml([empty], tmp_path / "o.mcap", prefix="rig/T")
+    assert not (tmp_path / "o.mcap").exists()
+    one, other = tmp_path / "one.xml", tmp_path / "other.xml"
+    one.write_bytes(_log(["2020-01-01T00:00:00Z,1,2,3,4"], uid="A"))
+    other.write_bytes(_log(["2020-01-01T00:00:10Z,1,2,3,4"], uid="B"))
+    with pytest.raises(IngestError, match="different logs"):
+        import_witsml([one, other], tmp_path / "o.mcap", prefix="rig/T")
+    assert not (tmp_path / "o.mcap").exists()
+
+
+def test_cli_imports_log_and_drafts_well_in_one_call(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    log = tmp_path / "log.xml"
+    log.write_bytes(_log(["2020-01-01T00:00:00Z,1,2,3,4", "2020-01-01T00:00:15Z,1,2,3,4"]))
+    code = main(["import", "witsml", str(WITSML / "wbGeometry.xml"), str(log),
+                 str(WITSML / "trajectory.xml"), str(WITSML / "tubular-3.xml"),
+                 "--out", str(tmp_path / "o.mcap"), "--well-out", str(tmp_path / "d.toml"),
+                 "--prefix", "rig/T", "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["log"]["rows"] == 2 and summary["log"]["curves"]["hookload"] == "HKLA [kkgf]"
+    assert any(item.startswith("fluid.density") for item in summary["well"]["missing"])
+    topics = {m.message["topic"] for m in read_messages(tmp_path / "o.mcap", "/tdmon/raw")}
+    assert topics == {"rig/T/hookload", "rig/T/torque", "rig/T/bit_depth", "rig/T/rpm"}
