@@ -297,7 +297,8 @@ def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:
                     log, curves, lists, block = element, [], {}, None
                     header = {"uid": element.get("uid", "")}
                 elif depth == 3 and name == "logData":
-                    log_data = element
+                    # a log may hold several logData blocks, each with its own columns
+                    log_data, lists, block = element, {}, None
                 continue
             depth -= 1
             if depth == 3 and log_data is not None and name == "data":

@@ -279,3 +279,22 @@ def test_cli_imports_log_and_drafts_well_in_one_call(tmp_path: Path,
     assert any(item.startswith("fluid.density") for item in summary["well"]["missing"])
     topics = {m.message["topic"] for m in read_messages(tmp_path / "o.mcap", "/tdmon/raw")}
     assert topics == {"rig/T/hookload", "rig/T/torque", "rig/T/bit_depth", "rig/T/rpm"}
+
+
+def test_curve_map_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = tmp_path / "log.xml"
+    log.write_bytes(_log(["2020-01-01T00:00:00Z,1,2,3,4"], mnemonics="TIME,XX,TQ,BDEP,RPM"))
+    curve_map = tmp_path / "map.toml"
+    curve_map.write_text('prefix = "rig/M"\n[curves.hookload]\nmnemonic = "XX"\nunit = "klbf"\n')
+    assert main(["import", "witsml", str(log), "--out", str(tmp_path / "o.mcap"),
+                 "--map", str(curve_map)]) == 0
+    series = _series(tmp_path / "o.mcap")
+    assert series["hookload"] == pytest.approx({1577836800.0: 4448.222})
+    topics = {m.message["topic"] for m in read_messages(tmp_path / "o.mcap", "/tdmon/raw")}
+    assert "rig/M/hookload" in topics
+    capsys.readouterr()
+    curve_map.write_text('[curves.hookpoint]\nmnemonic = "XX"\n')
+    assert main(["import", "witsml", str(log), "--out", str(tmp_path / "o.mcap"),
+                 "--map", str(curve_map)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "map.toml" in err and "hookpoint" in err
