@@ -64,7 +64,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
     importer = subparsers.add_parser(
         "import",
-        help="real rig data (CSV) to MCAP input messages",
+        help="real rig data (CSV, WITSML) to MCAP input messages",
         description=(
             "Convert rig time logs to the input format (one JSON payload per value, SI) in an "
             "MCAP file that tdmon replays like a flight recording. Empty cells send nothing; a "
@@ -91,6 +91,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                          help="topic prefix (default: the map's, else rig/import)")
     generic.add_argument("--json", action="store_true", help="print a summary as JSON")
     generic.set_defaults(func=_import_generic)
+
+    from tdmon.cli.witsml import register_import_witsml
+
+    register_import_witsml(kinds)
 
 
 def _utc(t: float | None) -> str:

@@ -1,0 +1,525 @@
+"""WITSML 1.4.1.1 time logs, read as a stream: bytes in, typed rows and SI samples out.
+
+A ``<logs>`` document holds one or more ``<log>`` elements (chunks of one log share its
+``uid``). Each has a header (``indexType``, ``indexCurve``, ``nullValue``, one ``logCurveInfo``
+per curve: ``mnemonic``, ``classWitsml``, ``unit``, per-curve ``nullValue``) and a ``logData``
+block: ``mnemonicList`` and ``unitList`` (comma separated) and one ``<data>`` row per index,
+comma separated cells in the order of ``mnemonicList``.
+
+The reader (:func:`iter_log`) walks the document with ``xml.etree.ElementTree.iterparse`` and
+clears every ``<data>`` row once read, so memory stays flat whatever the file's size. It yields a
+:class:`LogBlock` (the header and column list of one ``<log>``) before that block's
+:class:`DataRow` items. :func:`resolve_curves` picks, for each canonical channel, the curve
+to read through :data:`CURVE_TABLE` (by ``classWitsml`` or mnemonic, first match wins) or an
+override, and :func:`block_samples` turns rows into SI values. No file or network I/O here: the
+caller opens the files (:mod:`tdmon.replay.witsml_import`). See docs/witsml.md.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import IO, Final
+
+from tdmon.errors import IngestError
+from tdmon.ingest.decode import CHANNEL_UNITS
+from tdmon.units import conversion
+
+__all__ = [
+    "CURVE_TABLE",
+    "OBJECT_KINDS",
+    "RIG_ACTIVITY_MNEMONICS",
+    "WITSML_UNITS",
+    "CurveChoice",
+    "DataRow",
+    "LogBlock",
+    "LogCurve",
+    "ResolvedCurve",
+    "block_samples",
+    "detect_object",
+    "iter_log",
+    "local_name",
+    "parse_time",
+    "pint_unit",
+    "resolve_curves",
+]
+
+#: Root element of each WITSML 1.4.1.1 object file -> the object kind it holds.
+OBJECT_KINDS: Final[Mapping[str, str]] = {
+    "logs": "log", "trajectorys": "trajectory", "tubulars": "tubular",
+    "wbGeometrys": "wbGeometry", "rigs": "rig", "fluidsReports": "fluidsReport",
+}
+
+
+@dataclass(frozen=True)
+class CurveChoice:
+    """How one channel's curve is recognised: ``classWitsml`` values and mnemonics, in order
+    of preference (compared case-insensitively, spaces and underscores ignored)."""
+
+    classes: tuple[str, ...]
+    mnemonics: tuple[str, ...]
+
+
+#: The default curve table: channel -> what finds its curve. The ``classWitsml`` values are
+#: those of WITSML 1.4.1.1's log trace classes as Volve writes them (``tqAv``, ``rpmAv``...);
+#: the mnemonics are the Volve (Baker Hughes) ones first, then common WITS/LAS-style ones.
+#: Maximum or instantaneous curves (``HKLX``, ``tqMx``) are left out on purpose: the model
+#: compares averages. docs/witsml.md has the table with the Volve curves.
+CURVE_TABLE: Final[Mapping[str, CurveChoice]] = {
+    "hookload": CurveChoice(("hkldAv", "hook load", "hookload"),
+                            ("HKLD", "HKLA", "HKL", "HOOKLOAD", "HKLD_AVG", "HKLDAV")),
+    "torque": CurveChoice(("tqAv", "surface torque", "torque"),
+                          ("TORQUE", "TQA", "STOR", "TQ", "TORQ", "SURF_TORQUE", "TQAV")),
+    "bit_depth": CurveChoice(("depthBit", "bit depth"),
+                             ("BITDEP", "BDEP", "DBTM", "BDTI", "BIT_DEPTH", "DBIT")),
+    "hole_depth": CurveChoice(("depthHole", "hole depth"),
+                              ("MDEPTH", "DMEA", "HDTH", "HOLE_DEPTH", "DEPTH")),
+    "block_position": CurveChoice(("blockPos", "block position"),
+                                  ("BPOS", "BLKPOS", "BLOCK_POS", "BLKH", "HKHT")),
+    "rpm": CurveChoice(("rpmAv", "rotary speed"),
+                       ("SURF_RPM", "RPMA", "RPM", "TRPM", "RPMAV")),
+    "flow_in": CurveChoice(("flowInAv", "flow in"), ("FLOWIN", "MFIA", "TFLO", "FLOW_IN")),
+    "spp": CurveChoice(("presPumpAv", "standpipe pressure"), ("PUMP", "SPPA", "SPP", "STP")),
+    "wob": CurveChoice(("wobAv", "weight on bit"), ("WOB", "WOBA", "SWOB")),
+    "mud_density": CurveChoice(("wtMudInAv", "mud density in"), ("MWIN", "MDIA", "MW_IN")),
+    "mud_temp_in": CurveChoice(("tempMudInAv", "mud temperature in"),
+                               ("MTIA", "TEMPIN", "MT_IN", "MTIN")),
+    "mud_temp_out": CurveChoice(("tempMudOutAv", "mud temperature out"),
+                                ("MTOA", "TEMPOUT", "MT_OUT", "MTOUT")),
+}
+
+#: Curves carrying the Volve contractor's rig activity code (kept as a reference).
+RIG_ACTIVITY_MNEMONICS: Final = frozenset({"rigactivitycode"})
+
+#: WITSML ``uom`` spellings that pint reads differently or not at all -> pint spellings.
+#: Rotation rates: WITSML's ``c/s`` (cycles per second), ``rpm`` and ``1/min`` are revolutions,
+#: which pint must be told (its ``c`` is the speed of light, and ``1/min`` would be radians).
+WITSML_UNITS: Final[Mapping[str, str]] = {
+    "c/s": "revolution/second", "rpm": "revolution/minute", "1/min": "revolution/minute",
+    "rev/min": "revolution/minute", "1/s": "revolution/second",
+    "N.m": "N*m", "kN.m": "kN*m", "daN.m": "daN*m", "ft.lbf": "ft*lbf",
+    "kft.lbf": "kft*lbf", "lbf.ft": "lbf*ft", "klbf.ft": "klbf*ft",
+    "kkgf": "kkgf", "tonf": "metric_ton_force", "kdaN": "kN*10",
+    "m3/s": "m**3/s", "m3/min": "m**3/min", "m3/h": "m**3/h", "L/min": "L/min",
+    "gpm": "gallon/minute", "galUS/min": "gallon/minute", "bbl/min": "oil_barrel/minute",
+    "ft3/min": "ft**3/min",
+    "kg/m3": "kg/m**3", "g/cm3": "g/cm**3", "kg/L": "kg/L", "lbm/galUS": "lb/gallon",
+    "ppg": "ppg", "sg": "sg", "SG": "sg", "lbm/ft3": "lb/ft**3",
+    "degC": "degC", "degF": "degF", "K": "K", "dega": "degree", "lbm/ft": "lb/ft",
+}
+
+_NOT_UNITS: Final = frozenset({"", "unitless", "euc", "none", "n/a"})
+_EXPONENT = re.compile(r"([A-Za-z])(\d)")
+
+
+def pint_unit(uom: str) -> str | None:
+    """The pint spelling of a WITSML ``uom`` (None when it names no unit, e.g. ``unitless``).
+
+    The table :data:`WITSML_UNITS` first; otherwise WITSML's grammar rewritten for pint:
+    ``.`` multiplies and a trailing digit is a power (``kN.m`` -> ``kN*m``, ``m3`` -> ``m**3``).
+    """
+    uom = uom.strip()
+    if uom.lower() in _NOT_UNITS:
+        return None
+    if uom in WITSML_UNITS:
+        return WITSML_UNITS[uom]
+    return _EXPONENT.sub(r"\1**\2", uom.replace(".", "*"))
+
+
+def local_name(tag: str) -> str:
+    """An element's name without its namespace (``{http://...}log`` -> ``log``)."""
+    return tag.rpartition("}")[2]
+
+
+def _normal(text: str) -> str:
+    return text.replace(" ", "").replace("_", "").lower()
+
+
+def parse_time(text: str) -> float:
+    """Unix seconds of a WITSML ``dateTime`` (ISO 8601; without an offset it is taken as UTC).
+
+    Raises
+    ------
+    ValueError
+        Not an ISO 8601 time.
+    """
+    stamp = datetime.fromisoformat(text.strip())
+    if stamp.tzinfo is None:
+        stamp = stamp.replace(tzinfo=UTC)
+    return stamp.timestamp()
+
+
+# -- the streaming reader ----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class LogCurve:
+    """One ``logCurveInfo``: ``unit`` is the WITSML ``uom`` text, ``null_value`` the curve's own
+    (None: the log's)."""
+
+    mnemonic: str
+    class_witsml: str | None
+    unit: str
+    null_value: str | None
+    description: str
+
+
+@dataclass(frozen=True)
+class LogBlock:
+    """The header of one ``<log>`` element and the columns of its ``logData``.
+
+    Attributes
+    ----------
+    uid, name : the log's ``uid`` attribute and ``name``
+    well, wellbore : ``nameWell``, ``nameWellbore``
+    service_company : ``serviceCompany``
+    index_type : ``indexType`` (``date time`` for a time log)
+    index_curve : ``indexCurve`` mnemonic
+    null_value : the log's ``nullValue`` (None: none)
+    curves : every ``logCurveInfo``
+    mnemonics, units : ``mnemonicList`` and ``unitList`` of the data block
+    """
+
+    uid: str
+    name: str
+    well: str
+    wellbore: str
+    service_company: str
+    index_type: str
+    index_curve: str
+    null_value: str | None
+    curves: tuple[LogCurve, ...]
+    mnemonics: tuple[str, ...]
+    units: tuple[str, ...]
+
+    @property
+    def index_column(self) -> int:
+        """Column of the index (time) in each data row."""
+        wanted = self.index_curve.lower()
+        for column, mnemonic in enumerate(self.mnemonics):
+            if mnemonic.lower() == wanted:
+                return column
+        return 0
+
+
+@dataclass(frozen=True, slots=True)
+class DataRow:
+    """One ``<data>`` row: index time [Unix s] and its cells as text (in ``mnemonics`` order)."""
+
+    t: float
+    cells: list[str]
+
+
+_HEADER_FIELDS: Final = {
+    "name": "name", "nameWell": "well", "nameWellbore": "wellbore",
+    "serviceCompany": "service_company", "indexType": "index_type",
+    "indexCurve": "index_curve", "nullValue": "null_value",
+}
+
+
+def _child_text(element: ET.Element, name: str) -> str | None:
+    for child in element:
+        if local_name(child.tag) == name:
+            return (child.text or "").strip()
+    return None
+
+
+def _curve(element: ET.Element) -> LogCurve:
+    texts = {local_name(child.tag): (child.text or "").strip() for child in element}
+    return LogCurve(mnemonic=texts.get("mnemonic", ""),
+                    class_witsml=texts.get("classWitsml") or None,
+                    unit=texts.get("unit", texts.get("uom", "")),
+                    null_value=texts.get("nullValue") or None,
+                    description=texts.get("curveDescription", ""))
+
+
+def detect_object(stream: IO[bytes], source: str) -> str:
+    """The WITSML object kind of a file from its root element (``log``, ``trajectory``,
+    ``tubular``, ``wbGeometry``, ``rig``, ``fluidsReport``); reads only the first tag.
+
+    Raises
+    ------
+    IngestError
+        Not XML, or XML whose root is not one of :data:`OBJECT_KINDS`.
+    """
+    try:
+        for _event, element in ET.iterparse(stream, events=("start",)):
+            root = local_name(element.tag)
+            if root not in OBJECT_KINDS:
+                raise IngestError(f"{source}: not a WITSML 1.4.1.1 object file (root element "
+                                  f"<{root}>, expected one of "
+                                  f"{', '.join(f'<{name}>' for name in OBJECT_KINDS)})")
+            return OBJECT_KINDS[root]
+    except ET.ParseError as exc:
+        raise IngestError(f"{source}: not well-formed XML ({exc})") from None
+    raise IngestError(f"{source}: empty file")
+
+
+def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:
+    """Stream a WITSML ``<logs>`` document: a :class:`LogBlock` before the rows of each
+    ``<log>``'s data, then its :class:`DataRow` items in file order.
+
+    Memory stays flat: each ``<data>`` element is cleared from its ``logData`` once read, and
+    each finished ``<log>`` from the root.
+
+    Raises
+    ------
+    IngestError
+        Not XML or malformed XML (with the line and column), a root other than ``<logs>``, a
+        depth-indexed log, data without ``mnemonicList``, or a row whose time cannot be read;
+        every message names ``source``.
+    """
+    parser = ET.iterparse(stream, events=("start", "end"))
+    root: ET.Element | None = None
+    log: ET.Element | None = None
+    log_data: ET.Element | None = None
+    header: dict[str, str] = {}
+    curves: list[LogCurve] = []
+    lists: dict[str, tuple[str, ...]] = {}
+    block: LogBlock | None = None
+    depth = 0
+    rows = 0
+    try:
+        for event, element in parser:
+            name = local_name(element.tag)
+            if event == "start":
+                depth += 1
+                if root is None:
+                    root = element
+                    if name != "logs":
+                        raise IngestError(f"{source}: not a WITSML log file (root element "
+                                          f"<{name}>, expected <logs>)")
+                elif depth == 2 and name == "log":
+                    log, curves, lists, block = element, [], {}, None
+                    header = {"uid": element.get("uid", "")}
+                elif depth == 3 and name == "logData":
+                    # a log may hold several logData blocks, each with its own columns
+                    log_data, lists, block = element, {}, None
+                continue
+            depth -= 1
+            if depth == 3 and log_data is not None and name == "data":
+                if block is None:
+                    block = _block(header, curves, lists, source)
+                    yield block
+                rows += 1
+                yield _row(element.text or "", block, source, rows)
+                log_data.clear()  # the rows read so far: what keeps memory flat
+            elif depth == 3 and log_data is not None and name in ("mnemonicList", "unitList"):
+                lists[name] = tuple(cell.strip() for cell in (element.text or "").split(","))
+            elif depth == 2 and log is not None:
+                if name == "logCurveInfo":
+                    curves.append(_curve(element))
+                elif name in _HEADER_FIELDS:
+                    header[_HEADER_FIELDS[name]] = (element.text or "").strip()
+                elif name == "logData":
+                    log_data = None
+            elif depth == 1 and name == "log":
+                log = None
+                assert root is not None
+                root.clear()
+    except ET.ParseError as exc:
+        raise IngestError(f"{source}: not well-formed XML ({exc})") from None
+    if root is None:
+        raise IngestError(f"{source}: empty file")
+
+
+def _block(header: Mapping[str, str], curves: list[LogCurve], lists: Mapping[str, tuple[str, ...]],
+           source: str) -> LogBlock:
+    uid = header.get("uid", "")
+    label = f"log '{uid or header.get('name', '?')}'"
+    index_type = header.get("index_type", "date time")
+    if index_type.lower() not in ("date time", "datetime"):
+        raise IngestError(f"{source}: {label} is indexed by '{index_type}'; only time logs "
+                          "(indexType 'date time') can be imported")
+    if "mnemonicList" not in lists:
+        raise IngestError(f"{source}: {label} has data rows but no <mnemonicList> (the column "
+                          "order; WITSML 1.4.1.1 logData)")
+    mnemonics = lists["mnemonicList"]
+    units = lists.get("unitList", ())
+    if units and len(units) != len(mnemonics):
+        raise IngestError(f"{source}: {label}: unitList has {len(units)} entries, mnemonicList "
+                          f"{len(mnemonics)}")
+    return LogBlock(uid=uid, name=header.get("name", ""), well=header.get("well", ""),
+                    wellbore=header.get("wellbore", ""),
+                    service_company=header.get("service_company", ""),
+                    index_type=index_type, index_curve=header.get("index_curve", mnemonics[0]),
+                    null_value=header.get("null_value") or None, curves=tuple(curves),
+                    mnemonics=mnemonics, units=units)
+
+
+def _row(text: str, block: LogBlock, source: str, number: int) -> DataRow:
+    cells = text.split(",")
+    if len(cells) != len(block.mnemonics):
+        raise IngestError(f"{source}: data row {number} has {len(cells)} cells, mnemonicList "
+                          f"{len(block.mnemonics)}")
+    stamp = cells[block.index_column]
+    try:
+        t = parse_time(stamp)
+    except ValueError:
+        raise IngestError(f"{source}: data row {number}: cannot read time '{stamp.strip()}' "
+                          "(ISO 8601 expected)") from None
+    return DataRow(t, cells)
+
+
+# -- curves to channels ------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ResolvedCurve:
+    """One column of a block feeding one channel: ``value_SI = value * scale + offset``;
+    cells equal to one of ``nulls`` (text or number) send nothing."""
+
+    channel: str
+    mnemonic: str
+    column: int
+    unit: str
+    scale: float
+    offset: float
+    null_texts: frozenset[str]
+    null_numbers: frozenset[float]
+
+
+def _nulls(*values: str | None) -> tuple[frozenset[str], frozenset[float]]:
+    texts = {value.strip() for value in values if value and value.strip()}
+    numbers = set()
+    for text in texts:
+        with contextlib.suppress(ValueError):
+            numbers.add(float(text))
+    return frozenset(texts), frozenset(numbers)
+
+
+def _find(block: LogBlock, choice: CurveChoice) -> LogCurve | None:
+    listed = {mnemonic.lower() for mnemonic in block.mnemonics}
+    curves = [curve for curve in block.curves if curve.mnemonic.lower() in listed]
+    for wanted in choice.classes:
+        for curve in curves:
+            if curve.class_witsml and _normal(curve.class_witsml) == _normal(wanted):
+                return curve
+    for wanted in choice.mnemonics:
+        for curve in curves:
+            if _normal(curve.mnemonic) == _normal(wanted):
+                return curve
+    return None
+
+
+def resolve_curves(block: LogBlock, source: str, *,
+                   overrides: Mapping[str, tuple[str, str | None]] | None = None,
+                   table: Mapping[str, CurveChoice] = CURVE_TABLE,
+                   required: tuple[str, ...] = ("hookload", "bit_depth"),
+                   ) -> tuple[ResolvedCurve, ...]:
+    """The curves of ``block`` feeding each channel.
+
+    Parameters
+    ----------
+    block : the log's header and columns
+    source : file name for messages
+    overrides : channel -> (mnemonic, unit or None): the curve to use instead of the table's
+        (an override's unit replaces the curve's ``uom``)
+    table : channel -> how its curve is recognised
+    required : channels the import cannot do without
+
+    Raises
+    ------
+    IngestError
+        A required channel has no curve (the message lists the log's curves), an override
+        names a curve the log lacks, or a curve's unit is missing, unknown or of the wrong kind.
+    """
+    overrides = overrides or {}
+    by_mnemonic = {curve.mnemonic.lower(): curve for curve in block.curves}
+    columns = {mnemonic.lower(): index for index, mnemonic in enumerate(block.mnemonics)}
+    resolved = []
+    for channel in CHANNEL_UNITS:
+        unit_override: str | None = None
+        if channel in overrides:
+            mnemonic, unit_override = overrides[channel]
+            if mnemonic.lower() not in columns:
+                raise IngestError(f"{source}: --curve {channel}={mnemonic}: the log has no "
+                                  f"curve '{mnemonic}' (curves: {', '.join(block.mnemonics)})")
+            curve = by_mnemonic.get(mnemonic.lower()) or LogCurve(mnemonic, None, "", None, "")
+        elif channel in table:
+            found = _find(block, table[channel])
+            if found is None:
+                continue
+            curve = found
+        else:
+            continue
+        column = columns[curve.mnemonic.lower()]
+        uom = unit_override or curve.unit or (block.units[column] if block.units else "")
+        unit = unit_override or pint_unit(uom)
+        if unit is None:
+            raise IngestError(f"{source}: curve '{curve.mnemonic}' ({channel}) has no unit "
+                              f"('{uom}'); give one with --curve {channel}="
+                              f"{curve.mnemonic}:UNIT")
+        try:
+            scale, offset = conversion(unit, CHANNEL_UNITS[channel][0])
+        except ValueError as exc:
+            raise IngestError(f"{source}: curve '{curve.mnemonic}' ({channel}), uom '{uom}': "
+                              f"{exc}; give the unit with --curve {channel}="
+                              f"{curve.mnemonic}:UNIT") from None
+        texts, numbers = _nulls(curve.null_value or block.null_value)
+        resolved.append(ResolvedCurve(channel, curve.mnemonic, column, uom, scale, offset,
+                                      texts, numbers))
+    missing = [channel for channel in required
+               if channel not in {item.channel for item in resolved}]
+    if missing:
+        raise IngestError(
+            f"{source}: log '{block.uid or block.name}' has no curve for "
+            f"{', '.join(missing)} (looked for {_looked_for(missing, table)}; curves: "
+            f"{', '.join(block.mnemonics)}); name one with --curve CHANNEL=MNEMONIC")
+    return tuple(resolved)
+
+
+def _looked_for(channels: list[str], table: Mapping[str, CurveChoice]) -> str:
+    parts = []
+    for channel in channels:
+        choice = table.get(channel)
+        if choice is not None:
+            parts.append(f"{channel}: classWitsml {'/'.join(choice.classes)} or mnemonic "
+                         f"{'/'.join(choice.mnemonics)}")
+    return "; ".join(parts) or "nothing"
+
+
+def rig_activity_column(block: LogBlock) -> int | None:
+    """Column of the Volve rig activity code, if the log has one."""
+    for column, mnemonic in enumerate(block.mnemonics):
+        if mnemonic.lower() in RIG_ACTIVITY_MNEMONICS:
+            return column
+    return None
+
+
+def block_samples(row: DataRow, curves: tuple[ResolvedCurve, ...], source: str
+                  ) -> Iterator[tuple[str, float]]:
+    """(channel, SI value) of each mapped cell of ``row`` that is not empty or null.
+
+    Raises
+    ------
+    IngestError
+        A cell that is not a finite number, naming the time and the curve.
+    """
+    for curve in curves:
+        text = row.cells[curve.column].strip()
+        if not text or text in curve.null_texts:
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            raise IngestError(f"{source}: row at {_iso(row.t)}, curve '{curve.mnemonic}': "
+                              f"'{text}' is not a number") from None
+        if value in curve.null_numbers or math.isnan(value):
+            continue
+        if math.isinf(value):
+            raise IngestError(f"{source}: row at {_iso(row.t)}, curve '{curve.mnemonic}': "
+                              f"'{text}' is not a finite number")
+        yield curve.channel, value * curve.scale + curve.offset
+
+
+def _iso(t: float) -> str:
+    return datetime.fromtimestamp(t, UTC).isoformat().replace("+00:00", "Z")
+
+
+def child_text(element: ET.Element, name: str) -> str | None:
+    """Text of the first child named ``name`` (namespace ignored), stripped; None if absent."""
+    return _child_text(element, name)
