@@ -54,8 +54,8 @@ def register_import_witsml(kinds: argparse._SubParsersAction[Any]) -> None:
 
 def _overrides(args: argparse.Namespace) -> tuple[dict[str, tuple[str, str | None]],
                                                    str | None]:
+    from tdmon.channels import CHANNEL_UNITS
     from tdmon.config.witsml_map import load_curve_map
-    from tdmon.ingest.decode import CHANNEL_UNITS
 
     overrides: dict[str, tuple[str, str | None]] = {}
     prefix = None

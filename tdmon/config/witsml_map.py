@@ -18,8 +18,8 @@ from pathlib import Path
 
 from pydantic import Field, field_validator
 
+from tdmon.channels import CHANNEL_UNITS
 from tdmon.config.common import StrictModel, load_model
-from tdmon.ingest.decode import CHANNEL_UNITS
 
 __all__ = ["CurveMapConfig", "CurveSpec", "load_curve_map"]
 

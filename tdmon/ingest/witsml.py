@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import IO, Final
 
+from tdmon.channels import CHANNEL_UNITS
 from tdmon.errors import IngestError
-from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.units import conversion
 
 __all__ = [

@@ -20,8 +20,8 @@ from typing import Any, Final
 import numpy as np
 from tqdm import tqdm
 
+from tdmon.channels import CHANNEL_UNITS
 from tdmon.errors import RecordError
-from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.schemas import DRAFT
 from tdmon.replay.session import STATES, Scenario, Session, simulate_session

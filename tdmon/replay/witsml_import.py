@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Final
 
+from tdmon.channels import CHANNEL_UNITS
 from tdmon.errors import IngestError
-from tdmon.ingest.decode import CHANNEL_UNITS
 from tdmon.ingest.witsml import (
     CURVE_TABLE,
     CurveChoice,
