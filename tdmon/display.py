@@ -198,13 +198,13 @@ def unit_system(name: str) -> UnitSystem:
     units = {}
     for quantity, (expression, label, key) in _TABLES[name].items():
         scale, offset = conversion(QUANTITIES[quantity], expression)
-        # pint's chain of factors leaves 1.7999999999999972 degF/degC; 12 digits are exact
+        # pint's chain of factors leaves 1.7999999999999972 degF/degC; 14 digits are exact
         units[quantity] = DisplayUnit(label, key, _round(scale), _round(offset))
     return UnitSystem(cast(SystemName, name), MappingProxyType(units))
 
 
 def _round(value: float) -> float:
-    return float(f"{value:.12g}")
+    return float(f"{value:.14g}")
 
 
 def resolve(option: str | None = None, config: str | None = None,
