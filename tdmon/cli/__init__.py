@@ -42,7 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "Real-time torque-and-drag monitor: modelled pick-up, slack-off and rotating loads "
             "with temperature-dependent friction, live friction back-calculation, MCAP flight "
-            "recording. Quantities are SI on output (N, N m, m); inputs accept units."
+            "recording. JSON, CSV and recordings are SI (N, N m, m); tables, reports and Rerun "
+            "views show SI or field units (--units, TDMON_UNITS); inputs and flags accept units."
         ),
     )
     parser.add_argument("--version", action="version", version=f"tdmon {__version__}")
