@@ -20,6 +20,7 @@ import argparse  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
+from typing import NoReturn  # noqa: E402
 
 from tdmon import __version__  # noqa: E402
 from tdmon.errors import TdmonError  # noqa: E402
@@ -27,13 +28,22 @@ from tdmon.errors import TdmonError  # noqa: E402
 _COMMAND_MODULES = ("model", "lab", "run", "record", "replay")
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage mistakes on one line, like every other user mistake (the usage is one ``--help``
+    away and, for commands with many options, longer than the message)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tdmon",
         description=(
             "Real-time torque-and-drag monitor: modelled pick-up, slack-off and rotating loads "
             "with temperature-dependent friction, live friction back-calculation, MCAP flight "
-            "recording. Quantities are SI on output (N, N m, m); inputs accept units."
+            "recording. JSON, CSV and recordings are SI (N, N m, m); tables, reports and Rerun "
+            "views show SI or field units (--units, TDMON_UNITS); inputs and flags accept units."
         ),
     )
     parser.add_argument("--version", action="version", version=f"tdmon {__version__}")

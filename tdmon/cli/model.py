@@ -13,9 +13,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.cli.arguments import add_units_option, display_units, quantity_arg
 from tdmon.errors import ConfigError, TdmonError
 
 if TYPE_CHECKING:
+    from tdmon.display import UnitSystem
     from tdmon.model.broomstick import Broomstick
     from tdmon.model.well import Well
 
@@ -35,20 +37,24 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         help="hook load and surface torque at one bit depth",
         description=(
             "Hook load (static, rotating off bottom, pick-up, slack-off) and surface torque at one "
-            "bit depth. Hook load includes the well file's block weight. Output in kN and kN m, "
-            "or SI with --json."
+            "bit depth. Hook load includes the well file's block weight. Output in kN and kN m "
+            "(klbf and kft lbf with --units field), or SI with --json."
         ),
     )
     _add_common(loads)
     loads.add_argument("--mu", type=_friction, help="friction factor for every section "
                        "(default: the well file's friction per section)")
-    loads.add_argument("--bit-depth", type=float, metavar="M",
-                       help="bit depth [m MD] (default: the string's length)")
-    loads.add_argument("--wob", type=float, default=0.0, metavar="N",
-                       help="weight on bit [N] for the on-bottom case (default 0: off bottom)")
-    loads.add_argument("--bit-torque", type=float, default=0.0, metavar="NM",
-                       help="torque at the bit [N m] for the on-bottom case")
+    loads.add_argument("--bit-depth", type=quantity_arg("m", "6500 ft"), metavar="DEPTH",
+                       help="bit depth [m MD], or with a unit, e.g. '6500 ft' (default: the "
+                       "string's length)")
+    loads.add_argument("--wob", type=quantity_arg("N", "20 klbf"), default=0.0, metavar="FORCE",
+                       help="weight on bit [N], or with a unit, e.g. '20 klbf' or '90 kN', for "
+                       "the on-bottom case (default 0: off bottom)")
+    loads.add_argument("--bit-torque", type=quantity_arg("N*m", "5 kft*lbf"), default=0.0,
+                       metavar="TORQUE", help="torque at the bit [N m], or with a unit, e.g. "
+                       "'5 kft*lbf' or '7 kN*m', for the on-bottom case")
     loads.add_argument("--json", action="store_true", help="print JSON (SI units in the keys)")
+    add_units_option(loads, "the table")
     loads.set_defaults(func=_run_loads)
 
     broom = commands.add_parser(
@@ -64,8 +70,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     broom.add_argument("--mu", type=_friction_list,
                        help="comma-separated friction factors, e.g. 0.1,0.2,0.3 (default: the "
                        "well file's friction, per section or mu(T), as one case)")
-    broom.add_argument("--step", type=float, default=30.0, metavar="M",
-                       help="bit-depth step [m] (default 30)")
+    broom.add_argument("--step", type=quantity_arg("m", "100 ft"), default=30.0,
+                       metavar="LENGTH", help="bit-depth step [m], or with a unit, e.g. "
+                       "'100 ft' (default 30 m)")
+    add_units_option(broom, "the table and the figure")
     out = broom.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print JSON (SI units in the keys)")
     out.add_argument("--csv", type=Path, metavar="FILE", help="write a CSV table")
@@ -151,18 +159,21 @@ def _run_loads(args: argparse.Namespace) -> int:
         json.dump(document, sys.stdout, indent=2)
         print()
         return 0
+    units = display_units(args)
+    force, torque, depth = units.label("force"), units.label("torque"), units.label("depth")
     friction = f"mu {args.mu:g}" if args.mu is not None else "friction from the well file"
-    print(f"{well.name or args.well}: bit at {loads.bit_depth:.1f} m MD, method {loads.method}, "
-          f"{friction}, block weight {well.block_weight / 1e3:.1f} kN")
+    print(f"{well.name or args.well}: bit at {units.depth(loads.bit_depth):.1f} {depth} MD, "
+          f"method {loads.method}, {friction}, block weight "
+          f"{units.force(well.block_weight):.1f} {force}")
     on_bottom = args.wob != 0.0 or args.bit_torque != 0.0
     shown = ["static", "rotating", "pick_up", "slack_off"] + (["on_bottom"] if on_bottom else [])
-    print(f"  {'hook load':<24}{'kN':>10}")
+    print(f"  {'hook load':<24}{force:>10}")
     for operation in shown:
-        print(f"  {operation.replace('_', ' '):<24}{loads.hookload[operation] / 1e3:>10.1f}")
-    print(f"  {'surface torque':<24}{'kN m':>10}")
+        print(f"  {operation.replace('_', ' '):<24}{units.force(loads.hookload[operation]):>10.1f}")
+    print(f"  {'surface torque':<24}{torque:>10}")
     for operation in ("rotating", "on_bottom") if on_bottom else ("rotating",):
         value = loads.surface_torque[operation]
-        print(f"  {operation.replace('_', ' '):<24}{value / 1e3:>10.2f}")
+        print(f"  {operation.replace('_', ' '):<24}{units.torque(value):>10.2f}")
     return 0
 
 
@@ -173,6 +184,7 @@ def _run_broomstick(args: argparse.Namespace) -> int:
     mus = args.mu if args.mu is not None else file_friction[np.newaxis, :]
     if not args.step > 0:
         raise ConfigError(str(args.well), "--step", "must be positive")
+    units = display_units(args)
     deepest = min(well.string.length, well.sections[-1].bottom)
     bit_depths = np.arange(args.step, deepest + 1e-9, args.step)
     if bit_depths.size == 0 or bit_depths[-1] < deepest - 1e-6:
@@ -188,10 +200,10 @@ def _run_broomstick(args: argparse.Namespace) -> int:
     elif args.png is not None:
         from tdmon.cli.plots import plot_broomstick
 
-        plot_broomstick(well, result, args.png, args.method)
+        plot_broomstick(well, result, args.png, args.method, units)
         print(f"wrote {args.png}")
     else:
-        _print_broomstick(result)
+        _print_broomstick(result, units)
     return 0
 
 
@@ -232,19 +244,21 @@ def _write_csv(path: Path, result: Broomstick) -> None:
         raise TdmonError(f"cannot write {path}: {exc.strerror}") from exc
 
 
-def _print_broomstick(result: Broomstick) -> None:
+def _print_broomstick(result: Broomstick, units: UnitSystem) -> None:
     mus = np.asarray(result.mu)
-    header = f"{'bit depth m':>12}" + "".join(
+    header = f"{'bit depth ' + units.label('depth'):>12}" + "".join(
         f"{'PU ' + label:>10}{'SO ' + label:>10}{'T ' + label:>9}"
         for label in (format(mu, ".3g") for mu in mus)
     )
-    print("hook load in kN (PU pick-up, SO slack-off), off-bottom torque T in kN m")
+    print(f"hook load in {units.label('force')} (PU pick-up, SO slack-off), off-bottom torque "
+          f"T in {units.label('torque')}")
     print(header + f"{'ROT':>10}")
-    rotating = np.atleast_2d(result.hookload["rotating"])[0]
-    for j, depth in enumerate(result.bit_depth):
+    rotating = units.force(np.atleast_2d(result.hookload["rotating"])[0])
+    pick_up = units.force(np.atleast_2d(result.hookload["pick_up"]))
+    slack_off = units.force(np.atleast_2d(result.hookload["slack_off"]))
+    torque = units.torque(np.atleast_2d(result.surface_torque["rotating"]))
+    for j, depth in enumerate(units.depth(result.bit_depth)):
         row = f"{depth:>12.1f}"
         for i in range(mus.size):
-            row += f"{result.hookload['pick_up'][i, j] / 1e3:>10.1f}"
-            row += f"{result.hookload['slack_off'][i, j] / 1e3:>10.1f}"
-            row += f"{result.surface_torque['rotating'][i, j] / 1e3:>9.2f}"
-        print(row + f"{rotating[j] / 1e3:>10.1f}")
+            row += f"{pick_up[i, j]:>10.1f}{slack_off[i, j]:>10.1f}{torque[i, j]:>9.2f}"
+        print(row + f"{rotating[j]:>10.1f}")

@@ -12,6 +12,7 @@ from tdmon.errors import TdmonError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+    from tdmon.display import UnitSystem
     from tdmon.model.broomstick import Broomstick
     from tdmon.model.well import Well
 
@@ -32,39 +33,44 @@ def save(figure: Figure, path: Path) -> None:
         raise TdmonError(f"cannot write {path}: {exc.strerror}") from exc
 
 
-def plot_broomstick(well: Well, result: Broomstick, path: Path, method: str) -> None:
+def plot_broomstick(well: Well, result: Broomstick, path: Path, method: str,
+                    units: UnitSystem | None = None) -> None:
     """Hook load and off-bottom torque against bit depth (depth down), as the thesis's Figure 6,
-    with the tensile limit of the joint at surface and the lowest make-up torque in the hole."""
+    with the tensile limit of the joint at surface and the lowest make-up torque in the hole.
+    Axes in ``units`` (default SI: kN, kN m, m)."""
+    from tdmon.display import unit_system
+
+    units = units or unit_system("si")
     figure = _figure(2)
     hook_axes, torque_axes = figure.subplots(1, 2, sharey=True)
-    depth = result.bit_depth
+    depth = units.depth(result.bit_depth)
     colours = [f"C{index}" for index in range(len(result.mu))]
     for index, mu in enumerate(np.asarray(result.mu)):
         colour = colours[index]
-        hook_axes.plot(result.hookload["pick_up"][index] / 1e3, depth, color=colour,
+        hook_axes.plot(units.force(result.hookload["pick_up"][index]), depth, color=colour,
                        label=f"pick-up, mu {mu:g}")
-        hook_axes.plot(result.hookload["slack_off"][index] / 1e3, depth, color=colour,
+        hook_axes.plot(units.force(result.hookload["slack_off"][index]), depth, color=colour,
                        linestyle="--", label=f"slack-off, mu {mu:g}")
-        torque_axes.plot(result.surface_torque["rotating"][index] / 1e3, depth, color=colour,
-                         label=f"mu {mu:g}")
+        torque_axes.plot(units.torque(result.surface_torque["rotating"][index]), depth,
+                         color=colour, label=f"mu {mu:g}")
     rotating = np.atleast_2d(result.hookload["rotating"])[0]
-    hook_axes.plot(rotating / 1e3, depth, color="black", label="rotating off bottom")
+    hook_axes.plot(units.force(rotating), depth, color="black", label="rotating off bottom")
 
     if np.isfinite(result.hookload_limit).any():
-        hook_axes.plot(result.hookload_limit / 1e3, depth, color="red", linewidth=1.5,
+        hook_axes.plot(units.force(result.hookload_limit), depth, color="red", linewidth=1.5,
                        label=f"tensile limit + block (SF {well.limits.safety_factor:g})")
     if np.isfinite(result.makeup_torque_limit).any():
-        torque_axes.plot(result.makeup_torque_limit / 1e3, depth, color="red", linewidth=1.5,
-                         label="make-up torque")
+        torque_axes.plot(units.torque(result.makeup_torque_limit), depth, color="red",
+                         linewidth=1.5, label="make-up torque")
 
-    hook_axes.set_xlabel("hook load [kN]")
-    hook_axes.set_ylabel("bit depth [m MD]")
+    hook_axes.set_xlabel(f"hook load [{units.label('force')}]")
+    hook_axes.set_ylabel(f"bit depth [{units.label('depth')} MD]")
     hook_axes.invert_yaxis()
     hook_axes.grid(alpha=0.3)
     hook_axes.legend(fontsize="small")
-    torque_axes.set_xlabel("off-bottom rotating torque [kN m]")
+    torque_axes.set_xlabel(f"off-bottom rotating torque [{units.label('torque')}]")
     torque_axes.grid(alpha=0.3)
     torque_axes.legend(fontsize="small")
     figure.suptitle(f"{well.name or 'well'}: broomstick ({method}, block weight "
-                    f"{well.block_weight / 1e3:.0f} kN)")
+                    f"{units.force(well.block_weight):.0f} {units.label('force')})")
     save(figure, path)

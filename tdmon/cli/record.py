@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from tdmon.cli.arguments import add_units_option, display_units
+
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     """Add ``tdmon recover``, ``tdmon view`` and ``tdmon report``."""
@@ -32,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     view.add_argument("files", nargs="+", type=Path, metavar="X.mcap")
     view.add_argument("--rrd", type=Path, required=True, metavar="Z.rrd", help="output .rrd")
     view.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_units_option(view, "the views' series and labels (entity names carry the unit)")
     view.set_defaults(func=_view)
 
     report = subparsers.add_parser(
@@ -45,6 +48,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     report.add_argument("files", nargs="+", type=Path, metavar="X.mcap")
     report.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     report.add_argument("--title", help="report title (default: the first file's name)")
+    add_units_option(report, "the figures and tables (estimates.csv stays SI)")
     report.set_defaults(func=_report)
 
 
@@ -79,7 +83,7 @@ def _view(args: argparse.Namespace) -> int:
     # Counting first also checks every file before the .rrd is created.
     total = sum(sum(topic_counts(path).values()) for path in args.files)
     with (
-        RerunViews(args.rrd) as views,
+        RerunViews(args.rrd, units=display_units(args)) as views,
         tqdm(total=total, unit="msg", disable=True if args.no_progress else None) as bar,
     ):
         for path in args.files:
@@ -97,6 +101,6 @@ def _view(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from tdmon.record.report import write_report
 
-    result = write_report(args.files, args.out, title=args.title)
+    result = write_report(args.files, args.out, title=args.title, units=display_units(args))
     print(f"{result.html} ({len(result.figures)} figures), {result.csv}")
     return 0

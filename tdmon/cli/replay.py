@@ -11,6 +11,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from tdmon.cli.arguments import add_units_option, display_units
 from tdmon.errors import ConfigError, ModelError
 
 
@@ -33,6 +34,8 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     replay.add_argument("--out", required=True, type=Path, metavar="Y.mcap",
                         help="flight recording to write (replaced if present)")
     replay.add_argument("--rrd", type=Path, metavar="Z.rrd", help="Rerun recording to write")
+    add_units_option(replay, "the Rerun recording (default: $TDMON_UNITS, else the daemon "
+                     "file's [display] units)")
     replay.add_argument("--speed", default="max",
                         help="real time x N, or 'max' (default: as fast as possible)")
     replay.add_argument("--check", nargs="?", const="", default=None, metavar="E.toml",
@@ -170,6 +173,7 @@ def _speed(text: str) -> float | None:
 def _replay(args: argparse.Namespace) -> int:
     from tdmon.config.daemon import load_daemon_config
     from tdmon.config.expectations import load_expectations
+    from tdmon.display import using
     from tdmon.replay.driver import raw_message_count, replay
     from tdmon.replay.expectations import check_replay, find_expectations
 
@@ -198,9 +202,11 @@ def _replay(args: argparse.Namespace) -> int:
         bar = tqdm(total=raw_message_count(args.replay), unit="msg", file=sys.stderr,
                    desc=args.replay.name)
     try:
-        result = asyncio.run(replay(args.replay, config, args.out, rrd=args.rrd, speed=speed,
-                                    progress=bar.update if bar is not None else None,
-                                    separate_writer=args.recorder == "process"))
+        # the Rerun views are built inside the daemon: they read the units from tdmon.display
+        with using(display_units(args, config.display.units)):
+            result = asyncio.run(replay(args.replay, config, args.out, rrd=args.rrd, speed=speed,
+                                        progress=bar.update if bar is not None else None,
+                                        separate_writer=args.recorder == "process"))
     finally:
         if bar is not None:
             bar.close()

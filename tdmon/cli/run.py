@@ -11,6 +11,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from tdmon.cli.arguments import add_units_option, display_units
 from tdmon.errors import TdmonError
 
 
@@ -24,6 +25,8 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     run.add_argument("--config", required=True, type=Path, help="daemon TOML file")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
+    add_units_option(run, "the Rerun views (default: $TDMON_UNITS, else the file's [display] "
+                     "units)")
     run.set_defaults(func=_run)
 
     pub = subparsers.add_parser(
@@ -57,11 +60,14 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 def _run(args: argparse.Namespace) -> int:
     from tdmon.config.daemon import load_daemon_config
     from tdmon.daemon.runner import run_daemon
+    from tdmon.display import using
 
     config = load_daemon_config(args.config)
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    stats = asyncio.run(run_daemon(config))
+    # the Rerun views are built inside the daemon: they read the units from tdmon.display
+    with using(display_units(args, config.display.units)):
+        stats = asyncio.run(run_daemon(config))
     print(f"tdmon: stopped: {stats.samples_in} samples, {stats.rejected} rejected, "
           f"{stats.dropped} dropped, {stats.duplicates} duplicates, {stats.out_of_order} "
           f"out of order, {stats.frames} frames", file=sys.stderr)

@@ -18,10 +18,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.cli.arguments import add_units_option, display_units, quantity_arg
 from tdmon.errors import ConfigError
 
 if TYPE_CHECKING:
     from tdmon.config.well import WellConfig
+    from tdmon.display import UnitSystem
     from tdmon.model.temperature import WellboreTemperature
     from tdmon.model.well import Well
 
@@ -39,13 +41,16 @@ def register_model_commands(commands: argparse._SubParsersAction[Any]) -> None:
             "element (Figure 11): a section's number, or its law mu(T) at the annulus "
             "temperature. The well file's [temperature] model is evaluated with the mud "
             "circulating at the bottom of the hole, at the midpoint of every hole-grid element, "
-            "exactly as 'tdmon model loads' and 'broomstick' use it. Temperatures in degC."
+            "exactly as 'tdmon model loads' and 'broomstick' use it. Temperatures in degC "
+            "(degF with --units field)."
         ),
     )
     parser.add_argument("--well", type=Path, required=True, metavar="W.toml",
                         help="well file with a [temperature] table")
-    parser.add_argument("--step", type=float, default=250.0, metavar="M",
-                        help="MD spacing of the rows of the text table [m] (default 250)")
+    parser.add_argument("--step", type=quantity_arg("m", "500 ft"), default=250.0,
+                        metavar="LENGTH", help="MD spacing of the rows of the text table [m], "
+                        "or with a unit, e.g. '500 ft' (default 250 m)")
+    add_units_option(parser, "the table and the figure")
     out = parser.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true",
                      help="print JSON: arrays md_m, tvd_m, pipe_C, annulus_C, formation_C, "
@@ -105,14 +110,15 @@ def _run_temperature(args: argparse.Namespace) -> int:
     if not args.step > 0:
         raise ConfigError(str(args.well), "--step", "must be positive")
     result = _profiles(args.well)
+    units = display_units(args)
     if args.json:
         json.dump(_document(result), sys.stdout, allow_nan=False)
         print()
     elif args.png is not None:
-        _plot(result, args.png)
+        _plot(result, args.png, units)
         print(f"wrote {args.png}")
     else:
-        _print(result, args.well, args.step)
+        _print(result, args.well, args.step, units)
     return 0
 
 
@@ -135,14 +141,12 @@ def _document(result: _Profiles) -> dict[str, Any]:
     return document
 
 
-def _fahrenheit(celsius: float) -> float:
-    return celsius * 1.8 + 32.0
-
-
-def _print(result: _Profiles, path: Path, step: float) -> None:
+def _print(result: _Profiles, path: Path, step: float, units: UnitSystem) -> None:
     profile, ends = result.profile, result.ends
+    depth, degrees, other = units.label("depth"), units.label("temperature"), units.other
     state = ("static mud at the formation temperature" if profile.model == "geothermal" else
-             f"mud circulating with the bit at {result.well.hole_bottom:.1f} m MD")
+             f"mud circulating with the bit at {units.depth(result.well.hole_bottom):.1f} "
+             f"{depth} MD")
     print(f"{result.well.name or path}: temperature model '{profile.model}', {state}")
     coefficients = profile.coefficients
     if coefficients is not None:
@@ -153,11 +157,12 @@ def _print(result: _Profiles, path: Path, step: float) -> None:
               f"t_D {heat.dimensionless_time:.3g}, T_D {heat.dimensionless_temperature:.3g}")
     for index, name in enumerate(("surface", "bottom")):
         mu = "" if result.ends_friction is None else f", friction {result.ends_friction[index]:.3f}"
-        print(f"  {name:<8} annulus {ends.annulus[index]:.2f} degC "
-              f"({_fahrenheit(float(ends.annulus[index])):.2f} degF), formation "
-              f"{ends.formation[index]:.2f} degC{mu}")
-    header = (f"{'MD m':>9}{'TVD m':>9}{'pipe degC':>11}{'annulus degC':>14}"
-              f"{'formation degC':>16}")
+        annulus = float(ends.annulus[index])
+        print(f"  {name:<8} annulus {units.temperature(annulus):.2f} {degrees} "
+              f"({other.temperature(annulus):.2f} {other.label('temperature')}), formation "
+              f"{units.temperature(float(ends.formation[index])):.2f} {degrees}{mu}")
+    header = (f"{'MD ' + depth:>9}{'TVD ' + depth:>9}{'pipe ' + degrees:>11}"
+              f"{'annulus ' + degrees:>14}{'formation ' + degrees:>16}")
     if result.friction is not None:
         header += f"{'friction':>10}"
     print(header)
@@ -165,30 +170,33 @@ def _print(result: _Profiles, path: Path, step: float) -> None:
     wanted = np.arange(0.0, md[-1] + step, step)
     rows = np.unique(np.append(np.searchsorted(md, wanted).clip(0, md.size - 1), md.size - 1))
     for i in rows:
-        line = (f"{md[i]:>9.1f}{profile.tvd[i]:>9.1f}{profile.pipe[i]:>11.2f}"
-                f"{profile.annulus[i]:>14.2f}{profile.formation[i]:>16.2f}")
+        line = (f"{units.depth(md[i]):>9.1f}{units.depth(profile.tvd[i]):>9.1f}"
+                f"{units.temperature(profile.pipe[i]):>11.2f}"
+                f"{units.temperature(profile.annulus[i]):>14.2f}"
+                f"{units.temperature(profile.formation[i]):>16.2f}")
         if result.friction is not None:
             line += f"{result.friction[i]:>10.4f}"
         print(line)
     print("(rows: hole-grid element midpoints about every "
-          f"{step:g} m; --json gives all {md.size})")
+          f"{units.depth(step):g} {depth}; --json gives all {md.size})")
 
 
-def _plot(result: _Profiles, path: Path) -> None:
+def _plot(result: _Profiles, path: Path, units: UnitSystem) -> None:
     """Temperature (Figure 9) and friction factor (Figure 11) against TVD, depth down."""
     from tdmon.cli.plots import _figure, save
 
     profile = result.profile
+    degrees = units.label("temperature")
     panels = 2 if result.friction is not None else 1
     figure = _figure(panels)
     axes = figure.subplots(1, panels, sharey=True, squeeze=False)[0]
-    tvd = profile.tvd
-    axes[0].plot(profile.pipe, tvd, color="C0", label="mud in drill pipe")
-    axes[0].plot(profile.annulus, tvd, color="C3", label="mud in annulus")
-    axes[0].plot(profile.formation, tvd, color="black", linestyle="--",
+    tvd = units.depth(profile.tvd)
+    axes[0].plot(units.temperature(profile.pipe), tvd, color="C0", label="mud in drill pipe")
+    axes[0].plot(units.temperature(profile.annulus), tvd, color="C3", label="mud in annulus")
+    axes[0].plot(units.temperature(profile.formation), tvd, color="black", linestyle="--",
                  label="formation (geotherm)")
-    axes[0].set_xlabel("temperature [degC]")
-    axes[0].set_ylabel("true vertical depth [m]")
+    axes[0].set_xlabel(f"temperature [{degrees}]")
+    axes[0].set_ylabel(f"true vertical depth [{units.label('depth')}]")
     axes[0].invert_yaxis()
     if result.friction is not None and result.friction_at_formation is not None:
         axes[1].plot(result.friction, tvd, color="C3", label="at annulus temperature")

@@ -241,6 +241,13 @@ class CalibrationConfig(_Model):
         return self
 
 
+class DisplayConfig(_Model):
+    """``[display]``: the units Rerun views show (``units = "field"``: klbf, kft lbf, ft, ppg,
+    degF); recordings and published messages stay SI. ``--units`` and ``TDMON_UNITS`` win."""
+
+    units: Literal["si", "field"] = "si"
+
+
 class DaemonConfig(_Model):
     """The whole daemon file."""
 
@@ -256,6 +263,7 @@ class DaemonConfig(_Model):
     rig_state: RigStateConfig = Field(default_factory=RigStateConfig)
     monitor: MonitorConfig = Field(default_factory=MonitorConfig)
     calibration: CalibrationConfig = Field(default_factory=CalibrationConfig)
+    display: DisplayConfig = Field(default_factory=DisplayConfig)
     #: the file this was read from (set by load_daemon_config; paths are relative to it)
     source_file: Path | None = Field(default=None, exclude=True)
 

@@ -1,8 +1,10 @@
 """Post-well report of flight recordings: an HTML page with figures and a CSV of estimates.
 
-Figures follow the thesis's conventions: depth downwards on the vertical axis, loads in kN on
-the horizontal one, the broomstick band as one line per friction factor. The page is
-self-contained (PNG figures embedded as data URIs) and the PNGs are also written beside it.
+Figures follow the thesis's conventions: depth downwards on the vertical axis, loads on the
+horizontal one, the broomstick band as one line per friction factor. Figures and tables are in
+the display units of :mod:`tdmon.display` (SI: kN, kN m, m, degC; field: klbf, kft lbf, ft,
+degF); ``estimates.csv`` stays SI, the unit in its column names. The page is self-contained
+(PNG figures embedded as data URIs) and the PNGs are also written beside it.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from tdmon.display import UnitSystem, unit_system
 from tdmon.errors import RecordError
 from tdmon.record.reader import read_messages, topic_counts
 from tdmon.vocabulary import EstimateKind, RigState
@@ -33,6 +36,7 @@ _STATE_COLOURS: Final[dict[str, str]] = {
     RigState.CIRCULATING: "#17becf", RigState.STATIC: "#bcbd22", RigState.UNKNOWN: "#c7c7c7",
 }
 _CSV_FIELDS: Final = ("time_utc", "t", "kind", "operation", "mu", "mu_std", "bit_depth_m")
+_SI: Final = unit_system("si")
 
 
 @dataclass
@@ -137,7 +141,7 @@ def _state_at(states: Sequence[dict[str, Any]], times: np.ndarray) -> list[str]:
     return [names[i] if i >= 0 else "unknown" for i in index]
 
 
-def _depth_axis(axes: Any, title: str, xlabel: str, ylabel: str = "Bit depth [m MD]") -> None:
+def _depth_axis(axes: Any, title: str, xlabel: str, ylabel: str) -> None:
     axes.invert_yaxis()
     axes.set_ylabel(ylabel)
     axes.set_xlabel(xlabel)
@@ -145,13 +149,13 @@ def _depth_axis(axes: Any, title: str, xlabel: str, ylabel: str = "Bit depth [m 
     axes.grid(True, alpha=0.3)
 
 
-def hookload_figure(data: ReportData, path: Path) -> Path | None:
+def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
     """Measured hook load against bit depth over the broomstick band."""
     models = [m for m in data.models if math.isfinite(_num(m.get("bit_depth_m")))]
     if not models:
         return None
     models.sort(key=lambda m: _num(m["bit_depth_m"]))
-    depth = np.array([_num(m["bit_depth_m"]) for m in models])
+    depth = units.depth(np.array([_num(m["bit_depth_m"]) for m in models]))
     figure, axes = _figure()
     band_mu = models[-1].get("band", {}).get("mu", [])
     for i, mu in enumerate(band_mu):
@@ -161,40 +165,41 @@ def hookload_figure(data: ReportData, path: Path) -> Path | None:
                 for m in models
             ])
             label = f"mu = {mu:.2f}" if column == "pick_up_N" else None
-            axes.plot(load / 1e3, depth, style, color=f"C{i}", lw=0.9, label=label)
+            axes.plot(units.force(load), depth, style, color=f"C{i}", lw=0.9, label=label)
     rotating = np.array([_num(m["hookload_N"].get("rotating")) for m in models])
-    axes.plot(rotating / 1e3, depth, ":", color="k", lw=1.0, label="rotating (model)")
+    axes.plot(units.force(rotating), depth, ":", color="k", lw=1.0, label="rotating (model)")
     measured = np.array([_num(m["measured"].get("hookload_N")) for m in models])
     times = np.array([_num(m["t"]) for m in models])
     states = _state_at(data.states, times)
     for state in sorted(set(states)):
         mask = np.array([s == state for s in states])
-        axes.scatter(measured[mask] / 1e3, depth[mask], s=5, color=_STATE_COLOURS.get(
+        axes.scatter(units.force(measured[mask]), depth[mask], s=5, color=_STATE_COLOURS.get(
             state, "k"), label=f"measured, {state}", zorder=3)
     _depth_axis(axes, "Hook load against depth (broomstick: solid pick-up, dashed slack-off)",
-                "Hook load [kN]")
+                f"Hook load [{units.label('force')}]", f"Bit depth [{units.label('depth')} MD]")
     _legend(axes, fontsize=7, loc="best")
     return _save(figure, path)
 
 
-def torque_figure(data: ReportData, path: Path) -> Path | None:
+def torque_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
     """Measured surface torque against depth with the modelled rotating torque."""
     models = [m for m in data.models if math.isfinite(_num(m["measured"].get("torque_Nm")))]
     if not models:
         return None
     models.sort(key=lambda m: _num(m["bit_depth_m"]))
-    depth = np.array([_num(m["bit_depth_m"]) for m in models])
+    depth = units.depth(np.array([_num(m["bit_depth_m"]) for m in models]))
     figure, axes = _figure()
-    axes.plot(np.array([_num(m["torque_Nm"].get("rotating")) for m in models]) / 1e3, depth,
-              "-", color="k", lw=1.0, label="rotating (model)")
-    axes.scatter(np.array([_num(m["measured"]["torque_Nm"]) for m in models]) / 1e3, depth,
-                 s=5, color="C3", label="measured")
-    _depth_axis(axes, "Surface torque against depth", "Torque [kN m]")
+    axes.plot(units.torque(np.array([_num(m["torque_Nm"].get("rotating")) for m in models])),
+              depth, "-", color="k", lw=1.0, label="rotating (model)")
+    axes.scatter(units.torque(np.array([_num(m["measured"]["torque_Nm"]) for m in models])),
+                 depth, s=5, color="C3", label="measured")
+    _depth_axis(axes, "Surface torque against depth", f"Torque [{units.label('torque')}]",
+                f"Bit depth [{units.label('depth')} MD]")
     _legend(axes, fontsize=8)
     return _save(figure, path)
 
 
-def friction_figure(data: ReportData, path: Path) -> Path | None:
+def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
     """Window estimates of mu against bit depth, and the latest local friction profile."""
     windows = [e for e in data.estimates if e.get("kind") == EstimateKind.WINDOW
                and math.isfinite(_num(e.get("bit_depth_m")))]
@@ -207,7 +212,7 @@ def friction_figure(data: ReportData, path: Path) -> Path | None:
         return None
     figure, axes = _figure(6.0, 6.0)
     if profile is not None:
-        md = np.array(profile["md_m"], dtype=float)
+        md = units.depth(np.array(profile["md_m"], dtype=float))
         mu = np.array([_num(v) for v in profile["mu_profile"]])
         axes.plot(mu, md, color="k", lw=1.2, label="local friction profile")
         if profile.get("mu_profile_std"):
@@ -215,16 +220,17 @@ def friction_figure(data: ReportData, path: Path) -> Path | None:
             axes.fill_betweenx(md, mu - std, mu + std, color="k", alpha=0.15, label="± 1 std")
     for i, operation in enumerate(sorted({str(e["operation"]) for e in windows})):
         chosen = [e for e in windows if e["operation"] == operation]
-        axes.errorbar([_num(e["mu"]) for e in chosen], [_num(e["bit_depth_m"]) for e in chosen],
+        axes.errorbar([_num(e["mu"]) for e in chosen],
+                      units.depth(np.array([_num(e["bit_depth_m"]) for e in chosen])),
                       xerr=[_num(e.get("mu_std")) for e in chosen], fmt="o", ms=4,
                       color=f"C{i}", capsize=2, label=f"window, {operation}")
     _depth_axis(axes, "Friction factor against depth", "Friction factor mu [-]",
-                "Depth [m MD] (bit depth for windows)")
+                f"Depth [{units.label('depth')} MD] (bit depth for windows)")
     _legend(axes, fontsize=8)
     return _save(figure, path)
 
 
-def mu_t_figure(data: ReportData, path: Path) -> Path | None:
+def mu_t_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
     """The mu(T) fits: the fitted points and, where the estimate carries it, the curve."""
     fits = [e for e in data.estimates if e.get("kind") == EstimateKind.MU_T]
     if not fits:
@@ -235,20 +241,28 @@ def mu_t_figure(data: ReportData, path: Path) -> Path | None:
         label: str | None = f"{fit.get('model', 'mu(T)')} ({_utc(_num(fit['t']))})" + (
             f": {params}" if params else "")
         if fit.get("temperature_C") and fit.get("mu_points"):
-            axes.plot(fit["temperature_C"], fit["mu_points"], "o", color=f"C{i}", label=label)
+            axes.plot(_temperatures(fit["temperature_C"], units), fit["mu_points"], "o",
+                      color=f"C{i}", label=label)
             label = None
         if fit.get("fit_temperature_C") and fit.get("fit_mu"):
-            axes.plot(fit["fit_temperature_C"], fit["fit_mu"], "-", color=f"C{i}", label=label)
+            axes.plot(_temperatures(fit["fit_temperature_C"], units), fit["fit_mu"], "-",
+                      color=f"C{i}", label=label)
         elif fit.get("temperature_C") and (line := _linear(fit)) is not None:
+            # the law is in degC (its parameters say so): evaluate there, show in the units
             temperature = np.linspace(min(fit["temperature_C"]), max(fit["temperature_C"]), 50)
             intercept, slope = line
-            axes.plot(temperature, intercept + slope * temperature, "-", color=f"C{i}")
-    axes.set_xlabel("Temperature [degC]")
+            axes.plot(units.temperature(temperature), intercept + slope * temperature, "-",
+                      color=f"C{i}")
+    axes.set_xlabel(f"Temperature [{units.label('temperature')}]")
     axes.set_ylabel("Friction factor mu [-]")
     axes.set_title("Temperature dependence of friction, mu(T)")
     axes.grid(True, alpha=0.3)
     _legend(axes, fontsize=7)
     return _save(figure, path)
+
+
+def _temperatures(values: Sequence[Any], units: UnitSystem) -> np.ndarray:
+    return units.temperature(np.array([_num(v) for v in values]))
 
 
 def _linear(fit: dict[str, Any]) -> tuple[float, float] | None:
@@ -260,7 +274,7 @@ def _linear(fit: dict[str, Any]) -> tuple[float, float] | None:
     return None
 
 
-def state_figure(data: ReportData, path: Path) -> Path | None:
+def state_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
     """Rig-state timeline (coloured spans) with the bit depth."""
     if not data.states:
         return None
@@ -278,10 +292,10 @@ def state_figure(data: ReportData, path: Path) -> Path | None:
     lanes.set_yticks(range(len(names)), names, fontsize=7)
     lanes.set_title(f"Rig state from {_utc(t0)} UTC")
     lanes.grid(True, axis="x", alpha=0.3)
-    depth = np.array([_num(s.get("bit_depth_m")) for s in states])
+    depth = units.depth(np.array([_num(s.get("bit_depth_m")) for s in states]))
     depth_axes.plot(times / 3600, depth, color="k", lw=1.0)
     depth_axes.invert_yaxis()
-    depth_axes.set_ylabel("Bit depth [m]")
+    depth_axes.set_ylabel(f"Bit depth [{units.label('depth')}]")
     depth_axes.set_xlabel("Hours since start")
     depth_axes.grid(True, alpha=0.3)
     return _save(figure, path)
@@ -318,13 +332,49 @@ def _summary_rows(data: ReportData) -> list[tuple[str, str, str, str]]:
     return rows
 
 
+def _loads_rows(data: ReportData, units: UnitSystem) -> list[tuple[str, ...]]:
+    """Per rig state: model frames, bit-depth range, mean measured hook load and torque and the
+    mean residuals (measured - model), in the display units."""
+    models = [m for m in data.models if math.isfinite(_num(m.get("t")))]
+    if not models:
+        return []
+    states = _state_at(data.states, np.array([_num(m["t"]) for m in models]))
+
+    def column(rows: Sequence[dict[str, Any]], group: str, key: str) -> np.ndarray:
+        return np.array([_num((m.get(group) or {}).get(key)) for m in rows])
+
+    def mean(values: np.ndarray, digits: int) -> str:
+        finite = values[np.isfinite(values)]
+        return f"{finite.mean():.{digits}f}" if finite.size else "-"
+
+    rows: list[tuple[str, ...]] = []
+    for state in sorted(set(states)):
+        chosen = [m for m, s in zip(models, states, strict=True) if s == state]
+        depth = units.depth(np.array([_num(m.get("bit_depth_m")) for m in chosen]))
+        finite = depth[np.isfinite(depth)]
+        span = f"{finite.min():.1f} - {finite.max():.1f}" if finite.size else "-"
+        rows.append((
+            state, str(len(chosen)), span,
+            mean(units.force(column(chosen, "measured", "hookload_N")), 1),
+            mean(units.force(column(chosen, "residual", "hookload_N")), 1),
+            mean(units.torque(column(chosen, "measured", "torque_Nm")), 2),
+            mean(units.torque(column(chosen, "residual", "torque_Nm")), 2),
+        ))
+    return rows
+
+
 def write_report(
     paths: Sequence[str | os.PathLike[str]],
     out_dir: str | os.PathLike[str],
     *,
     title: str | None = None,
+    units: UnitSystem | None = None,
 ) -> ReportResult:
-    """Write ``report.html``, the PNG figures and ``estimates.csv`` into ``out_dir``."""
+    """Write ``report.html``, the PNG figures and ``estimates.csv`` into ``out_dir``.
+
+    ``units``: the display units of figures and tables (default SI: kN, kN m, m, degC).
+    """
+    units = units if units is not None else _SI
     if not paths:
         raise RecordError("no recording given for the report")
     data = load(paths)
@@ -343,12 +393,12 @@ def write_report(
     figures: list[tuple[str, Path]] = []
     try:
         for name, caption, maker in makers:
-            made = maker(data, out / name)
+            made = maker(data, out / name, units)
             if made is not None:
                 figures.append((caption, made))
         csv_path = out / "estimates.csv"
         windows = write_estimates_csv(data.estimates, csv_path)
-        page = _page(paths, data, figures, windows, title)
+        page = _page(paths, data, figures, windows, title, units)
         html_path = out / "report.html"
         html_path.write_text(page, encoding="utf-8")
     except OSError as exc:
@@ -362,6 +412,7 @@ def _page(
     figures: Sequence[tuple[str, Path]],
     windows: int,
     title: str | None,
+    units: UnitSystem,
 ) -> str:
     heading = html.escape(title or Path(paths[0]).name)
     times = [_num(m.get("t")) for m in data.models + data.states]
@@ -384,6 +435,12 @@ def _page(
         _table(("topic", "messages"), sorted(data.counts.items())),
         "<h2>Friction per operation (window estimates)</h2>",
         _table(("operation", "windows", "mean mu", "std mu"), _summary_rows(data)),
+        f"<h2>Loads per rig state (units: {units.name})</h2>",
+        _table(("rig state", "model frames", f"bit depth [{units.label('depth')}]",
+                f"measured hook load [{units.label('force')}]",
+                f"hook load residual [{units.label('force')}]",
+                f"measured torque [{units.label('torque')}]",
+                f"torque residual [{units.label('torque')}]"), _loads_rows(data, units)),
     ]
     for caption, path in figures:
         encoded = base64.b64encode(path.read_bytes()).decode()

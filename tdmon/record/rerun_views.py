@@ -6,20 +6,25 @@ gRPC bound to 127.0.0.1) and ``tdmon view X.mcap --rrd Z.rrd`` (fed from a fligh
 about half a second and most tdmon commands never need it.
 
 Timelines: ``time`` (timestamp, from each message's ``t``) for everything that evolves, and
-``bit_depth_cm`` (sequence, integer centimetres) for the "against bit depth" entities under
-``vs_depth/``. Those are logged on that timeline only so that each tab of the blueprint shows
-its own abscissa once the matching timeline is selected in the viewer's time panel.
+``bit_depth_cm`` (sequence, integer centimetres; ``bit_depth_in``, integer inches, in field
+units) for the "against bit depth" entities under ``vs_depth/``. Those are logged on that
+timeline only so that each tab of the blueprint shows its own abscissa once the matching
+timeline is selected in the viewer's time panel.
 
-Entities (loads in kN and kN m for reading; the messages stay SI):
+Entities, in the display units of :mod:`tdmon.display` (SI by default: kN, kN m, m, degC;
+field: klbf, kft lbf, ft, degF), the unit in the entity's name; the messages stay SI:
 
 * ``hookload_kN/{measured,model/*,band/*}``, ``torque_kNm/{measured,model/rotating}``,
-  ``residual/*``: scalars on ``time``; the same under ``vs_depth/`` on ``bit_depth_cm``.
+  ``residual/*``: scalars on ``time``; the same under ``vs_depth/`` on ``bit_depth_cm``
+  (field: ``hookload_klbf``, ``torque_kftlbf``, ``bit_depth_in``).
 * ``friction/<operation>``: window estimates of mu; ``friction_mu_T/<param>``.
-* ``rig_state``: state changes (state timeline view); ``bit_depth_m``.
-* ``profile/friction``, ``profile/temperature_C``: bar charts against MD [m].
-* ``well/trajectory`` (LineStrips3D, east/north/up in metres), ``well/friction`` (the same
-  path coloured by local friction), ``well/string`` and ``well/bit`` (string position).
-* ``alarms`` and ``rejected``: text logs; ``samples/<channel>``, ``status/*``: scalars.
+* ``rig_state``: state changes (state timeline view); ``bit_depth_m`` (``bit_depth_ft``).
+* ``profile/friction``, ``profile/temperature_C`` (``_F``): bar charts against MD.
+* ``well/trajectory`` (LineStrips3D, east/north/up in metres whatever the units: a picture),
+  ``well/friction`` (the same path coloured by local friction), ``well/string`` and
+  ``well/bit`` (string position).
+* ``alarms`` and ``rejected``: text logs; ``status/*``: scalars; ``samples/<channel>``: the
+  decoded samples, in SI (``--units si``) or in field units, the unit in the series name.
 """
 
 from __future__ import annotations
@@ -37,6 +42,8 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.channels import CHANNEL_UNITS
+from tdmon.display import UnitSystem, current
 from tdmon.errors import RecordError
 from tdmon.record.sink import Message
 from tdmon.vocabulary import EstimateKind, Operation, Severity
@@ -46,17 +53,14 @@ log = logging.getLogger(__name__)
 APPLICATION_ID: Final = "tdmon"
 TIME: Final = "time"
 BIT_DEPTH: Final = "bit_depth_cm"
+# The "against bit depth" timeline per unit system: its name and its steps per metre.
+_DEPTH_TIMELINES: Final[dict[str, tuple[str, float]]] = {"si": (BIT_DEPTH, 100.0),
+                                                         "field": ("bit_depth_in", 1 / 0.0254)}
 _SEVERITY_LEVEL: Final[dict[str, str]] = {Severity.INFO: "INFO", Severity.WARNING: "WARN",
                                           Severity.CRITICAL: "ERROR"}
 # Rebuild the string position only when the bit has moved this much [cm]: a trip logs one
 # message per second, and a new 3D polyline for every centimetre would dominate the file.
 _STRING_STEP_CM: Final = 100
-
-
-def _kilo(value: Any) -> float | None:
-    if isinstance(value, int | float) and math.isfinite(value):
-        return float(value) / 1e3
-    return None
 
 
 def _finite(value: Any) -> float | None:
@@ -114,6 +118,9 @@ class RerunViews:
     disable_analytics
         With a live viewer, run ``rerun analytics disable`` once (the viewer collects usage
         data by default; the SDK writing files does not).
+    units
+        Display units of the scalars, labels and entity names (default:
+        :func:`tdmon.display.current`, i.e. what the running command set, else SI).
     """
 
     def __init__(
@@ -125,12 +132,15 @@ class RerunViews:
         batch_rows: int = 5000,
         flush_interval_s: float = 0.5,
         disable_analytics: bool = True,
+        units: UnitSystem | None = None,
     ) -> None:
         if rrd_path is None and live_port is None:
             raise RecordError("Rerun views need an .rrd path, a live port, or both")
         import rerun as rr  # lazily: ~0.45 s
 
         self._rr = rr
+        self.units = units if units is not None else current()
+        self.names = _Names.of(self.units)
         self.rrd_path = Path(rrd_path) if rrd_path is not None else None
         self.live_port = live_port
         self.batch_rows = batch_rows
@@ -141,6 +151,7 @@ class RerunViews:
         self._pending_rows = 0
         self._last_send = time.monotonic()
         self._bit_depth_cm: int | None = None
+        self._depth_index: int | None = None  # on the "against bit depth" timeline
         self._string_cm: int | None = None
         self._well: dict[str, NDArray[np.float64]] | None = None
         self._last_state: str | None = None
@@ -168,7 +179,7 @@ class RerunViews:
                 server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=live_port)
                 self.grpc_uri = server.uri
                 sinks.append(server)
-            self._rec.set_sinks(*sinks, default_blueprint=blueprint())
+            self._rec.set_sinks(*sinks, default_blueprint=blueprint(self.units))
         except Exception as exc:  # the bindings raise plain RuntimeError/ValueError
             raise RecordError(f"cannot start the Rerun sinks: {exc}") from exc
 
@@ -228,8 +239,21 @@ class RerunViews:
     def _both(self, entity: str, t_ns: int, value: float | None) -> None:
         """One scalar against time and, when the bit depth is known, against bit depth."""
         self._scalar(entity, TIME, t_ns, value)
-        if self._bit_depth_cm is not None:
-            self._scalar(f"vs_depth/{entity}", BIT_DEPTH, self._bit_depth_cm, value)
+        if self._depth_index is not None:
+            self._scalar(f"vs_depth/{entity}", self.names.depth_timeline, self._depth_index,
+                         value)
+
+    def _set_bit_depth(self, bit_depth: float) -> None:
+        self._bit_depth_cm = round(bit_depth * 100)
+        self._depth_index = self.names.depth_index(bit_depth)
+
+    def _force(self, value: Any) -> float | None:
+        finite = _finite(value)
+        return None if finite is None else self.units.force(finite)
+
+    def _torque(self, value: Any) -> float | None:
+        finite = _finite(value)
+        return None if finite is None else self.units.torque(finite)
 
     def _send_series(self, entity: str, series: _Series) -> None:
         rr = self._rr
@@ -262,6 +286,8 @@ class RerunViews:
         self._styled.add(entity)
         rr = self._rr
         name = entity.rsplit("/", 1)[-1]
+        if entity.startswith("samples/"):
+            name = f"{name} [{self._sample_unit(name)[0]}]"
         if entity.startswith("vs_depth/") and entity.endswith("/measured"):
             # Measurements against depth are a scatter (pick-up and slack-off overlap).
             style: Any = rr.SeriesPoints(names=name, marker_sizes=1.5)
@@ -290,29 +316,30 @@ class RerunViews:
     def _on_model(self, t_ns: int, message: Message) -> None:
         bit_depth = _finite(message.get("bit_depth_m"))
         if bit_depth is not None:
-            self._bit_depth_cm = round(bit_depth * 100)
+            self._set_bit_depth(bit_depth)
+        hookload, torque = self.names.hookload, self.names.torque
         measured = message.get("measured") or {}
-        self._both("hookload_kN/measured", t_ns, _kilo(measured.get("hookload_N")))
-        self._both("torque_kNm/measured", t_ns, _kilo(measured.get("torque_Nm")))
+        self._both(f"{hookload}/measured", t_ns, self._force(measured.get("hookload_N")))
+        self._both(f"{torque}/measured", t_ns, self._torque(measured.get("torque_Nm")))
         for operation, value in (message.get("hookload_N") or {}).items():
-            self._both(f"hookload_kN/model/{operation}", t_ns, _kilo(value))
+            self._both(f"{hookload}/model/{operation}", t_ns, self._force(value))
         for operation, value in (message.get("torque_Nm") or {}).items():
-            self._both(f"torque_kNm/model/{operation}", t_ns, _kilo(value))
+            self._both(f"{torque}/model/{operation}", t_ns, self._torque(value))
         band = message.get("band") or {}
         for column, label in (("pick_up_N", Operation.PICK_UP),
                               ("slack_off_N", Operation.SLACK_OFF)):
             for mu, value in zip(band.get("mu", []), band.get(column, []), strict=False):
-                self._both(f"hookload_kN/band/{label}_{_mu_key(mu)}", t_ns, _kilo(value))
+                self._both(f"{hookload}/band/{label}_{_mu_key(mu)}", t_ns, self._force(value))
         residual = message.get("residual") or {}
-        self._scalar("residual/hookload_kN", TIME, t_ns, _kilo(residual.get("hookload_N")))
-        self._scalar("residual/torque_kNm", TIME, t_ns, _kilo(residual.get("torque_Nm")))
+        self._scalar(f"residual/{hookload}", TIME, t_ns, self._force(residual.get("hookload_N")))
+        self._scalar(f"residual/{torque}", TIME, t_ns, self._torque(residual.get("torque_Nm")))
         self._update_string(t_ns)
 
     def _on_state(self, t_ns: int, message: Message) -> None:
         bit_depth = _finite(message.get("bit_depth_m"))
         if bit_depth is not None:
-            self._bit_depth_cm = round(bit_depth * 100)
-            self._scalar("bit_depth_m", TIME, t_ns, bit_depth)
+            self._set_bit_depth(bit_depth)
+            self._scalar(self.names.bit_depth, TIME, t_ns, self.units.depth(bit_depth))
         state = str(message["state"])
         if state != self._last_state:
             self._last_state = state
@@ -326,9 +353,10 @@ class RerunViews:
             depth = _finite(message.get("bit_depth_m"))
             mu = _finite(message.get("mu"))
             self._scalar(f"friction/{operation}", TIME, t_ns, mu)
-            cm = round(depth * 100) if depth is not None else self._bit_depth_cm
-            if cm is not None:
-                self._scalar(f"vs_depth/friction/{operation}", BIT_DEPTH, cm, mu)
+            index = self.names.depth_index(depth) if depth is not None else self._depth_index
+            if index is not None:
+                self._scalar(f"vs_depth/friction/{operation}", self.names.depth_timeline, index,
+                             mu)
         elif kind == EstimateKind.PROFILE and "md_m" in message and "mu_profile" in message:
             self._friction_profile(t_ns, message["md_m"], message["mu_profile"])
         elif kind == EstimateKind.MU_T:
@@ -338,9 +366,9 @@ class RerunViews:
     def _on_profile(self, t_ns: int, message: Message) -> None:
         md = message["md_m"]
         if "temperature_C" in message:
-            self._log_at(t_ns, "profile/temperature_C", self._rr.BarChart(
-                np.asarray(message["temperature_C"], np.float64),
-                abscissa=np.asarray(md, np.float64)))
+            self._log_at(t_ns, self.names.temperature_profile, self._rr.BarChart(
+                self.units.temperature(np.asarray(message["temperature_C"], np.float64)),
+                abscissa=self.units.depth(np.asarray(md, np.float64))))
         if "mu" in message:
             self._friction_profile(t_ns, md, message["mu"])
 
@@ -348,7 +376,7 @@ class RerunViews:
         md_array = np.asarray(md, np.float64)
         mu_array = np.asarray([np.nan if v is None else v for v in mu], np.float64)
         self._log_at(t_ns, "profile/friction", self._rr.BarChart(
-            np.nan_to_num(mu_array), abscissa=md_array))
+            np.nan_to_num(mu_array), abscissa=self.units.depth(md_array)))
         if self._well is None or len(md_array) < 2:
             return
         points = self._positions(md_array)
@@ -378,7 +406,21 @@ class RerunViews:
             f"{message['topic']}: {message['reason']}", level="WARN"))
 
     def _on_sample(self, t_ns: int, message: Message) -> None:
-        self._scalar(f"samples/{message['channel']}", TIME, t_ns, _finite(message["value"]))
+        channel = str(message["channel"])
+        value = _finite(message["value"])
+        if value is not None:
+            value = self._sample_unit(channel)[1](value)
+        self._scalar(f"samples/{channel}", TIME, t_ns, value)
+
+    def _sample_unit(self, channel: str) -> tuple[str, Any]:
+        """(label, conversion) of a channel's samples: SI as decoded with ``si``, else the
+        display unit of its kind of quantity."""
+        internal, label = CHANNEL_UNITS.get(channel, ("", "SI"))
+        quantity = self.units.quantity_of(internal)
+        if self.units.name == "si" or quantity is None:
+            return label, _same
+        unit = self.units.unit(quantity)
+        return unit.label, unit
 
     def _on_status(self, t_ns: int, message: Message) -> None:
         for key in ("samples_in", "rejected", "dropped", "lag_s"):
@@ -407,7 +449,37 @@ class RerunViews:
         self._log_at(t_ns, "well/string", self._rr.LineStrips3D(
             [points], colors=[[255, 200, 0]], radii=4.0))
         self._log_at(t_ns, "well/bit", self._rr.Points3D(
-            points[-1:], colors=[[255, 80, 0]], radii=15.0, labels=[f"bit {bit_md:.1f} m"]))
+            points[-1:], colors=[[255, 80, 0]], radii=15.0,
+            labels=[f"bit {self.units.depth(bit_md):.1f} {self.units.label('depth')}"]))
+
+
+def _same(value: float) -> float:
+    return value
+
+
+@dataclass(frozen=True)
+class _Names:
+    """Entity and timeline names carrying the display unit (``hookload_kN``/``_klbf``)."""
+
+    hookload: str
+    torque: str
+    bit_depth: str
+    temperature_profile: str
+    depth_timeline: str
+    depth_steps_per_m: float
+
+    @classmethod
+    def of(cls, units: UnitSystem) -> _Names:
+        timeline, steps = _DEPTH_TIMELINES[units.name]
+        return cls(hookload=f"hookload_{units.key('force')}",
+                   torque=f"torque_{units.key('torque')}",
+                   bit_depth=f"bit_depth_{units.key('depth')}",
+                   temperature_profile=f"profile/temperature_{units.key('temperature')}",
+                   depth_timeline=timeline, depth_steps_per_m=steps)
+
+    def depth_index(self, bit_depth_m: float) -> int:
+        """The bit depth [m] as a step of the "against bit depth" timeline."""
+        return round(bit_depth_m * self.depth_steps_per_m)
 
 
 def _time_ns(message: Message, log_time_ns: int) -> int:
@@ -430,18 +502,22 @@ _HANDLERS: Final = {
 }
 
 
-def blueprint() -> Any:
+def blueprint(units: UnitSystem | None = None) -> Any:
     """The default layout: tabs against time, against bit depth, the well, and the inputs."""
     import rerun.blueprint as rrb
 
+    units = units if units is not None else current()
+    names = _Names.of(units)
+    force, torque = units.label("force"), units.label("torque")
+    depth, degrees = units.label("depth"), units.label("temperature")
     against_time = rrb.Vertical(
         rrb.Horizontal(
-            rrb.TimeSeriesView(origin="/hookload_kN", name="Hook load [kN]"),
-            rrb.TimeSeriesView(origin="/torque_kNm", name="Torque [kN m]"),
+            rrb.TimeSeriesView(origin=f"/{names.hookload}", name=f"Hook load [{force}]"),
+            rrb.TimeSeriesView(origin=f"/{names.torque}", name=f"Torque [{torque}]"),
         ),
         rrb.Horizontal(
             rrb.TimeSeriesView(origin="/friction", name="Friction factor per operation"),
-            rrb.TimeSeriesView(origin="/residual", name="Residuals"),
+            rrb.TimeSeriesView(origin="/residual", name=f"Residuals [{force}, {torque}]"),
         ),
         rrb.StateTimelineView(origin="/rig_state", name="Rig state"),
         rrb.TextLogView(origin="/alarms", name="Alarms"),
@@ -449,24 +525,28 @@ def blueprint() -> Any:
         row_shares=[3, 2, 1, 1],
     )
     against_depth = rrb.Vertical(
-        rrb.TimeSeriesView(origin="/vs_depth/hookload_kN", name="Hook load vs bit depth [kN]"),
+        rrb.TimeSeriesView(origin=f"/vs_depth/{names.hookload}",
+                           name=f"Hook load vs bit depth [{force}]"),
         rrb.Horizontal(
-            rrb.TimeSeriesView(origin="/vs_depth/torque_kNm", name="Torque vs bit depth"),
+            rrb.TimeSeriesView(origin=f"/vs_depth/{names.torque}",
+                               name=f"Torque vs bit depth [{torque}]"),
             rrb.TimeSeriesView(origin="/vs_depth/friction", name="Friction vs bit depth"),
         ),
-        name="Against bit depth (select timeline bit_depth_cm)",
+        name=f"Against bit depth (select timeline {names.depth_timeline})",
     )
     well = rrb.Horizontal(
         rrb.Spatial3DView(origin="/well", name="Trajectory, string, local friction"),
         rrb.Vertical(
-            rrb.BarChartView(origin="/profile/friction", name="Local friction vs MD [m]"),
-            rrb.BarChartView(origin="/profile/temperature_C", name="Temperature [degC] vs MD"),
+            rrb.BarChartView(origin="/profile/friction", name=f"Local friction vs MD [{depth}]"),
+            rrb.BarChartView(origin=f"/{names.temperature_profile}",
+                             name=f"Temperature [{degrees}] vs MD [{depth}]"),
         ),
         name="Well",
         column_shares=[3, 2],
     )
+    samples = "SI" if units.name == "si" else "field units"
     inputs = rrb.Vertical(
-        rrb.TimeSeriesView(origin="/samples", name="Decoded samples (SI)"),
+        rrb.TimeSeriesView(origin="/samples", name=f"Decoded samples ({samples})"),
         rrb.TimeSeriesView(origin="/status", name="Daemon status"),
         rrb.TextLogView(origin="/rejected", name="Rejected input"),
         name="Inputs",
@@ -483,9 +563,10 @@ def build_rrd(
     rrd_path: str | Path,
     *,
     recording_id: str | None = None,
+    units: UnitSystem | None = None,
 ) -> ViewStats:
     """Write the views of a message stream (e.g. ``reader.read_messages(path)``) to ``.rrd``."""
-    with RerunViews(rrd_path, recording_id=recording_id) as views:
+    with RerunViews(rrd_path, recording_id=recording_id, units=units) as views:
         for topic, log_time_ns, message in messages:
             views.write(topic, log_time_ns, message)
     return views.stats

@@ -1,0 +1,75 @@
+"""Argument types and options shared by the commands: quantities with units, ``--units``.
+
+Kept free of pint and numpy at import time: ``tdmon --help`` builds every parser.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from tdmon.display import UnitSystem
+
+UNIT_SYSTEMS = ("si", "field")
+_NUMBER_FIRST = re.compile(r"\s*[-+]?\.?\d")  # tdmon.display.SYSTEMS, without importing it here
+
+
+def quantity_arg(target: str, example: str, *, positive: bool = False) -> Callable[[str], float]:
+    """An argparse ``type`` reading a number in ``target`` or a number with a unit.
+
+    Parameters
+    ----------
+    target : the internal unit the value is returned in (a pint expression, e.g. ``"m"``)
+    example : a valid value with a unit, quoted in the error message (e.g. ``"6500 ft"``)
+    positive : refuse zero and negative values
+
+    Returns
+    -------
+    A function ``text -> float [target]``: ``quantity_arg("m", "6500 ft")("6500 ft")``
+    is 1981.2. A bad value raises :class:`argparse.ArgumentTypeError`; argparse then names the
+    flag and exits with code 2.
+    """
+
+    shown = target.replace("**", "^").replace("*", " ")
+
+    def parse(text: str) -> float:
+        from tdmon.units import parse_quantity
+
+        hint = f"give a number [{shown}] or a number with a unit, e.g. '{example}'"
+        try:
+            value = float(text)
+        except ValueError:
+            if not _NUMBER_FIRST.match(text):
+                raise argparse.ArgumentTypeError(f"'{text}': {hint}") from None
+            try:
+                value = parse_quantity(text, target)
+            except ValueError as exc:
+                raise argparse.ArgumentTypeError(f"{exc}; {hint}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"'{text}' is not finite; e.g. '{example}'")
+        if positive and not value > 0:
+            raise argparse.ArgumentTypeError(f"'{text}' must be positive, e.g. '{example}'")
+        return value
+
+    parse.__name__ = f"quantity [{target}]"  # argparse names the type in some messages
+    return parse
+
+
+def add_units_option(parser: argparse.ArgumentParser, what: str = "tables") -> None:
+    """``--units si|field``: the units ``what`` is shown in (default: ``TDMON_UNITS``, else the
+    daemon file's ``[display] units`` where the command reads one, else si)."""
+    parser.add_argument(
+        "--units", choices=UNIT_SYSTEMS, default=None,
+        help=f"units of {what}: 'si' (kN, kN m, m, degC) or 'field' (klbf, kft lbf, ft, ppg, "
+             "degF, psi, gpm); default: $TDMON_UNITS, else si. JSON and CSV stay SI")
+
+
+def display_units(args: argparse.Namespace, config: str | None = None) -> UnitSystem:
+    """The unit system the command shows (``--units``, ``TDMON_UNITS``, ``config``, si)."""
+    from tdmon.display import resolve
+
+    return resolve(getattr(args, "units", None), config)
