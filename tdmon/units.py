@@ -18,6 +18,7 @@ import pint
 ureg: pint.UnitRegistry = pint.UnitRegistry()
 ureg.define("ppg = pound / gallon")
 ureg.define("sg = 1000 * kilogram / meter ** 3")
+ureg.define("gpm = gallon / minute")
 
 _ABSOLUTE_TEMPERATURES = {"degC", "degF", "degR", "K", "kelvin", "celsius", "fahrenheit",
                           "degree_Celsius", "degree_Fahrenheit"}
