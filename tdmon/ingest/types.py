@@ -96,11 +96,17 @@ def bounded_payload(payload: bytes, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> 
 def raw_message(raw: RawMessage, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
     """The ``raw`` daemon message (docs/architecture.md); payload bounded as in
     :func:`bounded_payload`."""
+    if len(raw.payload) > max_bytes:
+        return {"source": raw.source, "topic": raw.topic, "receive_time": raw.receive_time,
+                **bounded_payload(raw.payload, max_bytes)}
+    # the usual case, once per input message: no intermediate dict
+    text, encoding = payload_text(raw.payload)
     return {
         "source": raw.source,
         "topic": raw.topic,
         "receive_time": raw.receive_time,
-        **bounded_payload(raw.payload, max_bytes),
+        "payload": text,
+        "payload_encoding": encoding,
     }
 
 
