@@ -270,8 +270,7 @@ def recover_folder(folder: str | os.PathLike[str]) -> list[RecoveryResult]:
 
     Finished files and files held by a running recorder are left alone and not reported. A file
     that is not MCAP at all is skipped (it is not ours to rewrite). Called by the recorder on
-    start-up; the daemon may also call it directly and turn the results into ``alarm``/log
-    messages.
+    start-up, which logs each result and raises its :func:`recovery_alarm`.
     """
     results: list[RecoveryResult] = []
     directory = Path(folder)
