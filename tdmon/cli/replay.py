@@ -174,9 +174,11 @@ def _replay(args: argparse.Namespace) -> int:
     from tdmon.config.daemon import load_daemon_config
     from tdmon.config.expectations import load_expectations
     from tdmon.display import using
-    from tdmon.replay.driver import raw_message_count, replay
+    from tdmon.replay.driver import check_replay_file, raw_message_count, replay
     from tdmon.replay.expectations import check_replay, find_expectations
 
+    # the replay first: a CSV or a killed recording is named as such, before any config is read
+    check_replay_file(args.replay)
     speed = _speed(args.speed)
     expectations = None
     if args.check is not None:

@@ -28,6 +28,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
+    RECORDED_PAYLOAD_BYTES,
     RawMessage,
     Rejected,
     Sample,
@@ -129,6 +130,10 @@ class Pipeline:
         self._monotonic = monotonic
         self._closed = False
         self._routes: dict[str, list[Sink]] = {}
+        # Payloads the decoder may accept are recorded whole (so they replay); longer ones,
+        # which it rejects, as a bounded prefix with their size and hash.
+        self._recorded_payload_bytes = max(RECORDED_PAYLOAD_BYTES,
+                                           getattr(decoder, "max_payload_bytes", 0))
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
@@ -151,7 +156,7 @@ class Pipeline:
         stats.messages_in += 1
         log_ns = int(raw.receive_time * 1e9)
         if self._sinks_for("/tdmon/raw"):
-            self._write("/tdmon/raw", log_ns, raw_message(raw))
+            self._write("/tdmon/raw", log_ns, raw_message(raw, self._recorded_payload_bytes))
         decoded = self.decoder.decode(raw)
         if isinstance(decoded, Rejected):
             stats.rejected += 1
@@ -159,7 +164,8 @@ class Pipeline:
             key = decoded.reason.split(":")[0].split("(")[0].strip()[:60]
             if key in stats.rejected_reasons or len(stats.rejected_reasons) < 64:
                 stats.rejected_reasons[key] = stats.rejected_reasons.get(key, 0) + 1
-            self._write("/tdmon/rejected", log_ns, rejected_message(decoded))
+            self._write("/tdmon/rejected", log_ns,
+                        rejected_message(decoded, self._recorded_payload_bytes))
             return decoded
         stats.samples_in += 1
         stats.last_sample_t = decoded.t

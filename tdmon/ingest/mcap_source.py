@@ -4,7 +4,9 @@ A flight recording made by the daemon holds every raw input on ``/tdmon/raw`` (J
 original topic, payload and receive time); a file made elsewhere may instead hold the rig's
 payloads directly on topics such as ``rig/F4/hookload``. Both replay as RawMessages, paced at
 real time x ``speed`` (by log time) or as fast as the pipeline takes them (``speed=None``).
-Footer-less files (a writer that was killed) are read up to their last flushed chunk.
+Footer-less files (a writer that was killed) are read up to their last flushed chunk. A
+recorded payload kept only in part (``payload_truncated``: an oversized payload, see
+docs/recording.md) cannot be replayed and is skipped, with one log line per file.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import asyncio
 import base64
 import binascii
 import json
+import logging
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,12 +31,23 @@ from tdmon.ingest.types import RawMessage
 
 RAW_TOPIC = "/tdmon/raw"
 
+log = logging.getLogger(__name__)
+
+
+class _Truncated(Exception):
+    """A recorded payload kept only in part: nothing to replay."""
+
 
 def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMessage | None:
-    """Turn one MCAP message into the RawMessage it stands for (None: not an input message)."""
+    """Turn one MCAP message into the RawMessage it stands for (None: not an input message).
+
+    A ``/tdmon/raw`` record whose payload was kept only in part raises ``_Truncated``.
+    """
     if channel_topic == RAW_TOPIC:
         try:
             record = json.loads(data)
+            if isinstance(record, dict) and record.get("payload_truncated"):
+                raise _Truncated
             text = record["payload"]
             if record.get("payload_encoding") == "base64":
                 payload = base64.b64decode(text, validate=True)
@@ -56,6 +70,7 @@ def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
     """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those."""
     channels: dict[int, str] = {}
     has_raw = False
+    truncated = 0
     try:
         for record in StreamReader(stream, skip_magic=False).records:
             if isinstance(record, Channel):
@@ -67,13 +82,21 @@ def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
                     continue
                 if has_raw and topic != RAW_TOPIC:
                     continue
-                raw = raw_from_record(topic, record.data, record.log_time)
+                try:
+                    raw = raw_from_record(topic, record.data, record.log_time)
+                except _Truncated:
+                    truncated += 1
+                    continue
                 if raw is not None:
                     yield record.log_time, raw
     except (McapError, EOFError, ValueError) as exc:
         # a truncated file ends in the middle of a record: what came before is good
         if "magic" in str(exc).lower() and not channels:
             raise IngestError(f"not an MCAP file: {exc}") from exc
+    finally:
+        if truncated:
+            log.warning("skipped %d recorded payloads kept only in part (oversized when "
+                        "received; rejected then, not replayable)", truncated)
 
 
 class McapSource:

@@ -3,8 +3,16 @@
 from __future__ import annotations
 
 import base64
+import hashlib
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final
+
+#: Longest payload kept whole in the ``raw`` and ``rejected`` messages [bytes]. A longer one (an
+#: oversized payload the decoder rejects) is recorded as its first bytes, its size and its
+#: SHA-256, so that a flood of 10 MB payloads cannot fill the recording's disk
+#: (docs/recording.md). The daemon raises it to its ``max_payload_bytes`` when that is larger,
+#: so that every payload the decoder may accept is recorded, and replays, whole.
+RECORDED_PAYLOAD_BYTES: Final = 4096
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,8 +61,45 @@ def payload_text(payload: bytes) -> tuple[str, str]:
         return base64.b64encode(payload).decode("ascii"), "base64"
 
 
-def raw_message(raw: RawMessage) -> dict[str, Any]:
-    """The ``raw`` daemon message (docs/architecture.md)."""
+def bounded_payload(payload: bytes, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
+    """The payload fields of a ``raw``/``rejected`` message, at most ``max_bytes`` of payload.
+
+    A payload of at most ``max_bytes`` [bytes] gives ``payload`` and ``payload_encoding`` as
+    :func:`payload_text` does. A longer one gives its first ``max_bytes`` (fewer when the cut
+    would split a UTF-8 character of a text payload) and ``payload_bytes`` (its whole size
+    [bytes]), ``payload_sha256`` (hex digest of the whole payload) and ``payload_truncated``
+    (``True``).
+    """
+    if len(payload) <= max_bytes:
+        text, encoding = payload_text(payload)
+        return {"payload": text, "payload_encoding": encoding}
+    prefix = payload[:max_bytes]
+    # A cut inside a multi-byte character would turn a text payload into base64: step back
+    # over at most three continuation bytes to keep it readable.
+    for cut in range(len(prefix), max(len(prefix) - 4, 0), -1):
+        try:
+            text, encoding = prefix[:cut].decode("utf-8"), "utf-8"
+            break
+        except UnicodeDecodeError:
+            continue
+    else:
+        text, encoding = base64.b64encode(prefix).decode("ascii"), "base64"
+    return {
+        "payload": text,
+        "payload_encoding": encoding,
+        "payload_bytes": len(payload),
+        "payload_sha256": hashlib.sha256(payload).hexdigest(),
+        "payload_truncated": True,
+    }
+
+
+def raw_message(raw: RawMessage, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
+    """The ``raw`` daemon message (docs/architecture.md); payload bounded as in
+    :func:`bounded_payload`."""
+    if len(raw.payload) > max_bytes:
+        return {"source": raw.source, "topic": raw.topic, "receive_time": raw.receive_time,
+                **bounded_payload(raw.payload, max_bytes)}
+    # the usual case, once per input message: no intermediate dict
     text, encoding = payload_text(raw.payload)
     return {
         "source": raw.source,
@@ -77,14 +122,13 @@ def sample_message(sample: Sample) -> dict[str, Any]:
     }
 
 
-def rejected_message(rejected: Rejected) -> dict[str, Any]:
-    """The ``rejected`` daemon message."""
-    text, encoding = payload_text(rejected.raw)
+def rejected_message(rejected: Rejected,
+                     max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
+    """The ``rejected`` daemon message; payload bounded as in :func:`bounded_payload`."""
     return {
         "reason": rejected.reason,
         "source": rejected.source,
         "topic": rejected.topic,
         "receive_time": rejected.receive_time,
-        "payload": text,
-        "payload_encoding": encoding,
+        **bounded_payload(rejected.raw, max_bytes),
     }

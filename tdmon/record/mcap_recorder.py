@@ -145,6 +145,7 @@ class _McapFile:
         self.path = path
         # "x": never overwrite a file another run left behind (it may need recovery).
         self._raw = open(path, "xb", buffering=0)  # noqa: SIM115 - closed in finish/abandon
+        header_on_disk = False
         try:
             # An exclusive lock tells a recovery scan in another process that this file is live.
             fcntl.flock(self._raw.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -162,8 +163,15 @@ class _McapFile:
             for topic, schema in topics.items():
                 self.add_topic(topic, schema)
             self.flush()
+            header_on_disk = True
         except BaseException:
             self.abandon()
+            if not header_on_disk:
+                # We created this file and never got a valid header into it (a full disk at a
+                # retry): it holds nothing, and a retry every few seconds must not leave a trail
+                # of empty files behind.
+                with contextlib.suppress(OSError):
+                    path.unlink()
             raise
 
     def add_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
@@ -257,17 +265,19 @@ class McapRecorder:
         Topics beyond ``schemas.TOPIC_SCHEMAS`` (e.g. ``/truth/...``), with their JSON Schema.
     on_alarm
         Called with an ``alarm`` message (``kind`` ``recorder_failed`` / ``recorder_resumed``)
-        when recording fails or resumes. Always called from ``write``/``flush``/``retry``/
-        ``close``, i.e. on the caller's thread (a failure the background flusher finds is
-        reported on the next call), and without the recorder's lock held, so it may write
-        the alarm back into the recorder.
+        when recording fails or resumes, and ``recording_recovered`` for each unfinished file
+        of an earlier run rewritten at start-up (``recover``). Always called from
+        ``write``/``flush``/``retry``/``close``, i.e. on the caller's thread (a failure the
+        background flusher finds is reported on the next call), and without the recorder's
+        lock held, so it may write the alarm back into the recorder.
     retry_s
         After a failure, try a new file at most this often [s].
     min_free_bytes
         Refuse to start when the folder's file system has less free space than this.
     recover
         Before opening the first file, rewrite footer-less files of earlier runs in ``folder``
-        (:func:`tdmon.record.recover.recover_folder`); results in ``self.recovered``.
+        (:func:`tdmon.record.recover.recover_folder`); results in ``self.recovered``, each
+        logged and alarmed (:func:`tdmon.record.recover.recovery_alarm`).
     background_flush
         Flush from a daemon thread so that data is flushed even when no message arrives.
     path
@@ -331,9 +341,15 @@ class McapRecorder:
         self._prepare_folder(min_free_bytes)
         self.recovered: list[RecoveryResult] = []
         if recover and self._fixed_path is None:
-            from tdmon.record.recover import recover_folder
+            from tdmon.record.recover import recover_folder, recovery_alarm
 
             self.recovered = recover_folder(self.folder)
+            for result in self.recovered:
+                # Reported through on_alarm at the first write/flush (the daemon's first status
+                # at the latest), when the pipeline that records and publishes alarms exists.
+                alarm = recovery_alarm(result, flush_interval_s)
+                log.warning("%s", alarm["message"])
+                self._pending_alarms.append(alarm)
         self._next_seq = 0 if self._fixed_path else next_sequence(self.folder, prefix)
         try:
             if self._fixed_path is not None and overwrite:

@@ -5,23 +5,29 @@ every chunk written before the last ``flush()`` is complete. :func:`recover_file
 records in file order and rewrites them into a valid file (same schemas, channels, messages and
 metadata, plus a ``tdmon_recovery`` metadata record saying what happened), then replaces the
 original atomically. :func:`recover_folder` does this for every unfinished file of a folder and
-is what the daemon (through :class:`~tdmon.record.mcap_recorder.McapRecorder`) runs on start-up.
+is what the daemon (through :class:`~tdmon.record.mcap_recorder.McapRecorder`) runs on start-up;
+the recorder logs each file it recovered and raises a ``recording_recovered`` alarm
+(:func:`recovery_alarm`) whose value is the estimated number of seconds lost
+(:func:`seconds_lost`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import fcntl
+import math
 import os
+import time
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Literal
+from typing import IO, Any, Literal
 
 from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from tdmon.errors import RecordError
+from tdmon.messages import alarm_message
 from tdmon.record.reader import (
     MAGIC,
     TolerantScan,
@@ -29,6 +35,7 @@ from tdmon.record.reader import (
     has_footer,
     open_recording,
 )
+from tdmon.vocabulary import AlarmKind, Severity
 
 RecoveryStatus = Literal["complete", "recovered", "in_use"]
 
@@ -53,6 +60,8 @@ class RecoveryResult:
     """Size of the original file [bytes]."""
     stop_reason: str = ""
     """Why reading stopped before the end (the damaged tail), empty if it did not."""
+    flush_interval_s: float | None = None
+    """The writer's flush interval [s], from the file's ``tdmon`` metadata (None: not known)."""
 
 
 def _locked_by_writer(stream: IO[bytes]) -> bool:
@@ -105,6 +114,9 @@ def _rewrite(stream: IO[bytes], target: Path, result: RecoveryResult) -> None:
                     _count(result, topics[record.channel_id], record.log_time)
                 elif isinstance(record, Metadata):
                     writer.add_metadata(record.name, dict(record.metadata))
+                    if record.name == "tdmon":
+                        result.flush_interval_s = _positive(
+                            record.metadata.get("flush_interval_s"))
             if not started:
                 writer.start()
             result.stop_reason = "" if scan.complete else scan.stop_reason
@@ -122,6 +134,55 @@ def _rewrite(stream: IO[bytes], target: Path, result: RecoveryResult) -> None:
             writer.finish()
         out.flush()
         os.fsync(out.fileno())
+
+
+def _positive(text: str | None) -> float | None:
+    try:
+        value = float(text) if text is not None else math.nan
+    except ValueError:
+        return None
+    return value if math.isfinite(value) and value > 0 else None
+
+
+def seconds_lost(result: RecoveryResult, flush_interval_s: float,
+                 now: float | None = None) -> float:
+    """Estimated seconds of messages a crashed recorder lost [s] (an upper bound).
+
+    A recorder flushes at least every flush interval, so what a kill loses is what it held in
+    memory: at most one interval (the file's own ``flush_interval_s`` metadata, else
+    ``flush_interval_s``). When the last intact message's log time is known and closer to
+    ``now`` (the restart, [Unix s]) than that, the crash cannot have been later than ``now``, so
+    the smaller of the two is taken. Log times of a recording that replays old data are not
+    wall-clock times; they then only ever lower the bound when they lie in the past.
+    """
+    window = result.flush_interval_s or flush_interval_s
+    if result.last_log_time_ns is not None:
+        since_last = (time.time() if now is None else now) - result.last_log_time_ns / 1e9
+        if since_last >= 0:
+            window = min(window, since_last)
+    return round(window, 3)
+
+
+def recovery_alarm(result: RecoveryResult, flush_interval_s: float,
+                   now: float | None = None) -> dict[str, Any]:
+    """The ``recording_recovered`` alarm (severity warning) for a file recovered at start-up.
+
+    ``value`` is :func:`seconds_lost`; the message names the file, the messages kept, the last
+    intact message's time and where reading stopped.
+    """
+    now = time.time() if now is None else now
+    lost = seconds_lost(result, flush_interval_s, now)
+    if result.last_log_time_ns is None:
+        last = "no message was intact"
+    else:
+        stamp = datetime.fromtimestamp(result.last_log_time_ns / 1e9, UTC)
+        last = f"last intact message at {stamp.isoformat(timespec='milliseconds')}"
+    where = f"; reading stopped at: {result.stop_reason}" if result.stop_reason else ""
+    return alarm_message(
+        now, AlarmKind.RECORDING_RECOVERED, Severity.WARNING,
+        f"recovered the unfinished recording {result.path} ({result.messages} messages kept, "
+        f"{last}; up to {lost:g} s lost{where})",
+        value=lost)
 
 
 def _count(result: RecoveryResult, topic: str, log_time_ns: int) -> None:
@@ -209,8 +270,7 @@ def recover_folder(folder: str | os.PathLike[str]) -> list[RecoveryResult]:
 
     Finished files and files held by a running recorder are left alone and not reported. A file
     that is not MCAP at all is skipped (it is not ours to rewrite). Called by the recorder on
-    start-up; the daemon may also call it directly and turn the results into ``alarm``/log
-    messages.
+    start-up, which logs each result and raises its :func:`recovery_alarm`.
     """
     results: list[RecoveryResult] = []
     directory = Path(folder)

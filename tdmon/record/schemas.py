@@ -47,6 +47,17 @@ _NUMBERS: Final[JsonSchema] = {"type": "array", "items": {"type": "number"}}
 _OPTIONAL_NUMBERS: Final[JsonSchema] = {"type": "array", "items": {"type": ["number", "null"]}}
 
 
+# Optional fields of a payload recorded only in part (tdmon.ingest.types.bounded_payload): a
+# payload longer than the recording's bound keeps its first bytes, its size and its hash.
+_BOUNDED_PAYLOAD: Final[JsonSchema] = {
+    "payload_bytes": {**_COUNT, "description": "size of the whole payload [bytes]"},
+    "payload_sha256": {"type": "string", "pattern": "^[0-9a-f]{64}$",
+                       "description": "SHA-256 of the whole payload (hex)"},
+    "payload_truncated": {"const": True,
+                          "description": "payload holds only the first bytes"},
+}
+
+
 def _object(
     name: str,
     title: str,
@@ -79,6 +90,7 @@ RAW: Final = _object(
         "receive_time": _TIME,
         "payload": _TEXT,
         "payload_encoding": {"enum": list(PAYLOAD_ENCODINGS)},
+        **_BOUNDED_PAYLOAD,
     },
     ("source", "topic", "receive_time", "payload", "payload_encoding"),
 )
@@ -107,6 +119,7 @@ REJECTED: Final = _object(
         "receive_time": _TIME,
         "payload": _TEXT,
         "payload_encoding": {"enum": list(PAYLOAD_ENCODINGS)},
+        **_BOUNDED_PAYLOAD,
     },
     ("reason", "source", "topic", "receive_time", "payload", "payload_encoding"),
 )

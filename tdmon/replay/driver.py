@@ -45,8 +45,9 @@ from tdmon.errors import IngestError, RecordError
 from tdmon.record.sink import Recorder
 from tdmon.vocabulary import EstimateKind
 
-__all__ = ["FULL_SPEED_GC_YOUNG", "ReplayResult", "SummarySink", "raw_message_count", "replay",
-           "replay_config", "summarize_recording"]
+__all__ = ["FULL_SPEED_GC_YOUNG", "ReplayResult", "SummarySink", "check_replay_file",
+           "describe_start", "raw_message_count", "replay", "replay_config",
+           "summarize_recording"]
 
 #: Housekeeping period used at full speed [s]: long enough never to fire during a replay.
 _NO_TICKS = 10 * 365 * 86400.0
@@ -181,6 +182,61 @@ class _ProgressSink:
             self.count -= rest  # closed twice (daemon, then driver): counted once
 
 
+def describe_start(head: bytes) -> str:
+    """What the first bytes of a file that is not MCAP look like, for the error line: the text
+    (up to 24 characters, ``'time,hookload,...'``) when they are text, else their hex."""
+    sample = head[:24]
+    try:
+        text = sample.decode("utf-8")
+    except UnicodeDecodeError:
+        text = ""
+    if text and all(char.isprintable() or char in "\t\r\n" for char in text):
+        shown = text.split("\n")[0].rstrip("\r")
+        return repr(shown + ("..." if len(head) > len(shown) else ""))
+    return "bytes " + sample[:8].hex(" ")
+
+
+def _looks_like_csv(head: bytes) -> bool:
+    first = head.split(b"\n", 1)[0]
+    return any(separator in first for separator in (b",", b";", b"\t"))
+
+
+def check_replay_file(path: str | Path) -> None:
+    """Refuse, with one line naming the file, what cannot be replayed (before anything runs).
+
+    Raises
+    ------
+    IngestError
+        Missing file, a folder, an empty file, a file that is not MCAP (the line says what it
+        starts with and, for text with separators, to import the CSV first), or an unfinished
+        MCAP file (no footer: to be recovered first). Replaying any of these used to leave the
+        daemon retrying the source for ever.
+    """
+    from tdmon.record.reader import MAGIC, describe_os_error, has_footer
+
+    source = Path(path)
+    try:
+        with source.open("rb") as stream:
+            head = stream.read(256)
+            if not head:
+                raise IngestError(f"{source}: empty file (0 bytes), not an MCAP file")
+            if not head.startswith(MAGIC):
+                hint = ("; for CSV use `tdmon import csv` (or `tdmon import volve`) first"
+                        if _looks_like_csv(head) else
+                        "; a replay is an MCAP file (tdmon simulate, tdmon import, or a "
+                        "flight recording)")
+                raise IngestError(f"{source}: not an MCAP file (starts with "
+                                  f"{describe_start(head)}){hint}")
+            finished = has_footer(stream)
+    except FileNotFoundError as exc:
+        raise IngestError(f"{source}: replay not found (no such file)") from exc
+    except OSError as exc:
+        raise IngestError(describe_os_error(source, exc)) from exc
+    if not finished:
+        raise IngestError(f"{source}: unfinished MCAP file (no footer: its writer was killed or "
+                          f"the copy is cut short); run `tdmon recover {source}` first")
+
+
 def raw_message_count(path: str | Path) -> int | None:
     """Input messages in a replay (from its summary; None when it has none)."""
     from tdmon.record.reader import topic_counts
@@ -237,14 +293,14 @@ async def replay(
     Raises
     ------
     IngestError, RecordError, ConfigError
-        The replay cannot be read, an output cannot be written, the configuration is unusable.
+        The replay cannot be read (see :func:`check_replay_file`: checked before any output is
+        created), an output cannot be written, the configuration is unusable.
     """
     from tdmon.record.mcap_recorder import McapRecorder
     from tdmon.record.writer_process import RecorderProcess
 
     source = Path(path)
-    if not source.is_file():
-        raise IngestError(f"replay not found: {source}")
+    check_replay_file(source)
     out_path = Path(out)
     rrd_path = None if rrd is None else Path(rrd)
     if out_path.resolve() == source.resolve():

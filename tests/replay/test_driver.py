@@ -25,16 +25,19 @@ REPLAYS = sorted((REPO / "replays").glob("*.mcap"))
 
 #: Every alarm kind the daemon can raise: tdmon/calib/alarms.py (band, limit_*,
 #: friction_jump, sensor_*), tdmon/daemon/calibrate.py (window_rejected, block_weight,
-#: weight_check) and tdmon/record/mcap_recorder.py (recorder_failed, recorder_resumed).
+#: weight_check) and tdmon/record/mcap_recorder.py (recorder_failed, recorder_resumed,
+#: recording_recovered).
 DAEMON_ALARM_KINDS = frozenset({
     "band", "limit_tensile", "limit_sinusoidal_buckling", "limit_helical_buckling",
     "limit_makeup_torque", "friction_jump", "window_rejected", "block_weight", "weight_check",
     "sensor_stale", "sensor_hookload_implausible", "sensor_bit_below_hole",
     "sensor_hookload_frozen", "sensor_torque_frozen", "recorder_failed", "recorder_resumed",
+    "recording_recovered",
 })
-#: Kinds no replay can raise: the recorder's own failure needs a failing file system
-#: (tests/record/test_crash_and_failure.py covers them).
-NOT_FROM_REPLAYS = frozenset({"recorder_failed", "recorder_resumed"})
+#: Kinds no replay can raise: the recorder's own failure needs a failing file system, its
+#: recovery a killed recorder (tests/record/test_crash_and_failure.py and
+#: tests/record/test_recovery_alarm.py cover them).
+NOT_FROM_REPLAYS = frozenset({"recorder_failed", "recorder_resumed", "recording_recovered"})
 
 
 @cache
