@@ -40,7 +40,6 @@ from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.units import conversion, parse_quantity
 
-
 logger = logging.getLogger(__name__)
 
 
@@ -398,7 +397,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     return config
 
 
-def _brokers(config: DaemonConfig) -> list[tuple[str, MqttConfig]]:
+def broker_sections(config: DaemonConfig) -> list[tuple[str, MqttConfig]]:
     """Every MQTT connection of the file with its dotted key (``[publish.mqtt] = true``
     shares the source's connection and is checked there)."""
     brokers = []
@@ -414,7 +413,7 @@ def _check_brokers(config: DaemonConfig, file: Path) -> None:
     line instead of a connection retried for ever: the password's variable or file, the TLS
     files. A clear-text password readable by group or others is a warning."""
     clear_text_in_toml = False
-    for key, mqtt in _brokers(config):
+    for key, mqtt in broker_sections(config):
         if mqtt.password_env is not None and mqtt.password_env not in os.environ:
             raise ConfigError(str(file), f"{key}.password_env",
                               f"environment variable {mqtt.password_env} is not set")

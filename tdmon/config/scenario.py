@@ -2,9 +2,9 @@
 
 A scenario names a well file, a rig programme (``[[phase]]``), sampling, noise, faults, friction
 anomalies and tight spots. Quantities are strings with a unit (``"28 m"``, ``"120 rpm"``,
-``"2000 L/min"``, ``"3 min"``, ``"150 kN"``; plain numbers only where dimensionless). Every problem is a
-:class:`tdmon.errors.ConfigError` naming the file, the key and the reason. The simulator's
-:class:`tdmon.replay.spec.Scenario` is built from a validated file by
+``"2000 L/min"``, ``"3 min"``, ``"150 kN"``; plain numbers only where dimensionless). Every
+problem is a :class:`tdmon.errors.ConfigError` naming the file, the key and the reason. The
+simulator's :class:`tdmon.replay.spec.Scenario` is built from a validated file by
 :func:`tdmon.replay.scenario.to_scenario`. See docs/replays.md for the keys.
 """
 

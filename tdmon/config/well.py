@@ -2,9 +2,9 @@
 
 A dimensional quantity is a string with a unit ("0.3 kN/m", "9950 ft", "13 ppg", "655 kN"): a
 plain number is refused, since the unit it was meant in cannot be known. Dimensionless keys
-(friction factors, safety factors) are plain numbers. ``load_well(path)`` validates the file and ``WellConfig.to_model()`` turns
-it into the model layer's :class:`tdmon.model.well.Well`. Every problem is a
-:class:`tdmon.errors.ConfigError` naming the file, the key and the reason.
+(friction factors, safety factors) are plain numbers. ``load_well(path)`` validates the file
+and ``WellConfig.to_model()`` turns it into the model layer's :class:`tdmon.model.well.Well`.
+Every problem is a :class:`tdmon.errors.ConfigError` naming the file, the key and the reason.
 """
 
 from __future__ import annotations
