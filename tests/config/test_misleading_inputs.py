@@ -64,7 +64,7 @@ def test_every_dimensional_well_key_needs_its_unit(tmp_path: Path, old: str, new
     assert old in text, old
     path = tmp_path / "well.toml"
     path.write_text(text.replace(old, new, 1))
-    with pytest.raises(ConfigError, match="has no unit; write the unit, e.g. ") as caught:
+    with pytest.raises(ConfigError, match=re.escape("has no unit; write the unit")) as caught:
         load_well(path)
     assert caught.value.key == key
 
@@ -134,7 +134,7 @@ def test_bundled_files_carry_their_units(pattern: str) -> None:
     for path in files:
         if "daemon" in pattern:
             load_daemon_config(path)
-        elif "scenarios/*.toml" == pattern.split("/", 1)[1]:
+        elif pattern == "replays/scenarios/*.toml":
             load_scenario(path)
         else:
             load_well_model(path)
