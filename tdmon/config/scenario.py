@@ -13,15 +13,19 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal, get_args
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from tdmon.channels import check_channel, validate_prefix
+from tdmon.channels import CHANNEL_UNITS, check_channel, validate_prefix
 from tdmon.config.common import (
+    UNITS_REQUIRED,
+    CrossFieldError,
     Force,
     Length,
     Pressure,
     StrictModel,
+    _converter,
     load_model,
+    missing_unit,
     quantity,
 )
 from tdmon.units import parse_time
@@ -156,17 +160,43 @@ class NoiseConfig(StrictModel):
 
 
 class NoiseTable(NoiseConfig):
-    """Defaults for every channel, and ``[noise.channels.<name>]`` overrides (merged)."""
+    """Defaults for every channel, and ``[noise.channels.<name>]`` overrides (merged).
+
+    ``absolute`` is in the channel's unit, so in a file it is given per channel with its unit
+    (``absolute = "5 mm"``) and converted to the channel's SI unit here."""
 
     channels: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
+    @field_validator("absolute", mode="before")
+    @classmethod
+    def _absolute_per_channel(cls, value: Any, info: ValidationInfo) -> Any:
+        if (info.context or {}).get(UNITS_REQUIRED) and value not in (0, 0.0):
+            raise ValueError("the absolute noise is in each channel's unit: give it per "
+                             "channel, e.g. [noise.channels.bit_depth] absolute = \"5 mm\"")
+        return value
+
     @field_validator("channels")
     @classmethod
-    def _known(cls, channels: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    def _known(cls, channels: dict[str, dict[str, Any]],
+               info: ValidationInfo) -> dict[str, dict[str, Any]]:
+        read = {}
         for name, table in channels.items():
             _known_channels([name])
-            NoiseConfig.model_validate(table)
-        return channels
+            table = dict(table)
+            if "absolute" in table:
+                target = CHANNEL_UNITS[name][0]
+                # the key at fault is the channel's, not `channels`
+                reason = missing_unit(table["absolute"], target, "absolute") \
+                    if (info.context or {}).get(UNITS_REQUIRED) else None
+                try:
+                    if reason is not None:
+                        raise ValueError(reason)
+                    table["absolute"] = _converter(target)(table["absolute"], None)
+                except ValueError as exc:
+                    raise CrossFieldError(f"{name}.absolute", str(exc)) from None
+            NoiseConfig.model_validate(table, context=info.context)
+            read[name] = table
+        return read
 
     def for_channel(self, channel: str) -> NoiseConfig:
         """The noise of ``channel``: the defaults with the channel's overrides."""

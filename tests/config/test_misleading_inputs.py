@@ -336,3 +336,22 @@ def test_tls_file_missing_is_named_with_its_resolved_path(tmp_path: Path) -> Non
         parse_daemon_config(data, tmp_path / "d.toml")
     assert caught.value.key == "sources.mqtt.tls.ca_file"
     assert caught.value.reason == f"no such file: {(tmp_path / 'certs' / 'ca.crt').resolve()}"
+
+
+def test_scenario_absolute_noise_is_per_channel_with_its_unit(tmp_path: Path) -> None:
+    head = ('[scenario]\nwell = "w.toml"\nbit_depth = "100 m"\n'
+            '[[phase]]\nkind = "static"\nduration = "10 s"\n')
+    path = tmp_path / "s.toml"
+    path.write_text(head + '[noise.channels.bit_depth]\nabsolute = "5 mm"\n'
+                    '[noise.channels.hookload]\nabsolute = "2 kN"\n')
+    noise = load_scenario(path).noise
+    assert noise.for_channel("bit_depth").absolute == pytest.approx(0.005)
+    assert noise.for_channel("hookload").absolute == pytest.approx(2000.0)
+    path.write_text(head + "[noise.channels.bit_depth]\nabsolute = 0.005\n")
+    with pytest.raises(ConfigError, match=r'noise\.channels\.bit_depth\.absolute: 0\.005 has '
+                                          r'no unit; write the unit, e\.g\. absolute = "0\.005 m"'):
+        load_scenario(path)
+    path.write_text(head + "[noise]\nabsolute = 0.005\n")
+    with pytest.raises(ConfigError, match=r"noise\.absolute: the absolute noise is in each "
+                                          r"channel's unit"):
+        load_scenario(path)
