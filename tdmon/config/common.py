@@ -160,20 +160,35 @@ class CrossFieldError(ValueError):
         self.key = key
 
 
+# pydantic's tags of union members and validated models in an error location, e.g. "bool",
+# "MqttConfig", "function-after[_one_password(), MqttConfig]": not keys of the file
+_UNION_TAG = re.compile(r".*[\[(].*|[A-Z][A-Za-z0-9]*|bool|int|float|str")
+
+
+def _relevant(errors: list[Any]) -> list[Any]:
+    """The errors worth reporting: a table given for ``bool | Table`` fails the bool member
+    too, and that "Input should be a valid boolean" hides the table's real problem."""
+    kept = [e for e in errors
+            if not (e["type"].endswith("_type") and isinstance(e.get("input"), dict)
+                    and any(isinstance(p, str) and _UNION_TAG.fullmatch(p) for p in e["loc"]))]
+    return kept or errors
+
+
 def validation_to_config_error(path: Path | str, error: ValidationError) -> ConfigError:
     """The first validation problem as a ConfigError naming the file, the key and the reason."""
-    first = error.errors()[0]
+    errors = _relevant(error.errors())
+    first = errors[0]
     reason = first["msg"]
     reason = reason.removeprefix("Value error, ")
     if first["type"] == "missing":
         reason = "missing key"
     elif first["type"] == "extra_forbidden":
         reason = "unknown key"
-    loc = tuple(first["loc"])
+    loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and _UNION_TAG.fullmatch(p)))
     cause = first.get("ctx", {}).get("error")
     if isinstance(cause, CrossFieldError):
         loc = (*loc, *cause.key.split("."))
-    more = len(error.errors()) - 1
+    more = len(errors) - 1
     if more:
         reason += f" (and {more} more problem{'s' if more > 1 else ''})"
     return ConfigError(str(path), _dotted(loc), reason)

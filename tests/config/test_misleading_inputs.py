@@ -259,11 +259,13 @@ def test_csv_survey_states_its_unit_in_the_header(tmp_path: Path) -> None:
 
 # -- passwords ----------------------------------------------------------------------------
 
-def test_password_keys_are_exclusive(tmp_path: Path) -> None:
+@pytest.mark.parametrize("section", ["sources.mqtt", "publish.mqtt"])
+def test_password_keys_are_exclusive(tmp_path: Path, section: str) -> None:
+    # [publish.mqtt] is `true` or a table: the table's problem is reported, not "not a bool"
     with pytest.raises(ConfigError) as caught:
-        load_daemon_config(_daemon(tmp_path, '[sources.mqtt]\npassword = "a"\n'
+        load_daemon_config(_daemon(tmp_path, f'[{section}]\npassword = "a"\n'
                                              'password_file = "pw"\n'))
-    assert caught.value.key == "sources.mqtt"
+    assert caught.value.key == section
     assert caught.value.reason == ("give one of password, password_env and password_file, "
                                    "not password and password_file")
 
