@@ -1,9 +1,9 @@
 """The daemon's TOML file as pydantic v2 models, and ``load_daemon_config(path)``.
 
 Dimensional quantities are strings with a unit ("5 s", "9950 ft", "0.3 kN"): a plain number is
-refused, since the unit it was meant in cannot be known. Every
-mistake is raised as :class:`tdmon.errors.ConfigError` naming the file, the dotted key and the
-reason. Paths in the file are relative to the file.
+refused, since the unit it was meant in cannot be known. Every mistake is raised as
+:class:`tdmon.errors.ConfigError` naming the file, the dotted key and the reason. Paths in the
+file are relative to the file.
 """
 
 from __future__ import annotations
@@ -419,11 +419,14 @@ def _check_brokers(config: DaemonConfig, file: Path) -> None:
                               f"environment variable {mqtt.password_env} is not set")
         if mqtt.password_file is not None:
             try:
-                mqtt.resolved_password()
+                secret = mqtt.resolved_password()
             except (OSError, UnicodeDecodeError) as exc:
                 reason = "no such file" if isinstance(exc, FileNotFoundError) else str(exc)
                 raise ConfigError(str(file), f"{key}.password_file",
                                   f"{mqtt.password_file}: {reason}") from exc
+            if not secret:
+                raise ConfigError(str(file), f"{key}.password_file",
+                                  f"{mqtt.password_file}: the first line is empty")
             warn_if_readable_by_others(mqtt.password_file, f"{key}.password_file")
         clear_text_in_toml |= mqtt.password is not None
         if mqtt.tls is not None:

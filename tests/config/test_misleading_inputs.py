@@ -306,6 +306,9 @@ def test_missing_password_file_is_named(tmp_path: Path) -> None:
         load_daemon_config(_daemon(tmp_path, '[publish.mqtt]\npassword_file = "absent.pw"\n'))
     assert caught.value.key == "publish.mqtt.password_file"
     assert caught.value.reason == f"{tmp_path / 'absent.pw'}: no such file"
+    (tmp_path / "empty.pw").write_text("\n")
+    with pytest.raises(ConfigError, match=r"empty\.pw: the first line is empty"):
+        load_daemon_config(_daemon(tmp_path, '[publish.mqtt]\npassword_file = "empty.pw"\n'))
 
 
 def test_clear_text_password_readable_by_others_is_one_warning(
