@@ -279,10 +279,9 @@ class WellConfig(StrictModel):
             raise ConfigError(source, key, str(exc)) from exc
 
 
-#: Below this largest inclination [deg] a survey's angles could be radians (pi, a little more
-#: than the 0-180 deg range allows in radians).
+#: The largest inclination of a survey in radians (pi: 0-180 deg), with a rounding margin.
 _RADIAN_INCLINATION_MAX = math.pi + 1e-6
-#: ... and below this largest |azimuth| (2 pi).
+#: The largest |azimuth| of a survey in radians (2 pi), with a rounding margin.
 _RADIAN_AZIMUTH_MAX = 2.0 * math.pi + 1e-6
 
 
