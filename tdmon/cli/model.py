@@ -97,13 +97,16 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
 
 
 def _friction(text: str) -> float:
+    from tdmon.config.common import check_friction  # the rule of the well and daemon files
+
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not 0.0 <= value <= 1.0 or value != value:
-        raise argparse.ArgumentTypeError(f"friction factor {text} is outside 0-1")
-    return value
+    try:
+        return check_friction(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _friction_list(text: str) -> list[float]:

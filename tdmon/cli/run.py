@@ -9,10 +9,13 @@ import sys
 import time
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tdmon.cli.arguments import add_units_option, display_units
 from tdmon.errors import TdmonError
+
+if TYPE_CHECKING:
+    from tdmon.config.daemon import DaemonConfig
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -62,9 +65,11 @@ def _run(args: argparse.Namespace) -> int:
     from tdmon.daemon.runner import run_daemon
     from tdmon.display import using
 
-    config = load_daemon_config(args.config)
+    # before the file is read: its warnings (a password file readable by others) use it
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    config = load_daemon_config(args.config)
+    startup_checks(config, args.config)
     # the Rerun views are built inside the daemon: they read the units from tdmon.display
     with using(display_units(args, config.display.units)):
         stats = asyncio.run(run_daemon(config))
@@ -72,6 +77,49 @@ def _run(args: argparse.Namespace) -> int:
           f"{stats.dropped} dropped, {stats.duplicates} duplicates, {stats.out_of_order} "
           f"out of order, {stats.frames} frames", file=sys.stderr)
     return 0
+
+
+def startup_checks(config: DaemonConfig, file: Path) -> None:
+    """What would otherwise fail only once the daemon runs, checked before it starts so that
+    the mistake stops it with one line (exit 2) instead of a connection retried for ever or a
+    viewer that never comes: every broker's TLS files load, the Rerun live port is free.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key and the reason.
+    """
+    from tdmon.config.daemon import broker_sections
+    from tdmon.errors import ConfigError, IngestError
+    from tdmon.ingest.mqtt import tls_context
+
+    base = config.source_file.parent if config.source_file else file.parent
+    for key, mqtt in broker_sections(config):
+        try:
+            tls_context(mqtt, base)
+        except IngestError as exc:
+            raise ConfigError(str(file), key, str(exc)) from exc
+    if config.rerun.mode == "live":
+        reason = port_in_use("127.0.0.1", config.rerun.port)
+        if reason is not None:
+            raise ConfigError(str(file), "rerun.port",
+                              f"cannot serve the live viewer on 127.0.0.1:{config.rerun.port}: "
+                              f"{reason}; choose another port or stop what holds it")
+
+
+def port_in_use(host: str, port: int) -> str | None:
+    """Why a TCP server cannot listen on ``host:port`` (e.g. "Address already in use"), or
+    None when it can. SO_REUSEADDR as servers set it: a port left in TIME_WAIT is free."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+            probe.listen(1)
+        except OSError as exc:
+            return exc.strerror or str(exc)
+    return None
 
 
 def _publish(args: argparse.Namespace) -> int:

@@ -3,12 +3,13 @@ reader of every TOML file (:func:`load_model`) with its one error mapping."""
 
 from __future__ import annotations
 
+import re
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, Final, TypeVar
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
+from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError, ValidationInfo
 
 from tdmon.errors import ConfigError
 from tdmon.units import parse_quantity
@@ -22,12 +23,65 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-def _converter(target: str) -> Callable[[Any], float]:
-    """A function reading a number in ``target`` or a string with a unit, to ``target``."""
+#: Validation context key set by :func:`validate_model` (every file): a dimensional quantity
+#: read from a file must carry its unit. Python callers building models pass SI floats.
+UNITS_REQUIRED: Final = "units_required"
 
-    def convert(value: Any) -> float:
+#: Friction factors above this are refused everywhere (files and command line): steel on steel
+#: or on rock in drilling mud is 0.1-0.5 and back-calculated values rarely pass 0.6; above 1
+#: a value is a typing mistake (a percentage, a doubled digit), not a friction factor.
+MAX_FRICTION: Final = 1.0
+
+# the unit an error message suggests for a target, as people write it on a rig
+_EXAMPLE_UNITS: Final = {
+    "N": "kN", "N*m": "kN*m", "Pa": "MPa", "m": "m", "s": "s", "m/s": "m/s", "rad/s": "rpm",
+    "m**3/s": "L/min", "kg/m^3": "kg/m^3", "kg/m**3": "kg/m^3", "N/m": "kN/m", "degC": "degC",
+}
+_PLAIN_NUMBER = re.compile(r"[\d\s.+\-eE/]*")
+
+
+def _is_dimensionless(target: str) -> bool:
+    return target in ("dimensionless", "")
+
+
+def unit_example(target: str) -> str:
+    """A unit to suggest in an error message for a quantity in ``target``."""
+    return _EXAMPLE_UNITS.get(target, target)
+
+
+def missing_unit(value: Any, target: str, key: str | None = None) -> str | None:
+    """The reason a plain ``value`` (a number, or a text without a unit) for a quantity in
+    ``target`` is refused, or None when it has a unit or ``target`` is dimensionless.
+
+    A plain number was once read as SI, so ``block_weight = 655`` meant as kN gave hook loads
+    654 kN low; a file has to say which unit it means.
+    """
+    if _is_dimensionless(target) or isinstance(value, bool):
+        return None
+    if isinstance(value, str):
+        if not _PLAIN_NUMBER.fullmatch(value):
+            return None
+        shown = value.strip()
+    elif isinstance(value, (int, float)):
+        shown = f"{value:g}"
+    else:
+        return None
+    name = key or "key"
+    return (f"{shown} has no unit; write the unit, e.g. {name} = "
+            f"\"{shown} {unit_example(target)}\"")
+
+
+def _converter(target: str) -> Callable[[Any, ValidationInfo | None], float]:
+    """A function reading a number in ``target`` or a string with a unit, to ``target``; with
+    the :data:`UNITS_REQUIRED` context (a file) a dimensional value needs its unit."""
+
+    def convert(value: Any, info: ValidationInfo | None = None) -> float:
         if not isinstance(value, (int, float, str)) or isinstance(value, bool):
             raise ValueError(f"expected a number in {target} or a string with a unit")
+        if info is not None and (info.context or {}).get(UNITS_REQUIRED):
+            reason = missing_unit(value, target, info.field_name)
+            if reason is not None:
+                raise ValueError(reason)
         number = parse_quantity(value, target)
         if number != number or number in (float("inf"), float("-inf")):
             raise ValueError("must be a finite number")
@@ -37,20 +91,41 @@ def _converter(target: str) -> Callable[[Any], float]:
 
 
 def quantity(target: str) -> BeforeValidator:
-    """A pydantic validator reading a number in ``target`` or a string with a unit (such as
-    ``"3 min"``) into a finite number in ``target``: ``Annotated[float, quantity("s")]``."""
-    return BeforeValidator(_converter(target))
+    """A pydantic validator reading a string with a unit (such as ``"3 min"``) into a finite
+    number in ``target``: ``Annotated[float, quantity("s")]``. A plain number is accepted from
+    Python (SI) and, in a file, only for a dimensionless ``target``."""
+    convert = _converter(target)
+
+    def validate(value: Any, info: ValidationInfo) -> float:
+        return convert(value, info)
+
+    return BeforeValidator(validate)
 
 
-def _weight_per_length(value: Any) -> float:
+def _weight_per_length(value: Any, info: ValidationInfo) -> float:
     """A weight per length in N/m; a mass per length such as "29 lb/ft" is multiplied by g."""
     try:
-        return _converter("N/m")(value)
+        return _converter("N/m")(value, info)
     except ValueError as as_force:
         try:
-            return _converter("kg/m")(value) * GRAVITY
+            return _converter("kg/m")(value, info) * GRAVITY
         except ValueError:
             raise as_force from None
+
+
+def _friction_factor(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ValueError("expected a friction factor (a number)")
+    number = parse_quantity(value, "dimensionless")
+    if not 0.0 <= number <= MAX_FRICTION:
+        raise ValueError(f"friction factor {number:g} is outside 0-{MAX_FRICTION:g}")
+    return number
+
+
+def check_friction(value: float) -> float:
+    """``value`` if it is a friction factor (0 to :data:`MAX_FRICTION`), else ValueError: the
+    one rule of well files, daemon files and the command line."""
+    return _friction_factor(value)
 
 
 Length = Annotated[float, quantity("m")]
@@ -61,6 +136,7 @@ Pressure = Annotated[float, quantity("Pa")]
 Density = Annotated[float, quantity("kg/m^3")]
 WeightPerLength = Annotated[float, BeforeValidator(_weight_per_length)]
 Dimensionless = Annotated[float, quantity("dimensionless")]
+FrictionFactor = Annotated[float, BeforeValidator(_friction_factor)]
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -84,20 +160,35 @@ class CrossFieldError(ValueError):
         self.key = key
 
 
+# pydantic's tags of union members and validated models in an error location, e.g. "bool",
+# "MqttConfig", "function-after[_one_password(), MqttConfig]": not keys of the file
+_UNION_TAG = re.compile(r".*[\[(].*|[A-Z][A-Za-z0-9]*|bool|int|float|str")
+
+
+def _relevant(errors: list[Any]) -> list[Any]:
+    """The errors worth reporting: a table given for ``bool | Table`` fails the bool member
+    too, and that "Input should be a valid boolean" hides the table's real problem."""
+    kept = [e for e in errors
+            if not (e["type"].endswith("_type") and isinstance(e.get("input"), dict)
+                    and any(isinstance(p, str) and _UNION_TAG.fullmatch(p) for p in e["loc"]))]
+    return kept or errors
+
+
 def validation_to_config_error(path: Path | str, error: ValidationError) -> ConfigError:
     """The first validation problem as a ConfigError naming the file, the key and the reason."""
-    first = error.errors()[0]
+    errors = _relevant(error.errors())
+    first = errors[0]
     reason = first["msg"]
     reason = reason.removeprefix("Value error, ")
     if first["type"] == "missing":
         reason = "missing key"
     elif first["type"] == "extra_forbidden":
         reason = "unknown key"
-    loc = tuple(first["loc"])
+    loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and _UNION_TAG.fullmatch(p)))
     cause = first.get("ctx", {}).get("error")
     if isinstance(cause, CrossFieldError):
         loc = (*loc, *cause.key.split("."))
-    more = len(error.errors()) - 1
+    more = len(errors) - 1
     if more:
         reason += f" (and {more} more problem{'s' if more > 1 else ''})"
     return ConfigError(str(path), _dotted(loc), reason)
@@ -123,7 +214,8 @@ def validate_model(
     model: type[ModelT], data: dict[str, Any], path: Path | str,
     context: dict[str, Any] | None = None,
 ) -> ModelT:
-    """Validate already-parsed TOML ``data`` from the file ``path`` against ``model``.
+    """Validate already-parsed TOML ``data`` from the file ``path`` against ``model``
+    (dimensional quantities need their unit: see :data:`UNITS_REQUIRED`).
 
     Raises
     ------
@@ -131,7 +223,7 @@ def validate_model(
         The first problem, naming the file, the dotted key and the reason.
     """
     try:
-        return model.model_validate(data, context=context)
+        return model.model_validate(data, context={UNITS_REQUIRED: True, **(context or {})})
     except ValidationError as exc:
         raise validation_to_config_error(path, exc) from exc
 
@@ -151,18 +243,24 @@ def load_model(
 
 
 __all__ = [
+    "MAX_FRICTION",
+    "UNITS_REQUIRED",
     "Density",
     "Diameter",
     "Dimensionless",
     "Force",
+    "FrictionFactor",
     "Length",
     "Moment",
     "Pressure",
     "StrictModel",
     "WeightPerLength",
+    "check_friction",
     "load_model",
+    "missing_unit",
     "quantity",
     "read_toml",
+    "unit_example",
     "validate_model",
     "validation_to_config_error",
 ]

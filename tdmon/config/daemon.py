@@ -1,14 +1,17 @@
 """The daemon's TOML file as pydantic v2 models, and ``load_daemon_config(path)``.
 
-Quantities may be numbers (SI) or strings with a unit ("5 s", "9950 ft", "0.3 kN"). Every
-mistake is raised as :class:`tdmon.errors.ConfigError` naming the file, the dotted key and the
-reason. Paths in the file are relative to the file.
+Dimensional quantities are strings with a unit ("5 s", "9950 ft", "0.3 kN"): a plain number is
+refused, since the unit it was meant in cannot be known. Every mistake is raised as
+:class:`tdmon.errors.ConfigError` naming the file, the dotted key and the reason. Paths in the
+file are relative to the file.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import os
+import stat
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -24,19 +27,25 @@ from pydantic import (
 )
 
 from tdmon.channels import CHANNEL_UNITS, ChannelSpec, check_channel, validate_prefix
-from tdmon.config.common import CrossFieldError, read_toml, validation_to_config_error
+from tdmon.config.common import (
+    UNITS_REQUIRED,
+    CrossFieldError,
+    FrictionFactor,
+    missing_unit,
+    quantity,
+    read_toml,
+    validation_to_config_error,
+)
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.units import conversion, parse_quantity
 
+logger = logging.getLogger(__name__)
+
 
 def _quantity(target: str) -> BeforeValidator:
-    def convert(value: Any) -> Any:
-        if isinstance(value, str | int | float) and not isinstance(value, bool):
-            return parse_quantity(value, target)
-        return value
-
-    return BeforeValidator(convert)
+    # config.common's reader: in a file a plain number for a dimensional key is an error
+    return quantity(target)
 
 
 Seconds = Annotated[float, _quantity("s")]
@@ -48,7 +57,9 @@ CubicMetersPerSecond = Annotated[float, _quantity("m**3/s")]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    # defaults are SI floats written in Python, not a file's values: they are not validated
+    # (a file's plain number needs a unit; a default does not)
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 class TlsConfig(_Model):
@@ -69,17 +80,44 @@ class MqttConfig(_Model):
     username: str | None = None
     password: str | None = None
     password_env: str | None = None  # read the password from this environment variable
+    # read the password from this file (its first line; relative to the daemon file)
+    password_file: Path | None = None
     tls: TlsConfig | None = None
     qos: Literal[0, 1, 2] = 1
     keepalive: int = Field(default=30, ge=5, le=3600)
     # False keeps the session (subscription, queued QoS 1 messages) over reconnects
     clean_session: bool = False
 
+    @model_validator(mode="after")
+    def _one_password(self, info: ValidationInfo) -> MqttConfig:
+        given = [key for key in ("password", "password_env", "password_file")
+                 if getattr(self, key) is not None]
+        if len(given) > 1:
+            raise ValueError(f"give one of password, password_env and password_file, not "
+                             f"{' and '.join(given)}")
+        base = (info.context or {}).get("base_dir")
+        if base is not None and self.password_file is not None \
+                and not self.password_file.is_absolute():
+            object.__setattr__(self, "password_file", Path(base) / self.password_file)
+        return self
+
     def resolved_password(self) -> str | None:
+        """The password from ``password``, the ``password_env`` variable or the first line of
+        ``password_file`` (read at each connection, so that a changed file is used); None when
+        none is given or the variable is unset.
+
+        Raises
+        ------
+        OSError
+            ``password_file`` cannot be read.
+        """
         if self.password is not None:
             return self.password
         if self.password_env is not None:
             return os.environ.get(self.password_env)
+        if self.password_file is not None:
+            text = self.password_file.read_text(encoding="utf-8")
+            return text.splitlines()[0] if text else ""
         return None
 
 
@@ -161,12 +199,11 @@ class RerunConfig(_Model):
     path: Path | None = None
     port: int = Field(default=9876, ge=1, le=65535)
 
-    @field_validator("path")
-    @classmethod
-    def _file_mode_needs_path(cls, value: Path | None, info: ValidationInfo) -> Path | None:
-        if value is None and info.data.get("mode") == "file":
-            raise ValueError("mode 'file' needs a path for the .rrd file")
-        return value
+    @model_validator(mode="after")
+    def _file_mode_needs_path(self) -> RerunConfig:
+        if self.path is None and self.mode == "file":
+            raise CrossFieldError("path", "mode 'file' needs a path for the .rrd file")
+        return self
 
 
 class QueuesConfig(_Model):
@@ -196,17 +233,15 @@ class RigStateConfig(_Model):
 
 
 class MonitorConfig(_Model):
-    mu: float = Field(default=0.25, ge=0, le=2)  # friction factor of the modelled curves
-    band_mu: list[float] = Field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4])
+    mu: FrictionFactor = 0.25  # friction factor of the modelled curves
+    band_mu: list[FrictionFactor] = Field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4])
     method: Literal["aadnoy", "soft-string"] = "aadnoy"
     grid_step: Meters = Field(default=10.0, gt=0)
 
     @field_validator("band_mu")
     @classmethod
     def _band(cls, value: list[float]) -> list[float]:
-        if any(m < 0 or m > 2 for m in value):
-            raise ValueError("friction factors must be between 0 and 2")
-        return sorted(value)
+        return sorted(value)  # each a FrictionFactor (config.common's one rule)
 
 
 class CalibrationConfig(_Model):
@@ -328,7 +363,9 @@ def load_daemon_config(path: str | os.PathLike[str]) -> DaemonConfig:
 def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     """Validate already-parsed TOML data (see :func:`load_daemon_config`)."""
     try:
-        config = DaemonConfig.model_validate({**data, "source_file": None})
+        config = DaemonConfig.model_validate(
+            {**data, "source_file": None},
+            context={UNITS_REQUIRED: True, "base_dir": file.parent})
     except ValidationError as exc:
         raise validation_to_config_error(file, exc) from exc
     except ValueError as exc:  # a validator outside pydantic's wrapping
@@ -340,6 +377,9 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
         for key in ("min", "max"):
             bound = getattr(channel_cfg, key)
             if bound is not None:
+                reason = missing_unit(bound, target, key)
+                if reason is not None:
+                    raise ConfigError(str(file), f"channels.{name}.{key}", reason)
                 try:
                     parse_quantity(bound, target)
                 except ValueError as exc:
@@ -349,10 +389,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
                 conversion(channel_cfg.unit, target)
             except ValueError as exc:
                 raise ConfigError(str(file), f"channels.{name}.unit", str(exc)) from exc
-    mqtt = config.sources.mqtt
-    if mqtt is not None and mqtt.password_env and mqtt.resolved_password() is None:
-        raise ConfigError(str(file), "sources.mqtt.password_env",
-                          f"environment variable {mqtt.password_env} is not set")
+    _check_brokers(config, file)
     for name in config.publish.names:
         if not name or "/" in name:
             raise ConfigError(str(file), "publish.names", f"'{name}' is not a message name")
@@ -366,3 +403,59 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     if config.well is not None and not config.resolve(config.well).exists():
         raise ConfigError(str(file), "well", f"file not found: {config.resolve(config.well)}")
     return config
+
+
+def broker_sections(config: DaemonConfig) -> list[tuple[str, MqttConfig]]:
+    """Every MQTT connection of the file with its dotted key (``[publish.mqtt] = true``
+    shares the source's connection and is checked there)."""
+    brokers = []
+    if config.sources.mqtt is not None:
+        brokers.append(("sources.mqtt", config.sources.mqtt))
+    if isinstance(config.publish.mqtt, MqttConfig):
+        brokers.append(("publish.mqtt", config.publish.mqtt))
+    return brokers
+
+
+def _check_brokers(config: DaemonConfig, file: Path) -> None:
+    """What a broker connection needs at start, so that a mistake stops the daemon with one
+    line instead of a connection retried for ever: the password's variable or file, the TLS
+    files. A clear-text password readable by group or others is a warning."""
+    clear_text_in_toml = False
+    for key, mqtt in broker_sections(config):
+        if mqtt.password_env is not None and mqtt.password_env not in os.environ:
+            raise ConfigError(str(file), f"{key}.password_env",
+                              f"environment variable {mqtt.password_env} is not set")
+        if mqtt.password_file is not None:
+            try:
+                secret = mqtt.resolved_password()
+            except (OSError, UnicodeDecodeError) as exc:
+                reason = "no such file" if isinstance(exc, FileNotFoundError) else str(exc)
+                raise ConfigError(str(file), f"{key}.password_file",
+                                  f"{mqtt.password_file}: {reason}") from exc
+            if not secret:
+                raise ConfigError(str(file), f"{key}.password_file",
+                                  f"{mqtt.password_file}: the first line is empty")
+            warn_if_readable_by_others(mqtt.password_file, f"{key}.password_file")
+        clear_text_in_toml |= mqtt.password is not None
+        if mqtt.tls is not None:
+            for name in ("ca_file", "cert_file", "key_file"):
+                path = getattr(mqtt.tls, name)
+                if path is not None and not config.resolve(path).is_file():
+                    raise ConfigError(str(file), f"{key}.tls.{name}",
+                                      f"no such file: {config.resolve(path)}")
+    if clear_text_in_toml:
+        warn_if_readable_by_others(file, "password")
+
+
+def warn_if_readable_by_others(path: Path, key: str) -> bool:
+    """Log one warning when ``path``, which holds a clear-text password (``key``), can be read
+    by the file's group or by others; True when it warned."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return False
+    if not mode & (stat.S_IRWXG | stat.S_IRWXO):
+        return False
+    logger.warning("%s holds a clear-text password (%s) and is readable by others "
+                   "(mode %03o): chmod 600 %s", path, key, stat.S_IMODE(mode), path)
+    return True

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from tdmon.config.common import StrictModel, load_model
+from tdmon.config.common import Length, StrictModel, load_model, quantity
 from tdmon.vocabulary import RigState
 
 __all__ = [
@@ -30,6 +30,10 @@ __all__ = [
 ]
 
 
+#: seconds (in the file with a unit: "10 s")
+Duration = Annotated[float, quantity("s")]
+
+
 class InputExpectation(StrictModel):
     messages: int | None = Field(default=None, ge=0)
     rejected: int = Field(default=0, ge=0, description="at most this many rejections")
@@ -38,7 +42,7 @@ class InputExpectation(StrictModel):
 class StatesExpectation(StrictModel):
     reference: Literal["truth", "volve"] = "truth"
     agreement: float = Field(default=0.9, ge=0, le=1)
-    settle: float = Field(default=10.0, ge=0, description="seconds ignored after a change")
+    settle: Duration = Field(default=10.0, ge=0, description="seconds ignored after a change")
     required: list[RigState] = Field(default_factory=list)
 
 
@@ -46,7 +50,7 @@ class FrictionExpectation(StrictModel):
     # a window estimate's operation: pick_up, slack_off, rotating, or the combined-motion
     # states reaming and back_reaming
     operation: str
-    depth: tuple[float, float] | None = None
+    depth: tuple[Length, Length] | None = None
     section: str | None = None
     min: float | None = None
     max: float | None = None
@@ -65,8 +69,8 @@ class AlarmExpectation(StrictModel):
     event: str | None = None
     nth: int = Field(default=1, ge=1, description="which /truth/alarm of that kind (1: first)")
     kinds: list[str] = Field(default_factory=list)
-    at: float | None = None
-    window: tuple[float, float] | None = None
+    at: Duration | None = None
+    window: tuple[Duration, Duration] | None = None
     known_issue: str | None = None
 
     @model_validator(mode="after")

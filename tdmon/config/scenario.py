@@ -1,10 +1,10 @@
 """The scenario TOML of ``tdmon simulate`` as pydantic models, and ``load_scenario(path)``.
 
 A scenario names a well file, a rig programme (``[[phase]]``), sampling, noise, faults, friction
-anomalies and tight spots. Quantities are numbers in SI or strings with a unit (``"28 m"``,
-``"120 rpm"``, ``"2000 L/min"``, ``"3 min"``, ``"150 kN"``). Every problem is a
-:class:`tdmon.errors.ConfigError` naming the file, the key and the reason. The simulator's
-:class:`tdmon.replay.spec.Scenario` is built from a validated file by
+anomalies and tight spots. Quantities are strings with a unit (``"28 m"``, ``"120 rpm"``,
+``"2000 L/min"``, ``"3 min"``, ``"150 kN"``; plain numbers only where dimensionless). Every
+problem is a :class:`tdmon.errors.ConfigError` naming the file, the key and the reason. The
+simulator's :class:`tdmon.replay.spec.Scenario` is built from a validated file by
 :func:`tdmon.replay.scenario.to_scenario`. See docs/replays.md for the keys.
 """
 
@@ -13,15 +13,19 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal, get_args
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from tdmon.channels import check_channel, validate_prefix
+from tdmon.channels import CHANNEL_UNITS, check_channel, validate_prefix
 from tdmon.config.common import (
+    UNITS_REQUIRED,
+    CrossFieldError,
     Force,
     Length,
     Pressure,
     StrictModel,
+    _converter,
     load_model,
+    missing_unit,
     quantity,
 )
 from tdmon.units import parse_time
@@ -156,17 +160,43 @@ class NoiseConfig(StrictModel):
 
 
 class NoiseTable(NoiseConfig):
-    """Defaults for every channel, and ``[noise.channels.<name>]`` overrides (merged)."""
+    """Defaults for every channel, and ``[noise.channels.<name>]`` overrides (merged).
+
+    ``absolute`` is in the channel's unit, so in a file it is given per channel with its unit
+    (``absolute = "5 mm"``) and converted to the channel's SI unit here."""
 
     channels: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
+    @field_validator("absolute", mode="before")
+    @classmethod
+    def _absolute_per_channel(cls, value: Any, info: ValidationInfo) -> Any:
+        if (info.context or {}).get(UNITS_REQUIRED) and value not in (0, 0.0):
+            raise ValueError("the absolute noise is in each channel's unit: give it per "
+                             "channel, e.g. [noise.channels.bit_depth] absolute = \"5 mm\"")
+        return value
+
     @field_validator("channels")
     @classmethod
-    def _known(cls, channels: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    def _known(cls, channels: dict[str, dict[str, Any]],
+               info: ValidationInfo) -> dict[str, dict[str, Any]]:
+        read = {}
         for name, table in channels.items():
             _known_channels([name])
-            NoiseConfig.model_validate(table)
-        return channels
+            table = dict(table)
+            if "absolute" in table:
+                target = CHANNEL_UNITS[name][0]
+                # the key at fault is the channel's, not `channels`
+                reason = missing_unit(table["absolute"], target, "absolute") \
+                    if (info.context or {}).get(UNITS_REQUIRED) else None
+                try:
+                    if reason is not None:
+                        raise ValueError(reason)
+                    table["absolute"] = _converter(target)(table["absolute"], None)
+                except ValueError as exc:
+                    raise CrossFieldError(f"{name}.absolute", str(exc)) from None
+            NoiseConfig.model_validate(table, context=info.context)
+            read[name] = table
+        return read
 
     def for_channel(self, channel: str) -> NoiseConfig:
         """The noise of ``channel``: the defaults with the channel's overrides."""

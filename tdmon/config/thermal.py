@@ -1,7 +1,7 @@
 """Well-file tables for the temperature model and the friction model(s), with adapters.
 
-``[temperature]`` picks a mud-temperature model and gives its inputs; each quantity is a number
-in SI (degC for temperatures) or a string with a unit::
+``[temperature]`` picks a mud-temperature model and gives its inputs; each quantity is a string
+with a unit (a plain number is refused: which unit it meant is not known)::
 
     [temperature]
     model = "apak"                      # geothermal | apak | apak-empirical | numerical
@@ -24,9 +24,9 @@ from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 from numpy.typing import ArrayLike
-from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationInfo, model_validator
 
-from tdmon.config.common import _converter
+from tdmon.config.common import _converter, check_friction
 from tdmon.errors import ModelError
 from tdmon.model.friction import FAMILIES, PUBLISHED_FRICTION_MODELS, FrictionModel
 from tdmon.model.temperature import (
@@ -39,13 +39,14 @@ from tdmon.model.temperature import (
 __all__ = ["FrictionModelConfig", "TemperatureConfig"]
 
 
-def _reader(target: str, *, positive: bool) -> Callable[[Any], float]:
-    """common's quantity reader (number in ``target`` or string with a unit, finite), plus an
-    optional positivity check: radii, rates, times and properties must be above zero."""
+def _reader(target: str, *, positive: bool) -> Callable[[Any, ValidationInfo], float]:
+    """common's quantity reader (string with a unit, or from Python a number in ``target``;
+    finite), plus an optional positivity check: radii, rates, times and properties must be
+    above zero."""
     convert = _converter(target)
 
-    def read(value: Any) -> float:
-        number = convert(value)  # raises ValueError with the reason
+    def read(value: Any, info: ValidationInfo) -> float:
+        number = convert(value, info)  # raises ValueError with the reason
         if positive and number <= 0.0:
             raise ValueError(f"must be positive, got {number:g} {target}")
         return number
@@ -232,8 +233,8 @@ class FrictionModelConfig(BaseModel):
             self.friction_model()
         except ModelError as exc:
             raise ValueError(str(exc)) from None
-        if self.family == "constant" and not self.coefficients["mu"] >= 0.0:
-            raise ValueError(f"friction factor must be >= 0, got {self.coefficients['mu']}")
+        if self.family == "constant":
+            check_friction(self.coefficients["mu"])  # the one rule (config.common)
         return self
 
     def friction_model(self) -> FrictionModel:

@@ -1,9 +1,10 @@
 """The well file: survey, hole sections, drill string, fluid, limits and temperature, as TOML.
 
-A quantity is a number in SI (degC for temperatures) or a string with a unit ("0.3 kN/m",
-"9950 ft", "13 ppg"). ``load_well(path)`` validates the file and ``WellConfig.to_model()`` turns
-it into the model layer's :class:`tdmon.model.well.Well`. Every problem is a
-:class:`tdmon.errors.ConfigError` naming the file, the key and the reason.
+A dimensional quantity is a string with a unit ("0.3 kN/m", "9950 ft", "13 ppg", "655 kN"): a
+plain number is refused, since the unit it was meant in cannot be known. Dimensionless keys
+(friction factors, safety factors) are plain numbers. ``load_well(path)`` validates the file
+and ``WellConfig.to_model()`` turns it into the model layer's :class:`tdmon.model.well.Well`.
+Every problem is a :class:`tdmon.errors.ConfigError` naming the file, the key and the reason.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from tdmon.config.common import (
@@ -53,11 +54,17 @@ class WellInfo(StrictModel):
 
 
 class SurveyConfig(StrictModel):
-    """Survey stations, inline (``stations = [[md, inclination_deg, azimuth_deg], ...]``) or
-    from a CSV file (path relative to the well file)."""
+    """Survey stations, inline (``stations = [[md, inclination, azimuth], ...]``) or from a
+    CSV file (path relative to the well file).
+
+    The angles' unit is ``angle_unit`` ("deg" or "rad") or, for a CSV file, the suffix of the
+    angle columns (``incl_deg``, ``azi_rad``). Without either, degrees are assumed, unless the
+    stations look like radians (see :func:`looks_like_radians`): then the file is refused.
+    """
 
     stations: list[tuple[float, float, float]] | None = None
     file: Path | None = None
+    angle_unit: Literal["deg", "rad"] | None = None
     md_unit: str = "m"
     md_column: str = "md_m"
     inclination_column: str = "incl_deg"
@@ -257,10 +264,69 @@ class WellConfig(StrictModel):
             table = _read_survey_csv(source, config)
             key = f"survey.file ({config.file})"
         scale = 1.0 if config.md_unit == "m" else _md_scale(source, config.md_unit)
+        unit = _angle_unit(source, config)
+        if unit is None and looks_like_radians(table[:, 1], table[:, 2]):
+            raise ConfigError(
+                source, key,
+                f"the angles look like radians (inclination at most "
+                f"{np.max(table[:, 1]):.3g}, azimuth at most {np.max(np.abs(table[:, 2])):.3g}); "
+                "say which unit they are in: angle_unit = \"rad\" or \"deg\" in [survey]")
+        if unit == "rad":
+            table = np.column_stack([table[:, 0], np.degrees(table[:, 1:3])])
         try:
             return minimum_curvature(table[:, 0] * scale, table[:, 1], table[:, 2])
         except ModelError as exc:
             raise ConfigError(source, key, str(exc)) from exc
+
+
+#: The largest inclination of a survey in radians (pi: 0-180 deg), with a rounding margin.
+_RADIAN_INCLINATION_MAX = math.pi + 1e-6
+#: The largest |azimuth| of a survey in radians (2 pi), with a rounding margin.
+_RADIAN_AZIMUTH_MAX = 2.0 * math.pi + 1e-6
+
+
+def looks_like_radians(inclination: ArrayLike, azimuth: ArrayLike) -> bool:
+    """Whether survey angles given without a unit are likely radians rather than degrees.
+
+    True when some inclination is above zero (a vertical well reads the same in both), every
+    inclination is at most pi and every |azimuth| at most 2 pi. In degrees that is a well that
+    never leaves 3.2 deg of vertical and whose azimuths all lie within 6.3 deg of north: a
+    surveyed near-vertical hole wanders in azimuth, so a real degree survey almost never
+    passes; one that does only has to state ``angle_unit = "deg"``.
+    """
+    inc = np.asarray(inclination, dtype=float)
+    azi = np.abs(np.asarray(azimuth, dtype=float))
+    if inc.size == 0 or not np.isfinite(inc).all() or not np.isfinite(azi).all():
+        return False
+    return bool(inc.max() > 0.0 and inc.max() <= _RADIAN_INCLINATION_MAX
+                and azi.max() <= _RADIAN_AZIMUTH_MAX)
+
+
+def _column_unit(column: str) -> str | None:
+    name = column.strip().lower()
+    for unit, suffixes in (("deg", ("_deg", "[deg]", "(deg)", " deg")),
+                           ("rad", ("_rad", "[rad]", "(rad)", " rad"))):
+        if name.endswith(suffixes):
+            return unit
+    return None
+
+
+def _angle_unit(source: str, config: SurveyConfig) -> str | None:
+    """The stated angle unit: ``angle_unit``, else the CSV angle columns' suffix."""
+    if config.file is None:
+        return config.angle_unit
+    stated = {_column_unit(config.inclination_column), _column_unit(config.azimuth_column)}
+    stated.discard(None)
+    if len(stated) > 1:
+        raise ConfigError(source, "survey.inclination_column",
+                          f"'{config.inclination_column}' and '{config.azimuth_column}' name "
+                          "different angle units")
+    from_columns = stated.pop() if stated else None
+    if config.angle_unit is not None and from_columns not in (None, config.angle_unit):
+        raise ConfigError(source, "survey.angle_unit",
+                          f"'{config.angle_unit}' contradicts the column "
+                          f"'{config.inclination_column}'")
+    return config.angle_unit or from_columns
 
 
 def _md_scale(source: str, unit: str) -> float:

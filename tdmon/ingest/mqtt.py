@@ -38,17 +38,24 @@ def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext 
     def resolve(path: Path) -> str:
         return str(path if path.is_absolute() or base is None else base / path)
 
+    tls = config.tls
+    # each file is loaded on its own, so that the error names the key and the file at fault
+    step = f"tls.ca_file {resolve(tls.ca_file)}" if tls.ca_file else "system CA certificates"
     try:
         context = ssl.create_default_context(
-            cafile=resolve(config.tls.ca_file) if config.tls.ca_file else None
+            cafile=resolve(tls.ca_file) if tls.ca_file else None
         )
-        if config.tls.cert_file is not None:
+        if tls.cert_file is not None:
+            step = f"tls.cert_file {resolve(tls.cert_file)}"
+            if tls.key_file is not None:
+                step += f" / tls.key_file {resolve(tls.key_file)}"
             context.load_cert_chain(
-                resolve(config.tls.cert_file),
-                resolve(config.tls.key_file) if config.tls.key_file else None,
+                resolve(tls.cert_file),
+                resolve(tls.key_file) if tls.key_file else None,
             )
     except (OSError, ssl.SSLError) as exc:
-        raise IngestError(f"mqtt TLS files unusable: {exc}") from exc
+        reason = "no such file" if isinstance(exc, FileNotFoundError) else str(exc)
+        raise IngestError(f"TLS {step}: {reason}") from exc
     if config.tls.insecure:
         context.check_hostname = False
     return context

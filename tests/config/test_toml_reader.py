@@ -66,7 +66,7 @@ def test_expectations_and_scenarios_report_mistakes_alike(tmp_path: Path) -> Non
     bad.write_text('replay = "x"\nconfig = "y"\n[states]\nrequired = ["tripping"]\n')
     with pytest.raises(ConfigError, match=r"states\.required\[0\]: Input should be 'in_slips'"):
         load_expectations(bad)
-    bad.write_text('[scenario]\nwell = "w.toml"\nbit_depth = 100\n[[phase]]\nkind = "fly"\n')
+    bad.write_text('[scenario]\nwell = "w.toml"\nbit_depth = "100 m"\n[[phase]]\nkind = "fly"\n')
     with pytest.raises(ConfigError, match=r"bad\.toml: phase\[0\]\.kind: Input should be"):
         load_scenario(bad)
 
@@ -89,8 +89,8 @@ def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="prefix: prefix 'rig F4' must be a plain topic path"):
         load_daemon_config(daemon)
     scenario = tmp_path / "s.toml"
-    scenario.write_text('[scenario]\nwell = "w.toml"\nbit_depth = 100\nprefix = "sim/*"\n'
-                        '[[phase]]\nkind = "static"\nduration = 10\n')
+    scenario.write_text('[scenario]\nwell = "w.toml"\nbit_depth = "100 m"\nprefix = "sim/*"\n'
+                        '[[phase]]\nkind = "static"\nduration = "10 s"\n')
     with pytest.raises(ConfigError,
                        match=r"scenario\.prefix: prefix 'sim/\*' must be a plain topic path"):
         load_scenario(scenario)

@@ -56,7 +56,7 @@ def linear_model(mu: float = 0.25, band: tuple[float, ...] = (0.1, 0.2, 0.3)) ->
 
 
 def make_config(data: dict[str, Any], folder: Path | None = None) -> DaemonConfig:
-    base = {"prefix": "rig/T1", "publish": {"status_interval": 0.2},
+    base = {"prefix": "rig/T1", "publish": {"status_interval": "0.2 s"},
             "channels": {"hookload": {"unit": "kN"}, "torque": {"unit": "kN*m"},
                          "bit_depth": {"unit": "m"}}}
     for key, value in data.items():

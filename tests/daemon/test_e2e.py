@@ -52,7 +52,7 @@ def _check_models(models: list[dict[str, Any]], sequence: list[tuple[float, ...]
 
 # the frame must wait for the bit depth of its own instant even when the machine is busy
 # (the default 0.25 s hold is about latency, not what this test checks)
-ALIGN = {"max_wait": 3.0}
+ALIGN = {"max_wait": "3 s"}
 MONITOR = {"mu": 0.25, "band_mu": [0.1, 0.2, 0.3], "method": "aadnoy", "grid_step": "1 m"}
 
 

@@ -42,7 +42,7 @@ def harness(tmp_path_factory: pytest.TempPathFactory,
     config = make_config({
         "sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{daemon_port}"],
                               "connect": [f"tcp/127.0.0.1:{rig_port}"]}},
-        "align": {"max_wait": 0.0},
+        "align": {"max_wait": "0 s"},
     }, tmp_path_factory.mktemp("fuzz"))
     conf = zenoh.Config()
     conf.insert_json5("mode", '"peer"')

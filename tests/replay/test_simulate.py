@@ -200,16 +200,16 @@ def test_replay_source_reads_simulated_files_like_recordings(simulated: list[Rea
 
 
 @pytest.mark.parametrize(("text", "message"), [
-    ("[scenario]\nwell = 'x.toml'\nbit_depth = 100\n[[phase]]\nkind = 'static'\n"
-     "duration = 10\n", "scenario.well: no such file"),
-    ("[scenario]\nbit_depth = 100\n[[phase]]\nkind = 'static'\nduration = 10\n",
+    ("[scenario]\nwell = 'x.toml'\nbit_depth = '100 m'\n[[phase]]\nkind = 'static'\n"
+     "duration = '10 s'\n", "scenario.well: no such file"),
+    ("[scenario]\nbit_depth = '100 m'\n[[phase]]\nkind = 'static'\nduration = '10 s'\n",
      "scenario.well: missing key"),
-    ("[scenario]\nwell = 'x.toml'\nbit_depth = 100\nspeed = 3\n[[phase]]\nkind = 'static'\n"
-     "duration = 10\n", "scenario.speed: unknown key"),
-    ("[scenario]\nwell = 'x.toml'\nbit_depth = 100\n[[phase]]\nkind = 'trip_in'\n",
+    ("[scenario]\nwell = 'x.toml'\nbit_depth = '100 m'\nspeed = 3\n[[phase]]\nkind = 'static'\n"
+     "duration = '10 s'\n", "scenario.speed: unknown key"),
+    ("[scenario]\nwell = 'x.toml'\nbit_depth = '100 m'\n[[phase]]\nkind = 'trip_in'\n",
      "phase[0]: Value error, a 'trip_in' phase needs 'to'"),
-    ("[scenario]\nwell = 'x.toml'\nbit_depth = 100\n[sampling]\ninterval = '5 parsecs'\n"
-     "[[phase]]\nkind = 'static'\nduration = 10\n", "sampling.interval"),
+    ("[scenario]\nwell = 'x.toml'\nbit_depth = '100 m'\n[sampling]\ninterval = '5 parsecs'\n"
+     "[[phase]]\nkind = 'static'\nduration = '10 s'\n", "sampling.interval"),
 ])
 def test_bad_scenarios_exit_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                             text: str, message: str) -> None:
