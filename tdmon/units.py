@@ -1,9 +1,11 @@
 """Unit handling at the edges: one pint registry, strings with units to SI floats.
 
 Inside tdmon every quantity is SI (N, N m, m, s, Pa, m^3/s, kg/m^3, rad) except temperatures,
-which are degC because the friction correlations are written in degC. A configured quantity is
-either a plain number, already in the internal unit, or a string such as ``"0.3 kN/m"``,
-``"9950 ft"``, ``"13 ppg"``, ``"60 degF"`` or an oilfield size such as ``"12 1/4 in"``.
+which are degC because the friction correlations are written in degC. A quantity is a string
+with its unit, such as ``"0.3 kN/m"``, ``"9950 ft"``, ``"13 ppg"``, ``"60 degF"`` or an oilfield
+size such as ``"12 1/4 in"``. :func:`parse_quantity` also takes a plain number as already SI
+(command-line flags, Python callers); files refuse a plain number for a dimensional key
+(`tdmon.config.common`), since ``block_weight = 655`` meant in kN would be read as 655 N.
 """
 
 from __future__ import annotations
