@@ -155,3 +155,4 @@ class AlarmKind(StrEnum):
     WEIGHT_CHECK = "weight_check"
     RECORDER_FAILED = "recorder_failed"
     RECORDER_RESUMED = "recorder_resumed"
+    DATA_LOSS = "data_loss"
