@@ -16,7 +16,7 @@ from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import aiomqtt
 import zenoh
@@ -138,36 +138,150 @@ class Sender(Protocol):
 
 
 class MqttSender:
-    """QoS-1 publishing with a window of unacknowledged messages (one at a time is slow)."""
+    """QoS 1 publishing with a window of unacknowledged messages that survives the broker
+    going away.
 
-    def __init__(self, client: aiomqtt.Client, qos: int = 1, window: int = 200) -> None:
-        self.client = client
+    Every message is kept until the broker acknowledges it. When the connection is lost (a
+    failed publish, or the broker closing it), the messages in flight are abandoned on the old
+    connection, the sender reconnects with backoff (``retry_initial`` doubling to
+    ``retry_max`` seconds, for ever: Ctrl-C stops it) and sends every unacknowledged message
+    again, oldest first, before any new one: at least once, in order. ``send`` waits while
+    the broker is away. ``on_state`` gets one line per loss and per reconnection.
+    """
+
+    def __init__(self, config: MqttConfig, qos: int = 1, window: int = 200,
+                 retry_initial: float = 0.5, retry_max: float = 10.0,
+                 on_state: Callable[[str], None] | None = None) -> None:
+        self.config = config
         self.qos = qos
+        self.window = window
+        self.retry_initial = retry_initial
+        self.retry_max = retry_max
+        self.on_state = on_state or (lambda line: None)
         self._window = asyncio.Semaphore(window)
+        self._unconfirmed: dict[int, tuple[str, bytes]] = {}  # insertion order = send order
+        self._next = 0
         self._tasks: set[asyncio.Task[None]] = set()
+        self._client: aiomqtt.Client | None = None
+        self._healthy = asyncio.Event()
+        self._broken = asyncio.Event()
         self._error: BaseException | None = None
-        client.pending_calls_threshold = window + 10
+        self._watch: asyncio.Task[None] | None = None
+        #: messages the broker acknowledged; reconnections; messages sent again after one
+        self.confirmed = 0
+        self.reconnects = 0
+        self.resent = 0
+
+    async def start(self) -> None:
+        """Connect the first time (a broker that is not there at all is an error)."""
+        self._client = await self._connect()
+        self._healthy.set()
+        self._watch = asyncio.create_task(self._keep_connected(), name="mqtt-publish-watch")
+
+    async def _connect(self) -> aiomqtt.Client:
+        client = make_client(self.config, self.config.client_id)
+        client.pending_calls_threshold = self.window + 10
+        try:
+            await client.__aenter__()
+        except aiomqtt.MqttError as exc:
+            raise IngestError(f"mqtt {self.config.host}:{self.config.port}: cannot connect: "
+                              f"{exc}") from exc
+        return client
+
+    @property
+    def pending(self) -> int:
+        """Messages sent or waiting to be sent again, not yet acknowledged by the broker."""
+        return len(self._unconfirmed)
 
     async def send(self, topic: str, payload: bytes) -> None:
-        if self._error is not None:
-            raise IngestError(f"mqtt publish failed: {self._error}") from self._error
         await self._window.acquire()
-        task = asyncio.create_task(self._publish(topic, payload))
+        await self._healthy.wait()
+        number = self._next
+        self._next += 1
+        self._unconfirmed[number] = (topic, payload)
+        self._spawn(number)
+
+    def _spawn(self, number: int) -> None:
+        assert self._client is not None
+        task = asyncio.create_task(self._publish(self._client, number))
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    async def _publish(self, topic: str, payload: bytes) -> None:
+    async def _publish(self, client: aiomqtt.Client, number: int) -> None:
+        topic, payload = self._unconfirmed[number]
         try:
-            await self.client.publish(topic, payload, qos=self.qos)
+            await client.publish(topic, payload, qos=self.qos)
         except aiomqtt.MqttError as exc:
-            self._error = exc
-        finally:
+            # kept (and its window slot held) for sending again on the next connection
+            if client is self._client and self._healthy.is_set():
+                self._error = exc
+                self._healthy.clear()
+                self._broken.set()
+            return
+        if self._unconfirmed.pop(number, None) is not None:
+            self.confirmed += 1
             self._window.release()
 
+    async def _keep_connected(self) -> None:
+        while True:
+            client = self._client
+            assert client is not None
+            # aiomqtt resolves this private future when the broker closes the connection
+            gone: asyncio.Future[Any] = asyncio.ensure_future(
+                asyncio.shield(client._disconnected))  # private
+            broken: asyncio.Future[Any] = asyncio.ensure_future(self._broken.wait())
+            await asyncio.wait([gone, broken], return_when=asyncio.FIRST_COMPLETED)
+            for waiter in (gone, broken):
+                waiter.cancel()
+            await asyncio.gather(gone, broken, return_exceptions=True)
+            self._healthy.clear()
+            reason = self._error or (client._disconnected.exception()  # private, see above
+                                     if client._disconnected.done() else None)
+            stranded = list(self._tasks)
+            for task in stranded:
+                task.cancel()
+            await asyncio.gather(*stranded, return_exceptions=True)
+            with contextlib.suppress(aiomqtt.MqttError, OSError):
+                await client.__aexit__(None, None, None)
+            delay = self.retry_initial
+            while True:
+                self.on_state(f"broker lost ({reason or 'connection closed'}); "
+                              f"{len(self._unconfirmed)} unacknowledged; reconnecting in "
+                              f"{delay:g} s")
+                await asyncio.sleep(delay)
+                try:
+                    self._client = await self._connect()
+                    break
+                except IngestError as exc:
+                    reason = exc
+                    delay = min(delay * 2, self.retry_max)
+            self.reconnects += 1
+            self._error = None
+            self._broken.clear()
+            waiting = list(self._unconfirmed)
+            self.resent += len(waiting)
+            self.on_state(f"reconnected; sending {len(waiting)} unacknowledged message(s) again")
+            for number in waiting:  # created before any new send: sent first, in order
+                self._spawn(number)
+            self._healthy.set()
+
     async def flush(self) -> None:
-        await asyncio.gather(*list(self._tasks))
-        if self._error is not None:
-            raise IngestError(f"mqtt publish failed: {self._error}") from self._error
+        """Wait until the broker has acknowledged every message (reconnecting if need be)."""
+        while self._unconfirmed:
+            await asyncio.sleep(0.02)
+
+    async def close(self) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            await asyncio.gather(self._watch, return_exceptions=True)
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._client is not None:
+            # already gone is fine: what was not acknowledged is counted by the caller
+            with contextlib.suppress(aiomqtt.MqttError, OSError):
+                await self._client.__aexit__(None, None, None)
+            self._client = None
 
 
 class ZenohSender:
@@ -190,20 +304,17 @@ class ZenohSender:
 
 
 @asynccontextmanager
-async def mqtt_sender(config: MqttConfig, qos: int = 1) -> AsyncIterator[MqttSender]:
-    client = make_client(config, config.client_id)
+async def mqtt_sender(config: MqttConfig, qos: int = 1,
+                      on_state: Callable[[str], None] | None = None
+                      ) -> AsyncIterator[MqttSender]:
+    """A connected :class:`MqttSender`; on leaving normally, waits for every acknowledgement."""
+    sender = MqttSender(config, qos, on_state=on_state)
+    await sender.start()
     try:
-        await client.__aenter__()
-    except aiomqtt.MqttError as exc:
-        raise IngestError(f"mqtt {config.host}:{config.port}: cannot connect: {exc}") from exc
-    try:
-        sender = MqttSender(client, qos)
         yield sender
         await sender.flush()
     finally:
-        # already gone is fine: the flush above has reported any loss
-        with contextlib.suppress(aiomqtt.MqttError):
-            await client.__aexit__(None, None, None)
+        await sender.close()
 
 
 @asynccontextmanager
