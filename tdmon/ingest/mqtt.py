@@ -106,6 +106,11 @@ def _translate(config: MqttConfig, what: str, exc: BaseException) -> IngestError
     return IngestError(f"{describe(config)}: {what}: {text}")
 
 
+def connect_error(config: MqttConfig, exc: BaseException) -> IngestError:
+    """The one-line error for a failed connection (naming bad credentials as such)."""
+    return _translate(config, "cannot connect", exc)
+
+
 class _Inbox(asyncio.Queue[aiomqtt.Message]):
     """A client's incoming-message queue whose object the source holds.
 

@@ -25,7 +25,7 @@ from tdmon.channels import check_channel
 from tdmon.config.daemon import MqttConfig, ZenohConfig
 from tdmon.errors import IngestError
 from tdmon.ingest.mcap_source import iter_raw
-from tdmon.ingest.mqtt import make_client
+from tdmon.ingest.mqtt import connect_error, make_client
 from tdmon.ingest.zenoh_io import open_session
 from tdmon.units import parse_time
 
@@ -74,11 +74,13 @@ def parse_columns(text: str) -> tuple[Column, ...]:
 
 def csv_messages(
     path: Path, prefix: str, columns: Iterable[Column] = VOLVE_COLUMNS,
-    time_column: str = "time_utc", shift: float = 0.0,
+    time_column: str = "time_utc", shift: float = 0.0, seq: bool = False,
 ) -> Iterator[tuple[float, str, bytes]]:
     """One message per non-empty mapped cell: ``(t, topic, payload)``, times shifted by
-    ``shift`` seconds. Columns missing from the file are an error."""
+    ``shift`` seconds. Columns missing from the file are an error. ``seq``: number each
+    topic's messages 1, 2, ... in the payload (the daemon counts gaps in it as lost)."""
     columns = tuple(columns)
+    counters = dict.fromkeys((c.channel for c in columns), 0)
     try:
         handle = path.open(newline="", encoding="utf-8")
     except OSError as exc:
@@ -104,7 +106,11 @@ def csv_messages(
                 except ValueError:
                     raise IngestError(f"{path}:{line}: {column.column} is not a number: "
                                       f"'{cell}'") from None
-                body = {"t": t + shift, "value": value, "unit": column.unit}
+                body: dict[str, object] = {"t": t + shift, "value": value,
+                                           "unit": column.unit}
+                if seq:
+                    counters[column.channel] += 1
+                    body["seq"] = counters[column.channel]
                 yield t + shift, f"{prefix}/{column.channel}", json.dumps(body).encode()
 
 
@@ -129,6 +135,34 @@ def recording_messages(path: Path, prefix: str | None = None
             if prefix is not None:
                 topic = f"{prefix}/{topic.rsplit('/', 1)[-1]}"
             yield log_ns / 1e9, topic, raw.payload
+
+
+def csv_message_count(path: Path, columns: Iterable[Column] = VOLVE_COLUMNS) -> int:
+    """How many messages :func:`csv_messages` sends for ``path`` (non-empty mapped cells),
+    without parsing a number (for a progress bar); 0 when the file cannot be read."""
+    names = [c.column for c in columns]
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle)
+            return sum(1 for row in reader for name in names if (row.get(name) or "").strip())
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return 0
+
+
+def recording_message_count(path: Path) -> int | None:
+    """How many raw inputs a recording holds, from its summary (None: not stated)."""
+    from mcap.reader import make_reader
+
+    try:
+        with path.open("rb") as handle:
+            summary = make_reader(handle).get_summary()
+    except Exception:  # not MCAP, truncated, no summary: the count is only for display
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    counts = summary.statistics.channel_message_counts
+    raw = [counts.get(cid, 0) for cid, ch in summary.channels.items() if ch.topic == "/tdmon/raw"]
+    return sum(raw) if raw else None
 
 
 class Sender(Protocol):
@@ -184,8 +218,7 @@ class MqttSender:
         try:
             await client.__aenter__()
         except aiomqtt.MqttError as exc:
-            raise IngestError(f"mqtt {self.config.host}:{self.config.port}: cannot connect: "
-                              f"{exc}") from exc
+            raise connect_error(self.config, exc) from exc
         return client
 
     @property
