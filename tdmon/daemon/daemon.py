@@ -129,7 +129,9 @@ class AckWindow:
 def recorders_of(sinks: Iterable[Any]) -> list[Any]:
     """The sinks that buffer before their file: a ``flush()`` and ``stats.flushes``."""
     return [sink for sink in sinks
-            if callable(getattr(sink, "flush", None)) and hasattr(type(sink), "stats")]
+            if callable(getattr(sink, "flush", None))
+            and isinstance(getattr(type(sink), "stats", None), property)
+            and hasattr(sink.stats, "flushes")]
 
 
 class Daemon:
