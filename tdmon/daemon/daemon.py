@@ -61,23 +61,28 @@ class AckWindow:
 
     ``recorders`` are the sinks that hold messages in memory before their file (they have
     ``flush()`` and ``stats.flushes``); without any, a message is acknowledged as soon as it is
-    processed. Each batch of acknowledgements is marked with the recorders' flush count read
-    after its messages were written: it may go once that count has grown (the recorder's own
-    flush, every ``[recorder] flush_interval``, covered it). The broker sends only a limited
-    number of unacknowledged messages (mosquitto's ``max_inflight_messages``), so waiting for the
-    next scheduled flush could starve it; the window flushes the recorders itself when
-    ``batch`` acknowledgements wait, when at least ``idle_min`` wait and no message has come for
-    ``idle_s`` (the broker is waiting for us), or when the oldest has waited ``max_age_s``.
+    processed. Every ``check_s`` the window reads the recorders' flush count; when it has grown
+    since the previous reading, every acknowledgement that was already waiting at that reading
+    may go (the recorder's own flush, every ``[recorder] flush_interval``, came after those
+    messages were written). The broker sends only a limited number of unacknowledged messages
+    (mosquitto's ``max_inflight_messages``), so waiting for the next scheduled flush could
+    starve it; the window flushes the recorders itself when ``batch`` acknowledgements wait,
+    when at least ``idle_min`` wait and no message has come for ``idle_s`` (the broker is
+    waiting for us), or when the oldest has waited ``max_age_s``.
     """
 
     def __init__(self, recorders: Iterable[Any], batch: int = 500, idle_s: float = 0.05,
-                 idle_min: int = 16, max_age_s: float = 5.0) -> None:
+                 idle_min: int = 16, max_age_s: float = 5.0, check_s: float = 0.05) -> None:
         self.recorders = list(recorders)
         self.batch = batch
         self.idle_s = idle_s
         self.idle_min = idle_min
         self.max_age_s = max_age_s
-        self._pending: deque[tuple[int, float, Callable[[], None]]] = deque()
+        self.check_s = check_s
+        self._pending: deque[tuple[float, Callable[[], None]]] = deque()
+        self._last_check = float("-inf")
+        self._flushes_seen = 0
+        self._covered = 0  # leading entries that were waiting when _flushes_seen was read
         self.acknowledged = 0
         self.forced_flushes = 0
 
@@ -92,8 +97,7 @@ class AckWindow:
         if not self.recorders:
             self._ack(acks)
             return
-        mark = self.flushes()
-        self._pending.extend((mark, now, ack) for ack in acks)
+        self._pending.extend((now, ack) for ack in acks)
 
     def release(self, now: float, idle: float, force: bool = False) -> None:
         """Acknowledge what the recorders have flushed; flush them first when it is time
@@ -103,19 +107,24 @@ class AckWindow:
             return
         count = len(pending)
         if (force or count >= self.batch or (idle >= self.idle_s and count >= self.idle_min)
-                or now - pending[0][1] >= self.max_age_s):
+                or now - pending[0][0] >= self.max_age_s):
             for recorder in self.recorders:
                 recorder.flush()  # a failed recorder flushes nothing: monitoring goes on
             self.forced_flushes += 1
-            acks = [ack for _, _, ack in pending]
+            acks = [ack for _, ack in pending]
             pending.clear()
+            self._covered = 0
             self._ack(acks)
             return
-        flushed = self.flushes()
-        acks = []
-        while pending and pending[0][0] < flushed:
-            acks.append(pending.popleft()[2])
-        self._ack(acks)
+        if now - self._last_check < self.check_s:
+            return
+        self._last_check = now
+        flushes = self.flushes()  # a snapshot of each recorder's counters: not per message
+        if flushes > self._flushes_seen:
+            acks = [pending.popleft()[1] for _ in range(self._covered)]
+            self._ack(acks)
+        self._flushes_seen = flushes
+        self._covered = len(pending)
 
     def _ack(self, acks: list[Callable[[], None]]) -> None:
         for ack in acks:

@@ -55,9 +55,18 @@ def test_acks_wait_for_the_recorders_flush() -> None:
     window.add([lambda i=i: acked.append(i) for i in range(2)], now=0.0)
     window.release(now=0.01, idle=0.01)
     assert acked == [] and len(window) == 2  # not flushed yet
+    window.add([lambda: acked.append(99)], now=0.02)  # written after that look
     recorder.flush()  # the recorder's own schedule
-    window.release(now=0.02, idle=0.0)
-    assert acked == [0, 1] and len(window) == 0 and window.forced_flushes == 0
+    window.release(now=0.03, idle=0.0)
+    assert acked == []  # looks at the recorder at most every check_s
+    window.release(now=0.1, idle=0.0)
+    assert acked == [0, 1] and len(window) == 1 and window.forced_flushes == 0
+    window.release(now=0.2, idle=0.0)
+    assert acked == [0, 1]  # 99 was written before the flush but seen waiting only after it
+    recorder.flush()
+    window.release(now=0.3, idle=0.0)
+    assert acked == [0, 1, 99]
+    acked.remove(99)
     # idle with too few waiting: nothing; with idle_min waiting: flush and go
     window.add([lambda: acked.append(2), lambda: acked.append(3)], now=1.0)
     window.release(now=1.1, idle=1.0)
