@@ -156,3 +156,4 @@ class AlarmKind(StrEnum):
     RECORDER_FAILED = "recorder_failed"
     RECORDER_RESUMED = "recorder_resumed"
     RECORDING_RECOVERED = "recording_recovered"
+    DATA_LOSS = "data_loss"

@@ -19,6 +19,10 @@ from pathlib import Path
 import pytest
 
 MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+#: The broker configuration tdmon ships (docs/daemon.md, "The broker").
+SHIPPED_CONF = Path(__file__).resolve().parents[1] / "config" / "mosquitto" / "tdmon.conf"
+#: Lines of the shipped file a test broker replaces: its port, store and log are its own.
+_REPLACED = ("listener", "persistence_location", "log_dest", "allow_anonymous")
 
 
 def free_port() -> int:
@@ -44,12 +48,18 @@ class Mosquitto:
 
     def __init__(self, workdir: Path, port: int | None = None, extra: str = "",
                  persistence: bool = False, listener_extra: str = "",
-                 allow_anonymous: bool = True) -> None:
+                 allow_anonymous: bool = True, shipped: bool = False,
+                 overrides: dict[str, str] | None = None) -> None:
+        """``shipped``: start from config/mosquitto/tdmon.conf (persistence on) with this
+        broker's port, store and log; ``overrides`` replace its settings by key."""
         self.workdir = workdir
         self.port = port or free_port()
         self.process: subprocess.Popen[bytes] | None = None
         workdir.mkdir(parents=True, exist_ok=True)
         _chown_to_mosquitto(workdir)
+        if shipped:
+            self._write_config(self._shipped_lines(overrides or {}))
+            return
         lines = [
             "per_listener_settings true",
             f"listener {self.port} 127.0.0.1",
@@ -70,10 +80,29 @@ class Mosquitto:
             lines += ["persistence true", f"persistence_location {store}/",
                       "autosave_interval 1"]
         lines.append(extra)
-        self.config = workdir / "mosquitto.conf"
+        self._write_config(lines)
+
+    def _shipped_lines(self, overrides: dict[str, str]) -> list[str]:
+        store = self.workdir / "store"
+        store.mkdir(exist_ok=True)
+        _chown_to_mosquitto(store)
+        lines = [f"listener {self.port} 127.0.0.1", "allow_anonymous true",
+                 f"persistence_location {store}/",
+                 f"log_dest file {self.workdir / 'mosquitto.log'}"]
+        for line in SHIPPED_CONF.read_text().splitlines():
+            setting = line.split("#", 1)[0].split()
+            key = setting[0] if setting else ""
+            if not key or key in _REPLACED:
+                continue
+            lines.append(f"{key} {overrides.pop(key)}" if key in overrides else line)
+        lines += [f"{key} {value}" for key, value in overrides.items()]
+        return lines
+
+    def _write_config(self, lines: list[str]) -> None:
+        self.config = self.workdir / "mosquitto.conf"
         self.config.write_text("\n".join(line for line in lines if line) + "\n")
-        (workdir / "mosquitto.log").touch()
-        _chown_to_mosquitto(workdir / "mosquitto.log")
+        (self.workdir / "mosquitto.log").touch()
+        _chown_to_mosquitto(self.workdir / "mosquitto.log")
 
     def start(self) -> None:
         self.process = subprocess.Popen([MOSQUITTO, "-c", str(self.config)],
@@ -146,6 +175,27 @@ def mosquitto(broker_dir: Path) -> Iterator[Mosquitto]:
         yield broker
     finally:
         broker.stop()
+
+
+@pytest.fixture
+def shipped_mosquitto(broker_dir: Path) -> Iterator[Callable[..., Mosquitto]]:
+    """``shipped_mosquitto(**overrides)``: a started broker with the shipped configuration
+    (config/mosquitto/tdmon.conf) on a free port, its store in a temporary folder; keyword
+    arguments replace settings (``max_queued_messages="50"``). Stopped after the test."""
+    started: list[Mosquitto] = []
+
+    def make(**overrides: str) -> Mosquitto:
+        broker = Mosquitto(broker_dir / f"shipped{len(started)}", shipped=True,
+                           overrides=overrides)
+        broker.start()
+        started.append(broker)
+        return broker
+
+    try:
+        yield make
+    finally:
+        for broker in started:
+            broker.stop()
 
 
 @pytest.fixture

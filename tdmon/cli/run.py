@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import logging
+import os
+import signal
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Coroutine, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,6 +19,9 @@ from tdmon.errors import TdmonError
 
 if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
+
+#: Environment variable ``tdmon publish`` takes the MQTT password from when no option names one.
+PASSWORD_ENV = "TDMON_MQTT_PASSWORD"
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -43,7 +49,13 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--prefix", help="topic prefix (default: the config's, else rig/F4)")
     pub.add_argument("--mqtt", metavar="HOST:PORT", help="MQTT broker")
     pub.add_argument("--username")
-    pub.add_argument("--password")
+    pub.add_argument("--password", help="MQTT password (visible to other users in the process "
+                                        "list: prefer --password-file or --password-env)")
+    pub.add_argument("--password-file", type=Path,
+                     help="read the MQTT password from this file (first line)")
+    pub.add_argument("--password-env", metavar="NAME",
+                     help="read the MQTT password from this environment variable (without "
+                          f"any password option: {PASSWORD_ENV} if set)")
     pub.add_argument("--ca-file", type=Path, help="CA certificate: connect with TLS")
     pub.add_argument("--client-id", default="tdmon-rig")
     pub.add_argument("--qos", type=int, default=1, choices=[0, 1, 2])
@@ -57,6 +69,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--now", action="store_true",
                      help="shift times so that the first row is now (live-looking data)")
     pub.add_argument("--limit", type=int, help="stop after this many messages")
+    pub.add_argument("--seq", action="store_true",
+                     help="number each channel's messages (\"seq\": 1, 2, ...) so that the "
+                          "daemon can count the ones that never arrive (CSV sources)")
     pub.set_defaults(func=_publish)
 
 
@@ -142,19 +157,24 @@ def _publish(args: argparse.Namespace) -> int:
             raise TdmonError("--speed must be positive")
 
     messages: Iterable[tuple[float, str, bytes]]
+    total: int | None
     if args.source.suffix.lower() == ".mcap":
         first = next(iter(pub.recording_messages(args.source, prefix)), None)
         shift = time.time() - first[0] if args.now and first else 0.0
         messages = ((t + shift, topic, body) for t, topic, body in
                     pub.recording_messages(args.source, prefix))
+        total = pub.recording_message_count(args.source)
     else:
         columns = pub.parse_columns(args.columns) if args.columns else pub.VOLVE_COLUMNS
         first = next(iter(pub.csv_messages(args.source, prefix, columns, args.time_column)),
                      None)
         shift = time.time() - first[0] if args.now and first else 0.0
-        messages = pub.csv_messages(args.source, prefix, columns, args.time_column, shift)
+        messages = pub.csv_messages(args.source, prefix, columns, args.time_column, shift,
+                                    seq=args.seq)
+        total = pub.csv_message_count(args.source, columns)
     if args.limit is not None:
         messages = islice(messages, args.limit)
+        total = args.limit if total is None else min(total, args.limit)
 
     mqtt: MqttConfig | None = None
     zenoh: ZenohConfig | None = None
@@ -163,14 +183,19 @@ def _publish(args: argparse.Namespace) -> int:
         if not host or not port.isdigit():
             raise TdmonError(f"--mqtt must be HOST:PORT, got '{args.mqtt}'")
         mqtt = MqttConfig(host=host, port=int(port), client_id=args.client_id,
-                          username=args.username, password=args.password,
+                          username=args.username, password=_password(args),
                           tls=TlsConfig(ca_file=args.ca_file) if args.ca_file else None,
                           clean_session=True)
     elif args.zenoh_connect or args.zenoh_listen:
         zenoh = ZenohConfig(connect=args.zenoh_connect, listen=args.zenoh_listen)
     elif config is not None and config.sources.mqtt is not None:
-        mqtt = config.sources.mqtt.model_copy(
-            update={"client_id": args.client_id, "clean_session": True})
+        update: dict[str, Any] = {"client_id": args.client_id, "clean_session": True}
+        password = _password(args, fallback=config.sources.mqtt.resolved_password())
+        if password is not None:
+            update["password"] = password
+        if args.username:
+            update["username"] = args.username
+        mqtt = config.sources.mqtt.model_copy(update=update)
     elif config is not None and config.sources.zenoh is not None:
         source = config.sources.zenoh
         zenoh = ZenohConfig(mode="peer" if source.mode == "peer" else "client",
@@ -178,30 +203,122 @@ def _publish(args: argparse.Namespace) -> int:
     else:
         raise TdmonError("say where to publish: --config, --mqtt or --zenoh-connect")
 
+    def say(line: str) -> None:
+        print(f"tdmon: publish: {line}", file=sys.stderr, flush=True)
+
+    stopped_by: list[str] = []
+
     async def main() -> int:
-        progress = _progress()
+        # Explicit handlers: a job started in the background of a non-interactive shell
+        # inherits SIGINT ignored, and asyncio.run only handles SIGINT when it is not.
+        loop = asyncio.get_running_loop()
+        task = asyncio.current_task()
+        assert task is not None
+
+        def stop(name: str) -> None:
+            if not stopped_by:
+                stopped_by.append(name)
+                task.cancel()
+
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(signum, stop, signum.name)
+        progress = _progress(total)
+        sent = [0]
+
+        def on_sent(count: int) -> None:
+            sent[0] = count
+            progress(count)
+
         try:
             if mqtt is not None:
-                async with pub.mqtt_sender(mqtt, args.qos) as sender:
-                    return await pub.publish(messages, sender, speed, progress)
+                sender = pub.MqttSender(mqtt, args.qos, on_state=say)
+                await sender.start()
+                try:
+                    await _interruptible(pub.publish(messages, sender, speed, on_sent),
+                                         stopped_by)
+                    if stopped_by:  # what is in flight gets a moment to be acknowledged
+                        with contextlib.suppress(TimeoutError):
+                            await asyncio.wait_for(sender.flush(), 5.0)
+                finally:
+                    await sender.close()
+                if sender.reconnects:
+                    say(f"{sender.reconnects} reconnection(s), {sender.resent} message(s) "
+                        "sent again")
+                return sender.confirmed
             assert zenoh is not None
             async with pub.zenoh_sender(zenoh) as zsender:
-                return await pub.publish(messages, zsender, speed, progress)
+                await _interruptible(pub.publish(messages, zsender, speed, on_sent),
+                                     stopped_by)
+            return sent[0]
         finally:
             progress(None)
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                loop.remove_signal_handler(signum)
 
     count = asyncio.run(main())
+    of = f" of {total}" if total is not None else ""
+    if stopped_by:
+        print(f"tdmon: publish stopped by {stopped_by[0]}: {count}{of} messages delivered on "
+              f"{prefix}/...", file=sys.stderr)
+        return 130 if stopped_by[0] == "SIGINT" else 143
     print(f"tdmon: published {count} messages on {prefix}/...", file=sys.stderr)
     return 0
 
 
-def _progress() -> Any:
-    """A callback updating a tqdm bar on a terminal (and nothing otherwise)."""
+async def _interruptible(work: Coroutine[Any, Any, int], stopped_by: list[str]) -> None:
+    """Run ``work``; a cancellation from our own signal handler ends it quietly."""
+    try:
+        await work
+    except asyncio.CancelledError:
+        if not stopped_by:
+            raise
+        task = asyncio.current_task()
+        if task is not None:
+            task.uncancel()
+
+
+def _password(args: argparse.Namespace, fallback: str | None = None) -> str | None:
+    """The MQTT password: --password, --password-file, --password-env, the config's, or
+    $TDMON_MQTT_PASSWORD, in that order."""
+    if args.password is not None:
+        return str(args.password)
+    if args.password_file is not None:
+        return read_password_file(args.password_file, "--password-file")
+    if args.password_env is not None:
+        value = os.environ.get(args.password_env)
+        if value is None:
+            raise TdmonError(f"--password-env: environment variable {args.password_env} is "
+                             "not set")
+        return value
+    if fallback is not None:
+        return fallback
+    return os.environ.get(PASSWORD_ENV)
+
+
+def read_password_file(path: Path, what: str) -> str:
+    """The first line of a password file; warns when others may read it."""
+    try:
+        text = path.read_text(encoding="utf-8")
+        mode = path.stat().st_mode
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TdmonError(f"{what}: cannot read {path}: {exc}") from None
+    password = text.splitlines()[0] if text else ""
+    if not password:
+        raise TdmonError(f"{what}: {path} is empty: put the password on its first line")
+    if mode & 0o077:
+        print(f"tdmon: warning: {path} holds a clear-text password and is readable by others "
+              f"(chmod 600 {path})", file=sys.stderr)
+    return password
+
+
+def _progress(total: int | None = None) -> Any:
+    """A callback updating a tqdm bar on a terminal (and nothing otherwise): count, rate and,
+    when the number of messages is known, total and time left."""
     if not sys.stderr.isatty():
         return lambda count: None
     from tqdm import tqdm
 
-    bar = tqdm(unit="msg", file=sys.stderr)
+    bar = tqdm(unit="msg", file=sys.stderr, total=total)
     state = {"last": 0}
 
     def update(count: int | None) -> None:

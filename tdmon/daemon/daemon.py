@@ -3,9 +3,15 @@
 Backpressure: sources ``await queue.put``, so a slow pipeline slows the sources down instead of
 losing data (the Zenoh bridge then blocks zenoh, and MQTT messages wait in the client). The only
 places that can drop are the publisher queues, and they count every drop into the status.
-Shutdown (``stop`` set, e.g. by SIGINT/SIGTERM): stop the sources, process everything already
-queued, flush the aligner and the steps, send a last status, give the publishers time to send
-what they hold, then close every sink.
+Shutdown (``stop`` set, e.g. by SIGINT/SIGTERM): stop taking messages from the sources, process
+everything already queued, flush the recorder and acknowledge what it holds (the sources'
+connections are still open for that), close the sources, flush the aligner and the steps, send a
+last status, give the publishers time to send what they hold, then close every sink.
+
+Acknowledgements (at-least-once, docs/daemon.md): a message with an ``ack`` is acknowledged to
+its transport only once the pipeline has processed it and the recorder has flushed it into its
+file (:class:`AckWindow`), so a daemon killed at any moment leaves every unrecorded message with
+the broker, which sends it again.
 """
 
 from __future__ import annotations
@@ -13,7 +19,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections import deque
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -49,6 +56,93 @@ class ConnectedPublisher(Protocol):
     async def drain(self, timeout: float) -> bool: ...
 
 
+class AckWindow:
+    """Acknowledgements waiting for the recorder to flush what they acknowledge.
+
+    ``recorders`` are the sinks that hold messages in memory before their file (they have
+    ``flush()`` and ``stats.flushes``); without any, a message is acknowledged as soon as it is
+    processed. Every ``check_s`` the window reads the recorders' flush count; when it has grown
+    since the previous reading, every acknowledgement that was already waiting at that reading
+    may go (the recorder's own flush, every ``[recorder] flush_interval``, came after those
+    messages were written). The broker sends only a limited number of unacknowledged messages
+    (mosquitto's ``max_inflight_messages``), so waiting for the next scheduled flush could
+    starve it; the window flushes the recorders itself when ``batch`` acknowledgements wait,
+    when at least ``idle_min`` wait and no message has come for ``idle_s`` (the broker is
+    waiting for us), or when the oldest has waited ``max_age_s``.
+    """
+
+    def __init__(self, recorders: Iterable[Any], batch: int = 500, idle_s: float = 0.05,
+                 idle_min: int = 16, max_age_s: float = 5.0, check_s: float = 0.05) -> None:
+        self.recorders = list(recorders)
+        self.batch = batch
+        self.idle_s = idle_s
+        self.idle_min = idle_min
+        self.max_age_s = max_age_s
+        self.check_s = check_s
+        self._pending: deque[tuple[float, Callable[[], None]]] = deque()
+        self._last_check = float("-inf")
+        self._flushes_seen = 0
+        self._covered = 0  # leading entries that were waiting when _flushes_seen was read
+        self.acknowledged = 0
+        self.forced_flushes = 0
+
+    def __len__(self) -> int:
+        return len(self._pending)
+
+    def flushes(self) -> int:
+        return sum(int(recorder.stats.flushes) for recorder in self.recorders)
+
+    def add(self, acks: list[Callable[[], None]], now: float) -> None:
+        """Acknowledgements of messages just written; released by :meth:`release`."""
+        if not self.recorders:
+            self._ack(acks)
+            return
+        self._pending.extend((now, ack) for ack in acks)
+
+    def release(self, now: float, idle: float, force: bool = False) -> None:
+        """Acknowledge what the recorders have flushed; flush them first when it is time
+        (``idle``: seconds since the last message arrived; ``force``: always)."""
+        pending = self._pending
+        if not pending:
+            return
+        count = len(pending)
+        if (force or count >= self.batch or (idle >= self.idle_s and count >= self.idle_min)
+                or now - pending[0][0] >= self.max_age_s):
+            for recorder in self.recorders:
+                recorder.flush()  # a failed recorder flushes nothing: monitoring goes on
+            self.forced_flushes += 1
+            acks = [ack for _, ack in pending]
+            pending.clear()
+            self._covered = 0
+            self._ack(acks)
+            return
+        if now - self._last_check < self.check_s:
+            return
+        self._last_check = now
+        flushes = self.flushes()  # a snapshot of each recorder's counters: not per message
+        if flushes > self._flushes_seen:
+            acks = [pending.popleft()[1] for _ in range(self._covered)]
+            self._ack(acks)
+        self._flushes_seen = flushes
+        self._covered = len(pending)
+
+    def _ack(self, acks: list[Callable[[], None]]) -> None:
+        for ack in acks:
+            try:
+                ack()
+            except Exception:  # a transport that cannot acknowledge resends: not fatal
+                log.debug("acknowledgement failed", exc_info=True)
+        self.acknowledged += len(acks)
+
+
+def recorders_of(sinks: Iterable[Any]) -> list[Any]:
+    """The sinks that buffer before their file: a ``flush()`` and ``stats.flushes``."""
+    return [sink for sink in sinks
+            if callable(getattr(sink, "flush", None))
+            and isinstance(getattr(type(sink), "stats", None), property)
+            and hasattr(sink.stats, "flushes")]
+
+
 class Daemon:
     """Compose sources, the pipeline and connected publishers; run until ``stop``."""
 
@@ -77,11 +171,16 @@ class Daemon:
         self.connections: dict[str, str] = {}
         self.queue: asyncio.Queue[RawMessage | None] | None = None
         self.started = asyncio.Event()
+        self.acks = AckWindow(())
+        self._accepting = True
+        self._last_arrival = time.monotonic()
 
     async def run(self, stop: asyncio.Event | None = None) -> None:
         stop = stop or asyncio.Event()
         queue: asyncio.Queue[RawMessage | None] = asyncio.Queue(maxsize=self.queue_size)
         self.queue = queue
+        self.acks = AckWindow(recorders_of(self.pipeline.sinks))
+        self._accepting = True
         source_tasks = [
             asyncio.create_task(self._supervise_source(spec, queue), name=f"source {spec.name}")
             for spec in self.sources
@@ -117,6 +216,9 @@ class Daemon:
                                 queue: asyncio.Queue[RawMessage | None]) -> None:
         async def pump(source: AsyncIterator[RawMessage]) -> None:
             async for raw in source:
+                if not self._accepting:
+                    continue  # shutting down: left unacknowledged, the broker keeps it
+                self._last_arrival = time.monotonic()
                 # put_nowait skips a coroutine round trip per message; await only when full
                 if queue.full():
                     await queue.put(raw)
@@ -128,25 +230,46 @@ class Daemon:
 
     async def _consume(self, queue: asyncio.Queue[RawMessage | None]) -> None:
         process = self.pipeline.process
+        stats = self.pipeline.stats
+        acks: list[Callable[[], None]] = []
         handled = 0
         while True:
             raw = await queue.get()
             while True:
                 if raw is None:
+                    self._settle(acks)
                     return
-                process(raw)
+                if raw.duplicate:
+                    stats.duplicate_deliveries += 1  # already handed to the pipeline this run
+                else:
+                    if raw.redelivered:
+                        stats.redelivered += 1
+                    process(raw)
+                if raw.ack is not None:
+                    acks.append(raw.ack)
                 handled += 1
                 if handled % 256 == 0 or queue.empty():
                     break
                 raw = queue.get_nowait()
+            self._settle(acks)
             # give the sources and the housekeeping a turn between bursts
             await asyncio.sleep(0)
+
+    def _settle(self, acks: list[Callable[[], None]]) -> None:
+        """Hand a burst's acknowledgements to the window and release what may go."""
+        now = time.monotonic()
+        if acks:
+            self.acks.add(acks, now)
+            acks.clear()
+        self.acks.release(now, now - self._last_arrival)
 
     async def _housekeeping(self) -> None:
         next_status = time.monotonic() + self.status_interval
         while True:
             await asyncio.sleep(self.tick_interval)
             self.pipeline.tick()
+            now = time.monotonic()
+            self.acks.release(now, now - self._last_arrival)
             if time.monotonic() >= next_status:
                 next_status += self.status_interval
                 self.emit_status()
@@ -162,17 +285,23 @@ class Daemon:
         consumer: asyncio.Task[None],
         housekeeping: asyncio.Task[None],
     ) -> None:
+        # Sources stay connected until what they delivered is processed and acknowledged;
+        # what they deliver meanwhile is left unacknowledged for the next run.
+        self._accepting = False
+        housekeeping.cancel()
+        await asyncio.gather(housekeeping, return_exceptions=True)
+        if not consumer.done():
+            await queue.put(None)  # everything queued before this is still processed
+            await asyncio.gather(consumer, return_exceptions=True)
+        if len(self.acks):
+            self.acks.release(time.monotonic(), 0.0, force=True)
+            await asyncio.sleep(0.2)  # let the transports write the acknowledgements out
         for task in source_tasks:
             task.cancel()
         await asyncio.gather(*source_tasks, return_exceptions=True)
         for spec in self.sources:
             if self.connections.get(spec.name) != ConnectionState.FINISHED:
                 self.connections[spec.name] = ConnectionState.CLOSED
-        housekeeping.cancel()
-        await asyncio.gather(housekeeping, return_exceptions=True)
-        if not consumer.done():
-            await queue.put(None)  # everything queued before this is still processed
-            await asyncio.gather(consumer, return_exceptions=True)
         self.pipeline.flush()
         self.emit_status()
         for publisher in self.publishers:

@@ -26,6 +26,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
+from tdmon.daemon.loss import LossDetector
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
     RECORDED_PAYLOAD_BYTES,
@@ -90,6 +91,14 @@ class Stats:
     frames: int = 0
     step_errors: int = 0
     sink_errors: int = 0
+    redelivered: int = 0
+    """Messages the transport marked as sent again (MQTT DUP) that this run had not seen."""
+    duplicate_deliveries: int = 0
+    """Redelivered messages this run had already handed to the pipeline: not processed again."""
+    seq_lost: int = 0
+    """Messages missing from the publishers' ``seq`` counters."""
+    sampling_gaps: int = 0
+    """Silences much longer than a channel's usual sampling interval."""
     last_sample_t: float | None = None
     rejected_reasons: dict[str, int] = field(default_factory=dict)
 
@@ -134,6 +143,7 @@ class Pipeline:
         # which it rejects, as a bounded prefix with their size and hash.
         self._recorded_payload_bytes = max(RECORDED_PAYLOAD_BYTES,
                                            getattr(decoder, "max_payload_bytes", 0))
+        self.loss = LossDetector()
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
@@ -171,6 +181,10 @@ class Pipeline:
         stats.last_sample_t = decoded.t
         if self._sinks_for("/tdmon/sample"):
             self._write("/tdmon/sample", log_ns, sample_message(decoded))
+        for alarm in self.loss.observe(decoded):
+            self._write("/tdmon/alarm", log_ns, alarm)
+        stats.seq_lost = self.loss.seq_lost
+        stats.sampling_gaps = self.loss.sampling_gaps
         frames = self.aligner.push(decoded, self._monotonic())
         self._sync_aligner_counts()
         for frame in frames:
@@ -219,7 +233,9 @@ class Pipeline:
         return status_message(now, stats.samples_in, stats.rejected, stats.dropped, lag,
                               connections, messages_in=stats.messages_in,
                               duplicates=stats.duplicates, out_of_order=stats.out_of_order,
-                              frames=stats.frames)
+                              frames=stats.frames, redelivered=stats.redelivered,
+                              duplicate_deliveries=stats.duplicate_deliveries,
+                              seq_lost=stats.seq_lost, sampling_gaps=stats.sampling_gaps)
 
     def _sync_aligner_counts(self) -> None:
         self.stats.duplicates = self.aligner.duplicates

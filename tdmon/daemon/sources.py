@@ -11,7 +11,7 @@ from tdmon.config.daemon import McapSourceConfig, MqttConfig, ZenohConfig
 from tdmon.daemon.daemon import SourceSpec
 from tdmon.daemon.wiring import Entry, Table, Wiring
 from tdmon.ingest.mcap_source import McapSource
-from tdmon.ingest.mqtt import MqttSource
+from tdmon.ingest.mqtt import MqttSource, RecentDeliveries
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for
 
 
@@ -33,9 +33,10 @@ async def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
     subscribe = [f"{wiring.config.prefix}/#"]
     ignore = (wiring.own_prefix,)
     base = wiring.base
+    recent = RecentDeliveries()  # over reconnects: a resent message is recognised
 
     def open_mqtt() -> MqttSource:
-        return MqttSource(section, subscribe, ignore, base)
+        return MqttSource(section, subscribe, ignore, base, recent)
 
     wiring.sources.append(SourceSpec("mqtt", open_mqtt))
 

@@ -83,10 +83,10 @@ class Decoder:
             return _reject(
                 raw, f"payload too large ({len(raw.payload)} > {self.max_payload_bytes} bytes)"
             )
-        parsed = parse_payload(raw.payload)
+        parsed = parse_payload_seq(raw.payload)
         if isinstance(parsed, str):
             return _reject(raw, parsed)
-        t, value, unit = parsed
+        t, value, unit, seq = parsed
         channel = spec.channel
         # the usual case, a unit seen before or the configured one, without a method call
         factor = (self._default_factor[channel] if unit is None
@@ -108,7 +108,7 @@ class Decoder:
                                 f"{spec.maximum:g} {CHANNEL_UNITS[spec.channel][1]}")
         # positional: channel, t, value, source, topic, unit, receive_time
         return Sample(channel, t, si_value, raw.source, raw.topic, CHANNEL_UNITS[channel][1],
-                      raw.receive_time)
+                      raw.receive_time, seq)
 
     def _factor(self, channel: str, unit: str | None) -> tuple[float, float] | str:
         if unit is None:
@@ -138,11 +138,20 @@ def topic_for(prefix: str, topic: str) -> str:
 
 
 def parse_payload(payload: bytes) -> tuple[float, float, str | None] | str:
-    """Parse one JSON payload into ``(t, value, unit)``, or return the rejection reason.
+    """Parse one JSON payload into ``(t, value, unit)``, or return the rejection reason
+    (the rules of :func:`parse_payload_seq`, without the counter)."""
+    parsed = parse_payload_seq(payload)
+    return parsed if isinstance(parsed, str) else parsed[:3]
+
+
+def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | None] | str:
+    """Parse one JSON payload into ``(t, value, unit, seq)``, or return the rejection reason.
 
     Rules: a JSON object; ``t`` a finite number of Unix seconds or an ISO 8601 string (naive
     means UTC) between 1970 and 2200; ``value`` a finite JSON number (not a boolean, not a
-    string); ``unit`` absent, null or a non-empty string.
+    string); ``unit`` absent, null or a non-empty string. ``seq``, the publisher's optional
+    message counter per topic, is a non-negative integer or None (anything else is ignored, never
+    a rejection: the sample is good without it).
     """
     try:
         # decode explicitly: json.loads on bytes would also guess UTF-16/32 from the first bytes
@@ -179,7 +188,10 @@ def parse_payload(payload: bytes) -> tuple[float, float, str | None] | str:
     unit = obj.get("unit")
     if unit is not None and (not isinstance(unit, str) or not unit.strip()):
         return "'unit' must be a non-empty string"
-    return t, value, unit
+    seq = obj.get("seq")
+    if type(seq) is not int or seq < 0:
+        seq = None
+    return t, value, unit, seq
 
 
 def _plain_json_object(text: str) -> object:

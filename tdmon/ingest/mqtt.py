@@ -20,6 +20,7 @@ from types import TracebackType
 from typing import Any
 
 import aiomqtt
+import paho.mqtt.client as mqtt
 from aiomqtt.exceptions import MqttConnectError
 from paho.mqtt.reasoncodes import ReasonCode
 
@@ -112,6 +113,11 @@ def _translate(config: MqttConfig, what: str, exc: BaseException) -> IngestError
     return IngestError(f"{describe(config)}: {what}: {text}")
 
 
+def connect_error(config: MqttConfig, exc: BaseException) -> IngestError:
+    """The one-line error for a failed connection (naming bad credentials as such)."""
+    return _translate(config, "cannot connect", exc)
+
+
 class _Inbox(asyncio.Queue[aiomqtt.Message]):
     """A client's incoming-message queue whose object the source holds.
 
@@ -131,12 +137,74 @@ def _inbox_class(made: list[_Inbox]) -> type[_Inbox]:
     return Inbox
 
 
+class _Delivery(aiomqtt.Message):
+    """aiomqtt's message plus paho's DUP flag (aiomqtt's own message drops it)."""
+
+    def __init__(self, message: mqtt.MQTTMessage) -> None:
+        super().__init__(message.topic, bytes(message.payload), message.qos, message.retain,
+                         message.mid, None)
+        self.dup = bool(message.dup)
+
+
+def _enable_manual_ack(client: aiomqtt.Client) -> None:
+    """Let ``client`` acknowledge QoS 1/2 messages only when told to, and keep DUP flags.
+
+    aiomqtt 2.5 has no public hook for either (aiomqtt issue 345): the paho client it wraps
+    (``_client``) is switched to manual acknowledgement before connecting, so that nothing
+    the broker sends on a resumed session is acknowledged early, and its message callback is
+    replaced by one that keeps the flag. Messages go into the same queue aiomqtt reads.
+    """
+    paho = client._client  # private: see the docstring
+    paho.manual_ack_set(True)
+    queue = client._queue  # our own _Inbox class
+
+    def on_message(_client: mqtt.Client, _userdata: Any, message: mqtt.MQTTMessage) -> None:
+        queue.put_nowait(_Delivery(message))  # unbounded: our own _Inbox
+
+    paho.on_message = on_message
+
+
+class RecentDeliveries:
+    """The last ``size`` (topic, payload) pairs handed out, to recognise a redelivery.
+
+    A broker resends a QoS 1 message with the DUP flag when it had no acknowledgement for it
+    before the connection dropped; at most 65 535 such messages can be outstanding (the packet
+    identifier space), so a window of that size holds every one this run could have handed out.
+    """
+
+    def __init__(self, size: int = 65_535) -> None:
+        self.size = size
+        self._seen: dict[int, int] = {}
+        self._order: deque[int] = deque()
+
+    def add(self, topic: str, payload: bytes) -> None:
+        key = hash((topic, payload))
+        self._seen[key] = self._seen.get(key, 0) + 1
+        self._order.append(key)
+        if len(self._order) > self.size:
+            old = self._order.popleft()
+            left = self._seen[old] - 1
+            if left:
+                self._seen[old] = left
+            else:
+                del self._seen[old]
+
+    def __contains__(self, item: tuple[str, bytes]) -> bool:
+        return hash(item) in self._seen
+
+
 class MqttSource:
     """Subscribe to ``<prefix>/#`` with QoS 1 on a persistent session and yield RawMessages.
 
     ``async with MqttSource(...) as source: async for raw in source: ...``. A fixed client id
     and ``clean_session=False`` make the broker keep the subscription and queue QoS 1 messages
     while the daemon is away, so a reconnect resumes where it left off.
+
+    Acknowledgements are manual (docs/daemon.md, "At-least-once delivery"): each RawMessage
+    carries an ``ack`` the daemon calls once the message is processed and flushed to the
+    recording; until then the broker keeps it and resends it after a reconnect or a restart.
+    A resent message (DUP flag) whose topic and payload this run already handed out is marked
+    ``duplicate`` (``recent`` is shared by every connection of one daemon).
     """
 
     name = "mqtt"
@@ -147,11 +215,13 @@ class MqttSource:
         subscribe: list[str],
         ignore_prefixes: tuple[str, ...] = (),
         base: Path | None = None,
+        recent: RecentDeliveries | None = None,
     ) -> None:
         self.config = config
         self.subscribe = subscribe
         self.ignore_prefixes = ignore_prefixes
         self.base = base
+        self.recent = recent if recent is not None else RecentDeliveries()
         self._client: aiomqtt.Client | None = None
         self._inbox: _Inbox | None = None
         self._iterator: aiomqtt.MessagesIterator | None = None
@@ -162,6 +232,7 @@ class MqttSource:
         client = make_client(self.config, self.config.client_id, self.base,
                              queue_type=_inbox_class(made))
         (inbox,) = made  # built by the client's constructor
+        _enable_manual_ack(client)
         try:
             await client.__aenter__()
         except aiomqtt.MqttError as exc:
@@ -199,9 +270,10 @@ class MqttSource:
             if not inbox.empty():
                 # Fast path: aiomqtt's iterator creates a task per message even when one is
                 # already waiting, which costs more than all of our decoding. And after the
-                # connection dropped: aiomqtt has already acknowledged what waits here, and its
-                # iterator raises at once and would strand it (the broker will not send it
-                # again), so it is handed out first.
+                # connection dropped, what waits here is still handed out (its iterator would
+                # raise at once): the broker resends it unacknowledged on the next session,
+                # where it is recognised as a duplicate, but a broker without persistence that
+                # restarted would not, so processing it now loses nothing.
                 message = inbox.get_nowait()
             elif self._lost is not None:
                 raise self._lost
@@ -213,14 +285,40 @@ class MqttSource:
                     self._lost.__cause__ = exc
                     continue
             topic = str(message.topic)
+            ack = _acker(self._client, message)
             if topic.startswith(self.ignore_prefixes):
-                continue  # our own results coming back on the shared prefix
+                if ack is not None:
+                    ack()  # our own results coming back on the shared prefix: nothing to keep
+                continue
             payload = message.payload
             if isinstance(payload, str):
                 payload = payload.encode()
             elif not isinstance(payload, bytes | bytearray):
                 payload = b"" if payload is None else str(payload).encode()
-            return RawMessage("mqtt", topic, bytes(payload), time.time())
+            payload = bytes(payload)
+            dup = bool(getattr(message, "dup", False))
+            duplicate = dup and (topic, payload) in self.recent
+            if not duplicate:
+                self.recent.add(topic, payload)
+            return RawMessage("mqtt", topic, payload, time.time(), ack, dup, duplicate)
+
+
+def _acker(client: aiomqtt.Client | None, message: aiomqtt.Message
+           ) -> Callable[[], None] | None:
+    """The acknowledgement of one QoS 1/2 message on the connection it came from.
+
+    After that connection is gone the call does nothing (paho has no socket to send on): the
+    broker resends the message on the next session, which is what at-least-once needs.
+    """
+    if client is None or message.qos == 0:
+        return None
+    paho = client._client  # private: see _enable_manual_ack
+    mid, qos = message.mid, message.qos
+
+    def ack() -> None:
+        paho.ack(mid, qos)
+
+    return ack
 
 
 async def _quiet_exit(client: aiomqtt.Client) -> None:

@@ -16,7 +16,7 @@ from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import aiomqtt
 import zenoh
@@ -25,7 +25,7 @@ from tdmon.channels import check_channel
 from tdmon.config.daemon import MqttConfig, ZenohConfig
 from tdmon.errors import IngestError
 from tdmon.ingest.mcap_source import iter_raw
-from tdmon.ingest.mqtt import make_client
+from tdmon.ingest.mqtt import connect_error, make_client
 from tdmon.ingest.zenoh_io import open_session
 from tdmon.units import parse_time
 
@@ -74,11 +74,13 @@ def parse_columns(text: str) -> tuple[Column, ...]:
 
 def csv_messages(
     path: Path, prefix: str, columns: Iterable[Column] = VOLVE_COLUMNS,
-    time_column: str = "time_utc", shift: float = 0.0,
+    time_column: str = "time_utc", shift: float = 0.0, seq: bool = False,
 ) -> Iterator[tuple[float, str, bytes]]:
     """One message per non-empty mapped cell: ``(t, topic, payload)``, times shifted by
-    ``shift`` seconds. Columns missing from the file are an error."""
+    ``shift`` seconds. Columns missing from the file are an error. ``seq``: number each
+    topic's messages 1, 2, ... in the payload (the daemon counts gaps in it as lost)."""
     columns = tuple(columns)
+    counters = dict.fromkeys((c.channel for c in columns), 0)
     try:
         handle = path.open(newline="", encoding="utf-8")
     except OSError as exc:
@@ -104,7 +106,11 @@ def csv_messages(
                 except ValueError:
                     raise IngestError(f"{path}:{line}: {column.column} is not a number: "
                                       f"'{cell}'") from None
-                body = {"t": t + shift, "value": value, "unit": column.unit}
+                body: dict[str, object] = {"t": t + shift, "value": value,
+                                           "unit": column.unit}
+                if seq:
+                    counters[column.channel] += 1
+                    body["seq"] = counters[column.channel]
                 yield t + shift, f"{prefix}/{column.channel}", json.dumps(body).encode()
 
 
@@ -131,6 +137,34 @@ def recording_messages(path: Path, prefix: str | None = None
             yield log_ns / 1e9, topic, raw.payload
 
 
+def csv_message_count(path: Path, columns: Iterable[Column] = VOLVE_COLUMNS) -> int:
+    """How many messages :func:`csv_messages` sends for ``path`` (non-empty mapped cells),
+    without parsing a number (for a progress bar); 0 when the file cannot be read."""
+    names = [c.column for c in columns]
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle)
+            return sum(1 for row in reader for name in names if (row.get(name) or "").strip())
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return 0
+
+
+def recording_message_count(path: Path) -> int | None:
+    """How many raw inputs a recording holds, from its summary (None: not stated)."""
+    from mcap.reader import make_reader
+
+    try:
+        with path.open("rb") as handle:
+            summary = make_reader(handle).get_summary()
+    except Exception:  # not MCAP, truncated, no summary: the count is only for display
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    counts = summary.statistics.channel_message_counts
+    raw = [counts.get(cid, 0) for cid, ch in summary.channels.items() if ch.topic == "/tdmon/raw"]
+    return sum(raw) if raw else None
+
+
 class Sender(Protocol):
     async def send(self, topic: str, payload: bytes) -> None: ...
 
@@ -138,36 +172,149 @@ class Sender(Protocol):
 
 
 class MqttSender:
-    """QoS-1 publishing with a window of unacknowledged messages (one at a time is slow)."""
+    """QoS 1 publishing with a window of unacknowledged messages that survives the broker
+    going away.
 
-    def __init__(self, client: aiomqtt.Client, qos: int = 1, window: int = 200) -> None:
-        self.client = client
+    Every message is kept until the broker acknowledges it. When the connection is lost (a
+    failed publish, or the broker closing it), the messages in flight are abandoned on the old
+    connection, the sender reconnects with backoff (``retry_initial`` doubling to
+    ``retry_max`` seconds, for ever: Ctrl-C stops it) and sends every unacknowledged message
+    again, oldest first, before any new one: at least once, in order. ``send`` waits while
+    the broker is away. ``on_state`` gets one line per loss and per reconnection.
+    """
+
+    def __init__(self, config: MqttConfig, qos: int = 1, window: int = 200,
+                 retry_initial: float = 0.5, retry_max: float = 10.0,
+                 on_state: Callable[[str], None] | None = None) -> None:
+        self.config = config
         self.qos = qos
+        self.window = window
+        self.retry_initial = retry_initial
+        self.retry_max = retry_max
+        self.on_state = on_state or (lambda line: None)
         self._window = asyncio.Semaphore(window)
+        self._unconfirmed: dict[int, tuple[str, bytes]] = {}  # insertion order = send order
+        self._next = 0
         self._tasks: set[asyncio.Task[None]] = set()
+        self._client: aiomqtt.Client | None = None
+        self._healthy = asyncio.Event()
+        self._broken = asyncio.Event()
         self._error: BaseException | None = None
-        client.pending_calls_threshold = window + 10
+        self._watch: asyncio.Task[None] | None = None
+        #: messages the broker acknowledged; reconnections; messages sent again after one
+        self.confirmed = 0
+        self.reconnects = 0
+        self.resent = 0
+
+    async def start(self) -> None:
+        """Connect the first time (a broker that is not there at all is an error)."""
+        self._client = await self._connect()
+        self._healthy.set()
+        self._watch = asyncio.create_task(self._keep_connected(), name="mqtt-publish-watch")
+
+    async def _connect(self) -> aiomqtt.Client:
+        client = make_client(self.config, self.config.client_id)
+        client.pending_calls_threshold = self.window + 10
+        try:
+            await client.__aenter__()
+        except aiomqtt.MqttError as exc:
+            raise connect_error(self.config, exc) from exc
+        return client
+
+    @property
+    def pending(self) -> int:
+        """Messages sent or waiting to be sent again, not yet acknowledged by the broker."""
+        return len(self._unconfirmed)
 
     async def send(self, topic: str, payload: bytes) -> None:
-        if self._error is not None:
-            raise IngestError(f"mqtt publish failed: {self._error}") from self._error
         await self._window.acquire()
-        task = asyncio.create_task(self._publish(topic, payload))
+        await self._healthy.wait()
+        number = self._next
+        self._next += 1
+        self._unconfirmed[number] = (topic, payload)
+        self._spawn(number)
+
+    def _spawn(self, number: int) -> None:
+        assert self._client is not None
+        task = asyncio.create_task(self._publish(self._client, number))
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    async def _publish(self, topic: str, payload: bytes) -> None:
+    async def _publish(self, client: aiomqtt.Client, number: int) -> None:
+        topic, payload = self._unconfirmed[number]
         try:
-            await self.client.publish(topic, payload, qos=self.qos)
+            await client.publish(topic, payload, qos=self.qos)
         except aiomqtt.MqttError as exc:
-            self._error = exc
-        finally:
+            # kept (and its window slot held) for sending again on the next connection
+            if client is self._client and self._healthy.is_set():
+                self._error = exc
+                self._healthy.clear()
+                self._broken.set()
+            return
+        if self._unconfirmed.pop(number, None) is not None:
+            self.confirmed += 1
             self._window.release()
 
+    async def _keep_connected(self) -> None:
+        while True:
+            client = self._client
+            assert client is not None
+            # aiomqtt resolves this private future when the broker closes the connection
+            gone: asyncio.Future[Any] = asyncio.ensure_future(
+                asyncio.shield(client._disconnected))  # private
+            broken: asyncio.Future[Any] = asyncio.ensure_future(self._broken.wait())
+            await asyncio.wait([gone, broken], return_when=asyncio.FIRST_COMPLETED)
+            for waiter in (gone, broken):
+                waiter.cancel()
+            await asyncio.gather(gone, broken, return_exceptions=True)
+            self._healthy.clear()
+            reason = self._error or (client._disconnected.exception()  # private, see above
+                                     if client._disconnected.done() else None)
+            stranded = list(self._tasks)
+            for task in stranded:
+                task.cancel()
+            await asyncio.gather(*stranded, return_exceptions=True)
+            with contextlib.suppress(aiomqtt.MqttError, OSError):
+                await client.__aexit__(None, None, None)
+            delay = self.retry_initial
+            while True:
+                self.on_state(f"broker lost ({reason or 'connection closed'}); "
+                              f"{len(self._unconfirmed)} unacknowledged; reconnecting in "
+                              f"{delay:g} s")
+                await asyncio.sleep(delay)
+                try:
+                    self._client = await self._connect()
+                    break
+                except IngestError as exc:
+                    reason = exc
+                    delay = min(delay * 2, self.retry_max)
+            self.reconnects += 1
+            self._error = None
+            self._broken.clear()
+            waiting = list(self._unconfirmed)
+            self.resent += len(waiting)
+            self.on_state(f"reconnected; sending {len(waiting)} unacknowledged message(s) again")
+            for number in waiting:  # created before any new send: sent first, in order
+                self._spawn(number)
+            self._healthy.set()
+
     async def flush(self) -> None:
-        await asyncio.gather(*list(self._tasks))
-        if self._error is not None:
-            raise IngestError(f"mqtt publish failed: {self._error}") from self._error
+        """Wait until the broker has acknowledged every message (reconnecting if need be)."""
+        while self._unconfirmed:
+            await asyncio.sleep(0.02)
+
+    async def close(self) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            await asyncio.gather(self._watch, return_exceptions=True)
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._client is not None:
+            # already gone is fine: what was not acknowledged is counted by the caller
+            with contextlib.suppress(aiomqtt.MqttError, OSError):
+                await self._client.__aexit__(None, None, None)
+            self._client = None
 
 
 class ZenohSender:
@@ -190,20 +337,17 @@ class ZenohSender:
 
 
 @asynccontextmanager
-async def mqtt_sender(config: MqttConfig, qos: int = 1) -> AsyncIterator[MqttSender]:
-    client = make_client(config, config.client_id)
+async def mqtt_sender(config: MqttConfig, qos: int = 1,
+                      on_state: Callable[[str], None] | None = None
+                      ) -> AsyncIterator[MqttSender]:
+    """A connected :class:`MqttSender`; on leaving normally, waits for every acknowledgement."""
+    sender = MqttSender(config, qos, on_state=on_state)
+    await sender.start()
     try:
-        await client.__aenter__()
-    except aiomqtt.MqttError as exc:
-        raise IngestError(f"mqtt {config.host}:{config.port}: cannot connect: {exc}") from exc
-    try:
-        sender = MqttSender(client, qos)
         yield sender
         await sender.flush()
     finally:
-        # already gone is fine: the flush above has reported any loss
-        with contextlib.suppress(aiomqtt.MqttError):
-            await client.__aexit__(None, None, None)
+        await sender.close()
 
 
 @asynccontextmanager

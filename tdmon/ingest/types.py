@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import base64
 import hashlib
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, Final
 
 #: Longest payload kept whole in the ``raw`` and ``rejected`` messages [bytes]. A longer one (an
@@ -21,12 +22,21 @@ class RawMessage:
 
     ``receive_time`` is Unix seconds taken when the message reached tdmon (for a replay, the
     time recorded when it originally arrived), so latency and pacing can be measured from it.
+
+    Delivery (docs/daemon.md, "At-least-once delivery"): ``ack``, when set, tells the transport
+    that the message is safe with tdmon; the daemon calls it once the message has been
+    processed and the recorder has flushed it to its file. ``redelivered`` is the transport's
+    mark of a second delivery (MQTT's DUP flag); ``duplicate`` says the source recognised it
+    as one this run already handed out, so it is counted and acknowledged, not processed again.
     """
 
     source: str
     topic: str
     payload: bytes
     receive_time: float
+    ack: Callable[[], None] | None = field(default=None, compare=False, repr=False)
+    redelivered: bool = False
+    duplicate: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +50,8 @@ class Sample:
     topic: str
     unit: str
     receive_time: float
+    seq: int | None = None
+    """The payload's optional message counter (per topic), for loss detection."""
 
 
 @dataclass(frozen=True, slots=True)

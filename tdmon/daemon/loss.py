@@ -1,0 +1,110 @@
+"""Loss the daemon can see for itself: gaps in a publisher's ``seq`` counter and in a channel's
+regular sampling (docs/daemon.md, "Loss the daemon can see").
+
+Pure bookkeeping on decoded samples: :meth:`LossDetector.observe` returns the ``data_loss``
+alarms a sample reveals, and the counters go into the status message.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from tdmon.ingest.types import Sample
+from tdmon.messages import alarm_message
+from tdmon.vocabulary import AlarmKind, Severity
+
+#: An interval this many times the channel's median interval is a sampling gap [-].
+GAP_FACTOR = 10.0
+#: ... and at least this long [s] (so a 10 Hz channel must be silent for 2 s).
+GAP_MIN_S = 2.0
+#: Intervals kept per channel for the median, and needed before any gap is judged.
+INTERVALS_KEPT = 64
+INTERVALS_NEEDED = 16
+
+
+@dataclass(slots=True)
+class _Sampling:
+    last_t: float
+    intervals: deque[float] = field(default_factory=lambda: deque(maxlen=INTERVALS_KEPT))
+    median: float | None = None
+    since_median: int = 0
+
+
+class LossDetector:
+    """Count missing messages from ``seq`` and silences in regular sampling.
+
+    ``seq`` (optional, per topic, from the publisher) should grow by one per message; a jump
+    of n + 1 means n messages never arrived (counted in ``seq_lost``, one alarm with n). A
+    counter that falls to below half its last value is a publisher that restarted: it is
+    taken as the new start. A smaller step back (a redelivery, an out-of-order message) is
+    ignored. A channel's sample that comes more than ``GAP_FACTOR`` times its median interval
+    (and at least ``GAP_MIN_S``) after the previous one is a sampling gap (``sampling_gaps``,
+    one alarm per gap with the estimated number of missing samples).
+    """
+
+    def __init__(self) -> None:
+        self.seq_lost = 0
+        self.seq_gaps = 0
+        self.sampling_gaps = 0
+        self._seq: dict[str, int] = {}
+        self._sampling: dict[str, _Sampling] = {}
+
+    def observe(self, sample: Sample) -> list[dict[str, Any]]:
+        """Take one decoded sample; the ``data_loss`` alarms it reveals (usually none)."""
+        alarms: list[dict[str, Any]] = []
+        if sample.seq is not None:
+            alarm = self._check_seq(sample)
+            if alarm is not None:
+                alarms.append(alarm)
+        alarm = self._check_sampling(sample)
+        if alarm is not None:
+            alarms.append(alarm)
+        return alarms
+
+    def _check_seq(self, sample: Sample) -> dict[str, Any] | None:
+        seq = sample.seq
+        assert seq is not None
+        last = self._seq.get(sample.topic)
+        if last is None or seq > last or seq < last // 2:
+            self._seq[sample.topic] = seq
+        if last is None or seq <= last + 1:
+            return None
+        missing = seq - last - 1
+        self.seq_lost += missing
+        self.seq_gaps += 1
+        return alarm_message(
+            sample.t, AlarmKind.DATA_LOSS, Severity.WARNING,
+            f"{missing} message(s) on {sample.topic} never arrived (seq {last} -> {seq})",
+            value=missing)
+
+    def _check_sampling(self, sample: Sample) -> dict[str, Any] | None:
+        state = self._sampling.get(sample.channel)
+        if state is None:
+            self._sampling[sample.channel] = _Sampling(sample.t)
+            return None
+        interval = sample.t - state.last_t
+        if interval <= 0:
+            return None  # duplicate or out of order: the aligner counts those
+        state.last_t = sample.t
+        median = state.median
+        alarm = None
+        if (median is not None and interval > GAP_FACTOR * median
+                and interval >= GAP_MIN_S):
+            self.sampling_gaps += 1
+            missing = max(1, round(interval / median) - 1) if median > 0 else 1
+            alarm = alarm_message(
+                sample.t, AlarmKind.DATA_LOSS, Severity.WARNING,
+                f"no {sample.channel} samples for {interval:.1f} s (usually every "
+                f"{median:.3g} s): about {missing} missing", value=missing)
+        else:
+            # a gap stays out of the median, so a second gap is judged against the same rate
+            state.intervals.append(interval)
+            state.since_median += 1
+            if len(state.intervals) >= INTERVALS_NEEDED and (
+                    median is None or state.since_median >= INTERVALS_KEPT // 4):
+                state.median = statistics.median(state.intervals)
+                state.since_median = 0
+        return alarm

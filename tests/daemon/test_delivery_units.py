@@ -1,0 +1,204 @@
+"""Units of at-least-once delivery and loss counting: when acknowledgements go, what the
+daemon does with a recognised duplicate, the ``seq`` and sampling-gap rules, and the decoder
+taking ``seq``."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from typing import Any
+
+from tdmon.daemon.daemon import AckWindow, Daemon, SourceSpec, recorders_of
+from tdmon.daemon.loss import LossDetector
+from tdmon.daemon.pipeline import Stats
+from tdmon.ingest.decode import ChannelSpec, Decoder, parse_payload_seq
+from tdmon.ingest.types import RawMessage, Sample
+
+
+@dataclass
+class _Counts:
+    flushes: int = 0
+
+
+class FakeRecorder:
+    """Holds written messages in memory until flush() puts them 'in the file'."""
+
+    def __init__(self) -> None:
+        self.buffer: list[str] = []
+        self.file: list[str] = []
+        self._stats = _Counts()
+
+    @property
+    def stats(self) -> _Counts:
+        return _Counts(self._stats.flushes)
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        self.buffer.append(message["payload"])
+
+    def flush(self) -> None:
+        self.file += self.buffer
+        self.buffer.clear()
+        self._stats.flushes += 1
+
+    def close(self) -> None:
+        self.flush()
+
+
+def test_acks_wait_for_the_recorders_flush() -> None:
+    recorder = FakeRecorder()
+    window = AckWindow(recorders_of([recorder, object()]), batch=5, idle_s=0.05, idle_min=3,
+                       max_age_s=5.0)
+    assert window.recorders == [recorder]
+    acked: list[int] = []
+    window.add([lambda i=i: acked.append(i) for i in range(2)], now=0.0)
+    window.release(now=0.01, idle=0.01)
+    assert acked == [] and len(window) == 2  # not flushed yet
+    window.add([lambda: acked.append(99)], now=0.02)  # written after that look
+    recorder.flush()  # the recorder's own schedule
+    window.release(now=0.03, idle=0.0)
+    assert acked == []  # looks at the recorder at most every check_s
+    window.release(now=0.1, idle=0.0)
+    assert acked == [0, 1] and len(window) == 1 and window.forced_flushes == 0
+    window.release(now=0.2, idle=0.0)
+    assert acked == [0, 1]  # 99 was written before the flush but seen waiting only after it
+    recorder.flush()
+    window.release(now=0.3, idle=0.0)
+    assert acked == [0, 1, 99]
+    acked.remove(99)
+    # idle with too few waiting: nothing; with idle_min waiting: flush and go
+    window.add([lambda: acked.append(2), lambda: acked.append(3)], now=1.0)
+    window.release(now=1.1, idle=1.0)
+    assert acked == [0, 1]
+    window.add([lambda: acked.append(4)], now=1.1)
+    window.release(now=1.2, idle=0.06)
+    assert acked == [0, 1, 2, 3, 4] and window.forced_flushes == 1
+    # a full batch goes at once; an old one goes even when the recorder never flushes
+    window.add([lambda i=i: acked.append(i) for i in range(5, 10)], now=2.0)
+    window.release(now=2.0, idle=0.0)
+    assert acked[-5:] == [5, 6, 7, 8, 9]
+    window.add([lambda: acked.append(10)], now=3.0)
+    window.release(now=7.9, idle=0.0)
+    assert acked[-1] == 9
+    window.release(now=8.0, idle=0.0)
+    assert acked[-1] == 10
+
+
+def test_without_a_recorder_acks_go_after_processing() -> None:
+    acked: list[int] = []
+    window = AckWindow([])
+    window.add([lambda: acked.append(1)], now=0.0)
+    assert acked == [1] and window.acknowledged == 1
+
+
+class FakePipeline:
+    def __init__(self, recorder: FakeRecorder) -> None:
+        self.sinks = [recorder]
+        self.stats = Stats()
+        self.processed: list[bytes] = []
+        self.recorder = recorder
+
+    def process(self, raw: RawMessage) -> None:
+        self.processed.append(raw.payload)
+        self.recorder.write("/tdmon/raw", 0, {"payload": raw.payload})
+
+    def tick(self) -> None:
+        pass
+
+    def emit(self, name: str, message: dict[str, Any]) -> None:
+        pass
+
+    def status_message(self, connections: dict[str, str]) -> dict[str, Any]:
+        return {}
+
+    def flush(self) -> None:
+        pass
+
+    def close_sinks(self) -> None:
+        for sink in self.sinks:
+            sink.close()
+
+
+async def test_daemon_skips_a_recognised_duplicate_and_acks_everything_once_recorded() -> None:
+    recorder = FakeRecorder()
+    pipeline = FakePipeline(recorder)
+    acked: list[bytes] = []
+    recorded_when_acked: list[bool] = []
+
+    def ack_for(payload: bytes) -> Any:
+        def ack() -> None:
+            acked.append(payload)
+            recorded_when_acked.append(payload in recorder.file)
+        return ack
+
+    messages = [
+        RawMessage("mqtt", "rig/a", b"1", 0.0, ack_for(b"1")),
+        RawMessage("mqtt", "rig/a", b"2", 0.0, ack_for(b"2")),
+        RawMessage("mqtt", "rig/a", b"1", 0.0, ack_for(b"1"), True, True),  # recognised
+        RawMessage("mqtt", "rig/a", b"3", 0.0, ack_for(b"3"), True, False),  # after a crash
+    ]
+
+    @asynccontextmanager
+    async def source() -> AsyncIterator[AsyncIterator[RawMessage]]:
+        async def gen() -> AsyncIterator[RawMessage]:
+            for message in messages:
+                yield message
+        yield gen()
+
+    daemon = Daemon(pipeline, [SourceSpec("mqtt", source, finite=True)],  # type: ignore[arg-type]
+                    stop_when_sources_done=True, status_interval=10.0)
+    await asyncio.wait_for(daemon.run(), 10)
+    assert pipeline.processed == [b"1", b"2", b"3"]
+    assert pipeline.stats.duplicate_deliveries == 1 and pipeline.stats.redelivered == 1
+    assert sorted(acked) == [b"1", b"1", b"2", b"3"]
+    assert all(recorded_when_acked)  # never acknowledged before it was in the file
+
+
+def _sample(topic: str, t: float, seq: int | None = None) -> Sample:
+    return Sample(topic.rsplit("/", 1)[-1], t, 1.0, "mqtt", topic, "N", t, seq)
+
+
+def test_seq_gaps_are_counted_restarts_and_repeats_are_not() -> None:
+    loss = LossDetector()
+    alarms = []
+    for seq in [1, 2, 3, 7, 8, 8, 6, 9, 1, 2, 4]:
+        alarms += loss.observe(_sample("rig/a/torque", float(len(alarms) + seq), seq))
+    # 3 -> 7: 3 missing; 8 again, 6: ignored; 9 -> 1: a restart; 2 -> 4: 1 missing
+    seq_alarms = [a for a in alarms if "never arrived" in a["message"]]
+    assert [a["value"] for a in seq_alarms] == [3, 1]
+    assert loss.seq_lost == 4 and loss.seq_gaps == 2
+    assert all(a["kind"] == "data_loss" and a["severity"] == "warning" for a in seq_alarms)
+    # per topic: another topic's counter is its own
+    assert loss.observe(_sample("rig/a/hookload", 100.0, 50)) == []
+
+
+def test_a_sampling_gap_is_one_alarm_per_gap() -> None:
+    loss = LossDetector()
+    t = 0.0
+    alarms = []
+    for _ in range(40):
+        t += 0.1
+        alarms += loss.observe(_sample("rig/a/hookload", t))
+    assert alarms == []
+    t += 5.0  # 50 intervals missing
+    alarms += loss.observe(_sample("rig/a/hookload", t))
+    for _ in range(5):
+        t += 0.1
+        alarms += loss.observe(_sample("rig/a/hookload", t))
+    t += 1.5  # 15 x the interval but shorter than 2 s: not a gap
+    alarms += loss.observe(_sample("rig/a/hookload", t))
+    assert len(alarms) == 1 and loss.sampling_gaps == 1
+    assert alarms[0]["value"] == 49  # about 5.0 / 0.1 - 1 samples
+    assert "no hookload samples for 5.0 s" in alarms[0]["message"]
+
+
+def test_decoder_takes_seq_and_never_rejects_for_it() -> None:
+    assert parse_payload_seq(b'{"t": 1.7e9, "value": 1, "seq": 12}') == (1.7e9, 1.0, None, 12)
+    for bad in (b'"x"', b"-1", b"1.5", b"true", b"null"):
+        parsed = parse_payload_seq(b'{"t": 1.7e9, "value": 1, "seq": %s}' % bad)
+        assert parsed == (1.7e9, 1.0, None, None)
+    decoder = Decoder("rig", [ChannelSpec("hookload", "hookload", "kN")])
+    sample = decoder.decode(RawMessage("mqtt", "rig/hookload",
+                                       b'{"t": 1.7e9, "value": 2, "seq": 3}', 0.0))
+    assert isinstance(sample, Sample) and sample.seq == 3 and sample.value == 2000.0
