@@ -235,7 +235,7 @@ def test_friction_config_forms(raw: object, family: str, mu_at_50: float,
         ({"family": "linear", "a": "x", "b": 0.1}, "must be a number"),
         ({"a": 0.2, "b": 0.1}, "needs 'family'"),
         ({"name": "kaarstad-glydril", "a": 0.2}, "takes no other keys"),
-        (-0.1, "must be >= 0"),
+        (-0.1, "is outside 0-1"),
         (True, "expected a friction factor"),
     ],
 )

@@ -18,6 +18,7 @@ from tdmon.record.reader import read_messages, topic_counts
 from tdmon.replay.driver import ReplayResult, replay
 from tdmon.replay.expectations import Check, check_replay, failed, find_expectations
 from tdmon.replay.session import STATES
+from tdmon.vocabulary import AlarmKind
 
 from .conftest import REPO
 
@@ -27,13 +28,7 @@ REPLAYS = sorted((REPO / "replays").glob("*.mcap"))
 #: friction_jump, sensor_*), tdmon/daemon/calibrate.py (window_rejected, block_weight,
 #: weight_check) and tdmon/record/mcap_recorder.py (recorder_failed, recorder_resumed,
 #: recording_recovered).
-DAEMON_ALARM_KINDS = frozenset({
-    "band", "limit_tensile", "limit_sinusoidal_buckling", "limit_helical_buckling",
-    "limit_makeup_torque", "friction_jump", "window_rejected", "block_weight", "weight_check",
-    "sensor_stale", "sensor_hookload_implausible", "sensor_bit_below_hole",
-    "sensor_hookload_frozen", "sensor_torque_frozen", "recorder_failed", "recorder_resumed",
-    "recording_recovered",
-})
+DAEMON_ALARM_KINDS = frozenset(AlarmKind)
 #: Kinds no replay can raise: the recorder's own failure needs a failing file system, its
 #: recovery a killed recorder (tests/record/test_crash_and_failure.py and
 #: tests/record/test_recovery_alarm.py cover them).
