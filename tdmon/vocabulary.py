@@ -155,3 +155,4 @@ class AlarmKind(StrEnum):
     WEIGHT_CHECK = "weight_check"
     RECORDER_FAILED = "recorder_failed"
     RECORDER_RESUMED = "recorder_resumed"
+    CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)
