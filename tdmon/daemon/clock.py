@@ -94,6 +94,7 @@ class ClockGuard:
         self.jumps = 0
         self.rejected = 0
         self._channels: set[str] = set()
+        self._last_offset: float | None = None  # of the last sample accepted
         # the run of samples ahead of the anchor: (offset, channel)
         self._ahead: deque[tuple[float, str]] = deque(maxlen=self.settings.jump_samples)
 
@@ -107,6 +108,7 @@ class ClockGuard:
         if sample.channel not in channels:
             channels.add(sample.channel)
         if ahead <= settings.future_tolerance:
+            self._last_offset = offset
             if self._ahead:
                 self._ahead.clear()
             return None
@@ -118,7 +120,11 @@ class ClockGuard:
             if (max(offsets) - min(offsets) <= settings.jump_spread
                     and distinct >= min(2, len(channels))):
                 new = statistics.median(offsets)
-                jump = ClockJump(new - self.offset, sample.t, sample.receive_time, new)
+                # measured from the last sample on the old clock (its latency included, so
+                # that a constant latency cancels out)
+                before = self.offset if self._last_offset is None else self._last_offset
+                jump = ClockJump(new - before, sample.t, sample.receive_time, new)
+                self._last_offset = new
                 self.reanchor(new)
                 self.jumps += 1
                 return jump
