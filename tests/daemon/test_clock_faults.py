@@ -20,9 +20,11 @@ import pytest
 from daemon_support import WELL_FILE, make_config, payload, running, wait_until
 from mcap.writer import Writer
 
+from tdmon.config.daemon import load_daemon_config
 from tdmon.daemon.aligner import Aligner
 from tdmon.daemon.clock import ClockGuard, ClockSettings
 from tdmon.daemon.pipeline import Pipeline
+from tdmon.errors import ConfigError
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.types import RawMessage
 from tdmon.record.reader import read_messages
@@ -179,35 +181,106 @@ async def test_clock_faults_over_a_real_broker(mosquitto: Any, tmp_path: Path) -
     config = make_config({"sources": {"mqtt": {"port": mosquitto.port,
                                                "client_id": "tdmon-clock"}},
                           "well": str(WELL_FILE), "align": {"max_wait": 3.0}}, tmp_path)
-    async with running(config, connected=("mqtt",)) as (built, sink):
-        async with aiomqtt.Client("127.0.0.1", mosquitto.port, identifier="rig") as rig:
-            async def send(i: int, t: float) -> None:
-                for channel in ("bit_depth", "torque", "hookload"):
-                    unit = {"hookload": "kN", "torque": "kN*m", "bit_depth": "m"}[channel]
-                    await rig.publish(f"rig/T1/{channel}", payload(t, _value(channel, i), unit),
-                                      qos=1)
+    async with (running(config, connected=("mqtt",)) as (built, sink),
+                aiomqtt.Client("127.0.0.1", mosquitto.port, identifier="rig") as rig):
+        async def send(i: int, clock: float = 0.0) -> float:
+            # the rig stamps with its clock (``clock`` off the true time), all three channels
+            # of one step with one time, the hook load last so that each frame is complete
+            t = time.time() + clock
+            for channel in ("bit_depth", "torque", "hookload"):
+                unit = {"hookload": "kN", "torque": "kN*m", "bit_depth": "m"}[channel]
+                await rig.publish(f"rig/T1/{channel}", payload(t, _value(channel, i), unit),
+                                  qos=1)
+            await asyncio.sleep(0.02)
+            return t
 
-            start = time.time()
-            for i in range(10):
-                await send(i, start + 0.1 * i)
-            await wait_until(lambda: len(sink["model"]) >= 10, 20, "results before the faults")
-            await rig.publish("rig/T1/hookload", payload(time.time() + 30 * DAY, 950.0, "kN"),
-                              qos=1)
-            for i in range(10, 20):
-                await send(i, start + 0.1 * i)
-            await wait_until(lambda: len(sink["model"]) >= 20, 20, "results after the spike")
-            assert [r["reason"][:15] for r in sink["rejected"]] == ["t in the future"]
-            assert [a for a in sink["alarm"] if a["kind"] == "clock_jump"] == []
-            # the rig clock goes back an hour
-            for i in range(20, 40):
-                await send(i, start + 0.1 * i - 3600)
-            await wait_until(lambda: any(m["t"] < start - 3000 for m in sink["model"]), 20,
-                             "results on the new clock")
-            await wait_until(lambda: len(sink["model"]) >= 40, 20, "results after the jump")
+        for i in range(10):
+            await send(i)
+        await wait_until(lambda: len(sink["model"]) >= 10, 20, "results before the faults")
+        await rig.publish("rig/T1/hookload", payload(time.time() + 30 * DAY, 950.0, "kN"),
+                          qos=1)
+        for i in range(10, 20):
+            await send(i)
+        await wait_until(lambda: len(sink["model"]) >= 20, 20, "results after the spike")
+        assert [r["reason"][:15] for r in sink["rejected"]] == ["t in the future"]
+        assert [a for a in sink["alarm"] if a["kind"] == "clock_jump"] == []
+        # the rig clock goes back an hour
+        stamps = [await send(i, -3600.0) for i in range(20, 40)]
+        await wait_until(lambda: len(sink["model"]) >= 40, 20, "results after the jump")
     jumps = [a for a in sink["alarm"] if a["kind"] == "clock_jump"]
     assert len(jumps) == 1
     assert jumps[0]["message"] == "rig clock went back 3600 s; aligner re-anchored"
-    after = sorted(m["t"] - (start - 3600) for m in sink["model"] if m["t"] < start - 3000)
-    # results on the new clock from the sixth hook load on at the latest, up to the last one
-    assert after[0] <= 0.1 * 25 + 1e-6 and after[-1] == pytest.approx(0.1 * 39)
+    # every hook load on the new clock made its result, those that confirmed the jump too
+    assert [m["t"] for m in sink["model"][20:]] == stamps
+    assert len(sink["model"]) == 40 and len(sink["rejected"]) == 1
     assert built.stats.clock_jumps == 1
+
+
+# -- item 8 through the daemon: the config's limits reach the decoder ------------------------
+
+def test_misleading_samples_are_recorded_as_rejected_with_their_reason(tmp_path: Path) -> None:
+    faults = {(30, "hookload"): ("t", 0.0),  # a rig clock never set: 1970
+              (31, "bit_depth"): ("value", -50.0),  # a sign mistake
+              (32, "bit_depth"): ("value", 2000.0 / 0.3048)}  # feet sent as metres: 6562 m
+    rows = []
+    for receive_time, channel, t, value in _session():
+        i = round((receive_time - LATENCY - T0) / STEP)
+        field, bad = faults.get((i, channel), (None, None))
+        rows.append((receive_time, channel, bad if field == "t" else t,
+                     bad if field == "value" else value))
+    recorded = _replay(tmp_path, rows)
+    reasons = [r["reason"] for r in recorded["/tdmon/rejected"]]
+    # the well file's hole reaches 4223.6 m; 500 m beyond is allowed by default
+    assert reasons == [
+        "t before the earliest accepted time (1970-01-01T00:00:00Z < 2000-01-01: a rig clock "
+        "that was never set)",
+        "value -50 below the bit_depth minimum -2 m",
+        "beyond the well: bit_depth 6561.68 m > 4723.6 m (the well's total depth 4223.6 m + "
+        "500 m)"]
+    assert len(recorded["/tdmon/model"]) == N - 1  # all but the 1970 hook load
+    assert max(m["bit_depth_m"] for m in recorded["/tdmon/model"]) <= 2000.0
+    assert min(m["bit_depth_m"] for m in recorded["/tdmon/model"]) >= 0.0
+
+
+def _config(data: dict[str, Any], folder: Path) -> Any:
+    return make_config({"sources": {"mqtt": {}}, **data}, folder)
+
+
+def test_clock_keys_of_the_daemon_file(tmp_path: Path) -> None:
+    file = tmp_path / "daemon.toml"
+    file.write_text('''prefix = "rig/T1"
+[sources.mqtt]
+[align]
+future_tolerance = "1 min"
+clock_jump_samples = 8
+clock_jump_spread = "2 s"
+earliest_time = 2010-01-01        # a TOML date
+[channels.bit_depth]
+beyond_well = "100 ft"
+min = "-1 m"
+''')
+    config = load_daemon_config(file)
+    assert config.align.future_tolerance == 60.0
+    assert config.align.clock_jump_samples == 8 and config.align.clock_jump_spread == 2.0
+    assert config.align.earliest_time == 1_262_304_000.0
+    assert config.depth_margins() == {"bit_depth": pytest.approx(30.48), "hole_depth": 500.0}
+    specs = {spec.channel: spec for spec in config.channel_specs()}
+    assert specs["bit_depth"].minimum == -1.0 and specs["hole_depth"].minimum == -2.0
+    assert specs["block_position"].minimum == -2.0 and specs["hookload"].minimum is None
+    assert _config({"align": {"earliest_time": "2016-10-04T17:00:00+02:00"}},
+                   tmp_path).align.earliest_time == 1_475_593_200.0
+    assert _config({}, tmp_path).align.earliest_time == 946_684_800.0  # 2000-01-01
+
+
+@pytest.mark.parametrize(("data", "key", "words"), [
+    ({"channels": {"hookload": {"beyond_well": "10 m"}}}, "channels.hookload.beyond_well",
+     "only depths"),
+    ({"align": {"earliest_time": "last year"}}, "align.earliest_time", "not ISO 8601"),
+    ({"align": {"clock_jump_samples": 1}}, "align.clock_jump_samples", "2"),
+    ({"align": {"future_tolerance": "0 s"}}, "align.future_tolerance", "0"),
+])
+def test_clock_key_mistakes_name_the_key(tmp_path: Path, data: dict[str, Any], key: str,
+                                         words: str) -> None:
+    with pytest.raises(ConfigError) as error:
+        _config(data, tmp_path)
+    assert key in str(error.value) and words in str(error.value)
