@@ -19,8 +19,9 @@ if they fall inside it, so a late bit depth can complete a pending frame, but th
 frame backwards in time.
 
 Except when the rig clock went back: ``jump_samples`` hook loads in a row older than the last
-frame, whose offsets against their receive time agree within ``jump_spread`` and lie more than
-``jump_min`` below the offset of the last frame's hook load, are a clock jump, not late data.
+frame, in increasing time (the rig clock still runs), whose offsets against their receive time
+agree within ``jump_spread`` and lie more than ``jump_min`` below the offset of the last
+frame's hook load, are a clock jump, not late data.
 The aligner then emits its pending frame, forgets the old timeline and takes up the new one
 with the samples that came since the jump (kept for this, at most ``_MAX_LATE``), so results
 resume at once; the jump is reported through :meth:`Aligner.take_jumps` (docs/daemon.md,
@@ -96,8 +97,8 @@ class Aligner:
         self.jump_min = jump_min
         # offset (t - receive time) of the hook load that opened the newest frame
         self._frame_offset: float | None = None
-        # hook loads in a row that could not open a frame: their offsets
-        self._refused: deque[float] = deque(maxlen=jump_samples)
+        # hook loads in a row that could not open a frame, in increasing time: (t, offset)
+        self._refused: deque[tuple[float, float]] = deque(maxlen=jump_samples)
         # samples that may belong to a new timeline: out of order, or any since a hook load
         # was refused; cleared whenever a hook load opens a frame
         self._late: deque[Sample] = deque(maxlen=_MAX_LATE)
@@ -146,13 +147,15 @@ class Aligner:
 
     def _refused_hookload(self, sample: Sample) -> ClockJump | None:
         refused = self._refused
-        offset = sample.t - sample.receive_time
-        refused.append(offset)
+        if refused and sample.t <= refused[-1][0]:
+            refused.clear()  # a clock that went back still runs forward: a new run
+        refused.append((sample.t, sample.t - sample.receive_time))
         if len(refused) < self.jump_samples or self._frame_offset is None:
             return None
-        if max(refused) - min(refused) > self.jump_spread:
+        offsets = [offset for _, offset in refused]
+        if max(offsets) - min(offsets) > self.jump_spread:
             return None  # late data of many ages, not one clock
-        new = statistics.median(refused)
+        new = statistics.median(offsets)
         back = self._frame_offset - new
         if back <= self.jump_min:
             return None  # a short hold-up, over within the future tolerance anyway

@@ -26,7 +26,7 @@ from tdmon.daemon.clock import ClockGuard, ClockSettings
 from tdmon.daemon.pipeline import Pipeline
 from tdmon.errors import ConfigError
 from tdmon.ingest.decode import ChannelSpec, Decoder
-from tdmon.ingest.types import RawMessage
+from tdmon.ingest.types import RawMessage, Sample
 from tdmon.record.reader import read_messages
 from tdmon.replay.driver import replay
 
@@ -284,3 +284,44 @@ def test_clock_key_mistakes_name_the_key(tmp_path: Path, data: dict[str, Any], k
     with pytest.raises(ConfigError) as error:
         _config(data, tmp_path)
     assert key in str(error.value) and words in str(error.value)
+
+
+# -- what is not a clock jump ----------------------------------------------------------------
+
+def _hookload(t: float, receive_time: float) -> Sample:
+    return Sample("hookload", t, 1e6, "mqtt", "rig/hookload", "N", receive_time)
+
+
+def test_late_hook_loads_of_many_ages_are_no_clock_jump() -> None:
+    aligner = Aligner()
+    frames = [f for i in range(20) for f in aligner.push(_hookload(T0 + i, T0 + i), 0.0)]
+    # a backlog of old hook loads, delivered now: out of order, offsets 15-55 s apart
+    for age in (60, 20, 45, 30, 75, 50, 35):
+        frames += aligner.push(_hookload(T0 + 19 - age, T0 + 20), 0.0)
+    assert aligner.take_jumps() == () and aligner.out_of_order == 7
+    assert [f.t for f in frames] == sorted(f.t for f in frames)
+
+
+def test_a_clock_back_by_less_than_the_tolerance_is_a_hold_up_not_a_jump() -> None:
+    aligner = Aligner(jump_min=10.0)
+    for i in range(20):
+        aligner.push(_hookload(T0 + i, T0 + i), 0.0)
+    frames = []
+    for i in range(20, 40):  # the rig clock 8 s back: frames wait until t passes T0 + 19
+        frames += aligner.push(_hookload(T0 + i - 8, T0 + i), 0.0)
+    assert aligner.take_jumps() == ()
+    assert [f.t for f in frames] == [T0 + i - 8 for i in range(28, 40)]
+
+
+def test_a_clock_back_by_more_than_the_tolerance_is_one_jump() -> None:
+    aligner = Aligner(jump_min=10.0, jump_samples=5)
+    for i in range(20):
+        aligner.push(_hookload(T0 + i, T0 + i), 0.0)
+    frames = []
+    for i in range(20, 40):
+        frames += aligner.push(_hookload(T0 + i - 12.5, T0 + i), 0.0)
+    jumps = aligner.take_jumps()
+    assert [(j.seconds, j.offset) for j in jumps] == [(-12.5, -12.5)]
+    assert jumps[0].message == "rig clock went back 12 s; aligner re-anchored"
+    # every hook load on the new clock made its frame, those that confirmed the jump too
+    assert [f.t for f in frames] == [T0 + i - 12.5 for i in range(20, 40)]
