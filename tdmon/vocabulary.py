@@ -157,3 +157,4 @@ class AlarmKind(StrEnum):
     RECORDER_RESUMED = "recorder_resumed"
     RECORDING_RECOVERED = "recording_recovered"
     DATA_LOSS = "data_loss"
+    CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)

@@ -12,6 +12,7 @@ import logging
 import math
 import os
 import stat
+from datetime import UTC, date, datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -38,7 +39,7 @@ from tdmon.config.common import (
 )
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
-from tdmon.units import conversion, parse_quantity
+from tdmon.units import conversion, parse_quantity, parse_time
 
 logger = logging.getLogger(__name__)
 
@@ -167,13 +168,31 @@ class SourcesConfig(_Model):
         return self
 
 
+#: Lowest value a depth channel takes when ``min`` is not configured [m]. Measured depths and
+#: the block position start at the drill floor; a depth tracker zeroed a little off reads a
+#: little below 0, a sign or datum mistake reads far below: 2 m separates the two.
+DEFAULT_MINIMUM: dict[str, float] = {"bit_depth": -2.0, "hole_depth": -2.0,
+                                     "block_position": -2.0}
+
+#: How far beyond the well file's total depth a bit or hole depth may lie when ``beyond_well``
+#: is not configured [m]: a well file kept a day or two behind the drilling (a few hundred
+#: metres) is not refused, a depth in feet taken as metres (x 3.28) is.
+DEFAULT_BEYOND_WELL = 500.0
+
+#: Channels that are measured depths in the hole (``beyond_well`` applies to them).
+DEPTH_CHANNELS = ("bit_depth", "hole_depth")
+
+
 class ChannelConfig(_Model):
     """How a rig topic feeds a canonical channel; bounds are in the channel's SI unit."""
 
     topic: str | None = None  # topic after the prefix (default: the channel name)
     unit: str | None = None  # unit when the payload has none, e.g. "kN"
-    min: float | str | None = None
+    min: float | str | None = None  # default: DEFAULT_MINIMUM for depths, else none
     max: float | str | None = None
+    # bit and hole depth only: how far beyond the well file's total depth a value may lie
+    # (default DEFAULT_BEYOND_WELL; needs `well`)
+    beyond_well: Meters | None = Field(default=None, ge=0)
 
 
 class PublishConfig(_Model):
@@ -219,6 +238,34 @@ class AlignConfig(_Model):
     )
     # channels a frame waits for while they keep pace with the hook load (default: all)
     wait_for: list[str] | None = None
+    # the rig clock (docs/daemon.md, "Clock faults"): a sample stamped more than this ahead
+    # of its receive time (plus the rig clock's known offset) is rejected; 10 s is well above
+    # NTP skew and the jitter of the bundled replays (2.8 s), and bounds what one such
+    # sample that slips through can hold frames back
+    future_tolerance: Seconds = Field(default=10.0, gt=0)
+    # this many samples in a row, consistently off by more than the tolerance (offsets within
+    # clock_jump_spread of each other), are a clock jump: one alarm, the aligner re-anchors
+    clock_jump_samples: int = Field(default=5, ge=2, le=1000)
+    clock_jump_spread: Seconds = Field(default=5.0, gt=0)
+    # a stamp before this is a rig clock never set (t = 0 is 1970): rejected; ISO 8601 date
+    # or time (UTC unless it says), or Unix seconds
+    earliest_time: float = Field(default=946_684_800.0)  # 2000-01-01T00:00:00Z
+
+    @field_validator("earliest_time", mode="before")
+    @classmethod
+    def _earliest(cls, value: Any) -> Any:
+        if isinstance(value, datetime):
+            value = value if value.tzinfo else value.replace(tzinfo=UTC)
+            return value.timestamp()
+        if isinstance(value, date):
+            return datetime(value.year, value.month, value.day, tzinfo=UTC).timestamp()
+        if isinstance(value, str | int | float) and not isinstance(value, bool):
+            seconds = parse_time(value)
+            if isinstance(seconds, str):
+                raise ValueError(seconds.replace("'t'", "the time") +
+                                 " (give e.g. \"2000-01-01\")")
+            return seconds
+        return value
 
 
 class RigStateConfig(_Model):
@@ -327,7 +374,8 @@ class DaemonConfig(_Model):
         return value
 
     def channel_specs(self) -> list[ChannelSpec]:
-        """Channel map for the decoder; every canonical channel is accepted on its own name."""
+        """Channel map for the decoder; every canonical channel is accepted on its own name.
+        Depth channels without a configured ``min`` get :data:`DEFAULT_MINIMUM`."""
         specs = []
         for name, (target, _) in CHANNEL_UNITS.items():
             cfg = self.channels.get(name, ChannelConfig())
@@ -335,10 +383,20 @@ class DaemonConfig(_Model):
                 channel=name,
                 topic=cfg.topic or name,
                 unit=cfg.unit,
-                minimum=None if cfg.min is None else parse_quantity(cfg.min, target),
+                minimum=(DEFAULT_MINIMUM.get(name) if cfg.min is None
+                         else parse_quantity(cfg.min, target)),
                 maximum=None if cfg.max is None else parse_quantity(cfg.max, target),
             ))
         return specs
+
+    def depth_margins(self) -> dict[str, float]:
+        """How far beyond the well's total depth each depth channel may lie [m]."""
+        margins = {}
+        for name in DEPTH_CHANNELS:
+            cfg = self.channels.get(name)
+            margin = None if cfg is None else cfg.beyond_well
+            margins[name] = DEFAULT_BEYOND_WELL if margin is None else margin
+        return margins
 
     def resolve(self, path: Path) -> Path:
         """A path from the file, made absolute relative to the file's folder."""
@@ -393,6 +451,11 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     for name in config.publish.names:
         if not name or "/" in name:
             raise ConfigError(str(file), "publish.names", f"'{name}' is not a message name")
+    for name, channel_cfg in config.channels.items():
+        if channel_cfg.beyond_well is not None and name not in DEPTH_CHANNELS:
+            raise ConfigError(str(file), f"channels.{name}.beyond_well",
+                              f"only depths ({', '.join(DEPTH_CHANNELS)}) can lie beyond the "
+                              "well; remove the key")
     for channel in config.align.wait_for or ():
         try:
             check_channel(channel)

@@ -17,19 +17,41 @@ Duplicates (same channel and time as a sample already held) are counted and igno
 Out-of-order samples (older than the channel's newest) are counted; they still fill the history
 if they fall inside it, so a late bit depth can complete a pending frame, but they never move a
 frame backwards in time.
+
+Except when the rig clock went back: ``jump_samples`` hook loads in a row older than the last
+frame, in increasing time (the rig clock still runs), whose offsets against their receive time
+agree within ``jump_spread`` and lie more than ``jump_min`` below the offset of the last
+frame's hook load, are a clock jump, not late data.
+The aligner then emits its pending frame, forgets the old timeline and takes up the new one
+with the samples that came since the jump (kept for this, at most ``_MAX_LATE``), so results
+resume at once; the jump is reported through :meth:`Aligner.take_jumps` (docs/daemon.md,
+"Clock faults"). A single hook load stamped ahead that slipped through the future tolerance
+holds frames back for at most that tolerance, which is why ``jump_min`` is the same value.
 """
 
 from __future__ import annotations
 
 import bisect
-from collections.abc import Iterable
+import statistics
+from collections import deque
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+from tdmon.daemon.clock import ClockJump
 from tdmon.daemon.pipeline import Frame
 from tdmon.ingest.types import Sample
 
 #: Times closer than this are the same instant (rigs stamp with ms resolution at best).
 _SAME_TIME = 1e-6
+
+#: Samples kept from the new timeline while a clock jump back is being confirmed (bounded: a
+#: flood of late samples must not grow memory).
+_MAX_LATE = 1024
+
+# what _store did with a sample
+_DUPLICATE, _STORED, _TOO_OLD = 0, 1, 2
+
+_NO_JUMPS: tuple[ClockJump, ...] = ()
 
 
 @dataclass(slots=True)
@@ -51,6 +73,9 @@ class Aligner:
         stale_timeout: float = 5.0,
         max_wait: float = 0.25,
         history: int = 8,
+        jump_samples: int = 5,
+        jump_spread: float = 5.0,
+        jump_min: float = 10.0,
     ) -> None:
         self.trigger = trigger
         self.wait_for = None if wait_for is None else tuple(c for c in wait_for if c != trigger)
@@ -67,22 +92,93 @@ class Aligner:
         self._first_t: float | None = None
         self.duplicates = 0
         self.out_of_order = 0
+        self.jump_samples = jump_samples
+        self.jump_spread = jump_spread
+        self.jump_min = jump_min
+        # offset (t - receive time) of the hook load that opened the newest frame
+        self._frame_offset: float | None = None
+        # hook loads in a row that could not open a frame, in increasing time: (t, offset)
+        self._refused: deque[tuple[float, float]] = deque(maxlen=jump_samples)
+        # samples that may belong to a new timeline: out of order, or any since a hook load
+        # was refused; cleared whenever a hook load opens a frame
+        self._late: deque[Sample] = deque(maxlen=_MAX_LATE)
+        self._jumps: list[ClockJump] = []
 
     def push(self, sample: Sample, now: float) -> list[Frame]:
         """Take one sample (``now`` is monotonic seconds); return the frames it completes."""
-        if not self._store(sample):
+        stored = self._store(sample)
+        if stored == _DUPLICATE:
             return []
         frames: list[Frame] = []
-        if sample.channel == self.trigger and sample.t > self._last_frame_t + _SAME_TIME:
+        if sample.channel == self.trigger:
             pending = self._pending
-            if pending is None or sample.t > pending.t + _SAME_TIME:
+            if sample.t > self._last_frame_t + _SAME_TIME and (
+                    pending is None or sample.t > pending.t + _SAME_TIME):
                 if pending is not None:
                     frames.append(self._emit())
                 self._pending = _Pending(sample.t, sample.value, now,
                                          int(sample.receive_time * 1e9))
-            # an out-of-order hook load older than the pending one is kept in the history only
+                self._frame_offset = sample.t - sample.receive_time
+                if self._refused:
+                    self._refused.clear()
+                if self._late:
+                    self._late.clear()
+            else:
+                # an out-of-order hook load is kept in the history only, unless it confirms
+                # that the rig clock went back
+                self._late.append(sample)
+                jump = self._refused_hookload(sample)
+                if jump is not None:
+                    return self._reanchor(jump, now)
+        elif stored == _TOO_OLD or self._refused:
+            self._late.append(sample)
+        if stored == _TOO_OLD:
+            return frames
         if self._pending is not None and self._complete(self._pending.t):
             frames.append(self._emit())
+        return frames
+
+    def take_jumps(self) -> Sequence[ClockJump]:
+        """The clock jumps back seen since the last call (the pipeline raises one alarm each)."""
+        if not self._jumps:
+            return _NO_JUMPS
+        jumps, self._jumps = self._jumps, []
+        return jumps
+
+    def _refused_hookload(self, sample: Sample) -> ClockJump | None:
+        refused = self._refused
+        if refused and sample.t <= refused[-1][0]:
+            refused.clear()  # a clock that went back still runs forward: a new run
+        refused.append((sample.t, sample.t - sample.receive_time))
+        if len(refused) < self.jump_samples or self._frame_offset is None:
+            return None
+        offsets = [offset for _, offset in refused]
+        if max(offsets) - min(offsets) > self.jump_spread:
+            return None  # late data of many ages, not one clock
+        new = statistics.median(offsets)
+        back = self._frame_offset - new
+        if back <= self.jump_min:
+            return None  # a short hold-up, over within the future tolerance anyway
+        return ClockJump(-back, sample.t, sample.receive_time, new)
+
+    def _reanchor(self, jump: ClockJump, now: float) -> list[Frame]:
+        """Emit the old timeline's pending frame, forget it, and replay the new one."""
+        frames = self.flush()
+        late = list(self._late)
+        self._times.clear()
+        self._values.clear()
+        self._pending = None
+        self._last_frame_t = float("-inf")
+        self._first_t = None
+        self._frame_offset = None
+        self._refused.clear()
+        self._late.clear()
+        self._jumps.append(jump)
+        # these samples were counted when they arrived; replaying them is not new disorder
+        counts = self.duplicates, self.out_of_order
+        for sample in late:
+            frames.extend(self.push(sample, now))
+        self.duplicates, self.out_of_order = counts
         return frames
 
     def expire(self, now: float) -> list[Frame]:
@@ -102,19 +198,19 @@ class Aligner:
             return None
         return times[-1], self._values[channel][-1]
 
-    def _store(self, sample: Sample) -> bool:
+    def _store(self, sample: Sample) -> int:
         if self._first_t is None:
             self._first_t = sample.t
         times = self._times.get(sample.channel)
         if times is None:
             self._times[sample.channel] = [sample.t]
             self._values[sample.channel] = [sample.value]
-            return True
+            return _STORED
         values = self._values[sample.channel]
         newest = times[-1]
         if abs(sample.t - newest) <= _SAME_TIME:
             self.duplicates += 1
-            return False
+            return _DUPLICATE
         if sample.t > newest:
             times.append(sample.t)
             values.append(sample.value)
@@ -124,16 +220,16 @@ class Aligner:
                 index > 0 and abs(times[index - 1] - sample.t) <= _SAME_TIME
             ):
                 self.duplicates += 1
-                return False
+                return _DUPLICATE
             self.out_of_order += 1
             if index == 0:
-                return False  # older than anything held: too late to matter
+                return _TOO_OLD  # older than anything held: too late to matter
             times.insert(index, sample.t)
             values.insert(index, sample.value)
         if len(times) > self.history:
             del times[0]
             del values[0]
-        return True
+        return _STORED
 
     def _complete(self, t: float) -> bool:
         if self.wait_for is not None:

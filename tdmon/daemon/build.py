@@ -18,6 +18,7 @@ from typing import Any
 
 from tdmon.config.daemon import DaemonConfig
 from tdmon.daemon.aligner import Aligner
+from tdmon.daemon.clock import ClockGuard, ClockSettings
 from tdmon.daemon.daemon import Daemon
 from tdmon.daemon.monitor import LoadModel
 from tdmon.daemon.pipeline import Pipeline, Sink, Stats, Step
@@ -27,7 +28,7 @@ from tdmon.daemon.steps.compose import calibration_steps_for, default_steps
 from tdmon.daemon.steps.profile import profile_step
 from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
-from tdmon.ingest.decode import Decoder
+from tdmon.ingest.decode import Decoder, SampleChecks
 
 log = logging.getLogger(__name__)
 
@@ -125,15 +126,25 @@ async def build_daemon(
         sources = wiring.sources
 
         steps = default_steps(config, model, rig_state) + list(extra_steps)
+        align = config.align
         aligner = Aligner(
-            wait_for=config.align.wait_for,
+            wait_for=align.wait_for,
             expected=list(config.channels),
-            stale_timeout=config.align.stale_timeout,
-            max_wait=config.align.max_wait,
+            stale_timeout=align.stale_timeout,
+            max_wait=align.max_wait,
+            jump_samples=align.clock_jump_samples,
+            jump_spread=align.clock_jump_spread,
+            jump_min=align.future_tolerance,
         )
+        checks = SampleChecks(
+            earliest_t=align.earliest_time,
+            well_depth=None if well is None else well.hole_bottom,
+            depth_margins=config.depth_margins())
         decoder = Decoder(config.prefix, config.channel_specs(),
-                          max_payload_bytes=config.queues.max_payload_bytes)
-        pipeline = Pipeline(decoder, aligner, steps, wiring.sinks, stats)
+                          max_payload_bytes=config.queues.max_payload_bytes, checks=checks)
+        clock = ClockGuard(ClockSettings(align.future_tolerance, align.clock_jump_samples,
+                                         align.clock_jump_spread))
+        pipeline = Pipeline(decoder, aligner, steps, wiring.sinks, stats, clock=clock)
         wiring.pipeline = pipeline
         if stop_when_sources_done is None:
             stop_when_sources_done = bool(sources) and all(s.finite for s in sources)

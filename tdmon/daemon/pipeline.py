@@ -26,6 +26,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
+from tdmon.daemon.clock import ClockGuard, ClockJump
 from tdmon.daemon.loss import LossDetector
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
@@ -37,9 +38,9 @@ from tdmon.ingest.types import (
     rejected_message,
     sample_message,
 )
-from tdmon.messages import status_message
+from tdmon.messages import alarm_message, status_message
 from tdmon.record.sink import Sink
-from tdmon.vocabulary import RigState
+from tdmon.vocabulary import AlarmKind, RigState, Severity
 
 __all__ = ["Emit", "Frame", "FrameSource", "Pipeline", "Sink", "Stats", "Step"]
 
@@ -99,6 +100,7 @@ class Stats:
     """Messages missing from the publishers' ``seq`` counters."""
     sampling_gaps: int = 0
     """Silences much longer than a channel's usual sampling interval."""
+    clock_jumps: int = 0
     last_sample_t: float | None = None
     rejected_reasons: dict[str, int] = field(default_factory=dict)
 
@@ -130,9 +132,17 @@ class Pipeline:
         sinks: Sequence[Sink] = (),
         stats: Stats | None = None,
         monotonic: Callable[[], float] = time.monotonic,
+        clock: ClockGuard | None = None,
     ) -> None:
         self.decoder = decoder
         self.aligner = aligner
+        # the rig clock against the receive time (docs/daemon.md, "Clock faults"); None: no
+        # future check, as for a pipeline built by hand
+        self.clock = clock
+        # an aligner that can see the rig clock go back says so here (FrameSource does not
+        # require it)
+        self._take_jumps: Callable[[], Sequence[ClockJump]] | None = getattr(
+            aligner, "take_jumps", None)
         self.steps = list(steps)
         self.sinks = list(sinks)
         self.stats = stats or Stats()
@@ -169,14 +179,14 @@ class Pipeline:
             self._write("/tdmon/raw", log_ns, raw_message(raw, self._recorded_payload_bytes))
         decoded = self.decoder.decode(raw)
         if isinstance(decoded, Rejected):
-            stats.rejected += 1
-            # group by the reason's first words so a flood of distinct values stays small
-            key = decoded.reason.split(":")[0].split("(")[0].strip()[:60]
-            if key in stats.rejected_reasons or len(stats.rejected_reasons) < 64:
-                stats.rejected_reasons[key] = stats.rejected_reasons.get(key, 0) + 1
-            self._write("/tdmon/rejected", log_ns,
-                        rejected_message(decoded, self._recorded_payload_bytes))
-            return decoded
+            return self._reject(decoded, log_ns)
+        jump: ClockJump | None = None
+        if self.clock is not None:
+            verdict = self.clock.check(decoded)
+            if isinstance(verdict, str):
+                return self._reject(Rejected(verdict, raw.payload, raw.source, raw.topic,
+                                             raw.receive_time), log_ns)
+            jump = verdict
         stats.samples_in += 1
         stats.last_sample_t = decoded.t
         if self._sinks_for("/tdmon/sample"):
@@ -185,11 +195,37 @@ class Pipeline:
             self._write("/tdmon/alarm", log_ns, alarm)
         stats.seq_lost = self.loss.seq_lost
         stats.sampling_gaps = self.loss.sampling_gaps
+        if jump is not None:
+            self._clock_jump(jump, log_ns)
         frames = self.aligner.push(decoded, self._monotonic())
         self._sync_aligner_counts()
+        if self._take_jumps is not None:
+            for jump in self._take_jumps():
+                if self.clock is not None:
+                    self.clock.reanchor(jump.offset)
+                self._clock_jump(jump, log_ns)
         for frame in frames:
             self._run_steps(frame)
         return decoded
+
+    def _reject(self, rejected: Rejected, log_ns: int) -> Rejected:
+        stats = self.stats
+        stats.rejected += 1
+        # group by the reason's first words so a flood of distinct values stays small
+        key = rejected.reason.split(":")[0].split("(")[0].strip()[:60]
+        if key in stats.rejected_reasons or len(stats.rejected_reasons) < 64:
+            stats.rejected_reasons[key] = stats.rejected_reasons.get(key, 0) + 1
+        self._write("/tdmon/rejected", log_ns,
+                    rejected_message(rejected, self._recorded_payload_bytes))
+        return rejected
+
+    def _clock_jump(self, jump: ClockJump, log_ns: int) -> None:
+        """One alarm and one log line per clock jump: never a silent stall."""
+        self.stats.clock_jumps += 1
+        log.warning("%s (rig time %.3f, receive time %.3f)", jump.message, jump.t,
+                    jump.receive_time)
+        self._write("/tdmon/alarm", log_ns, alarm_message(
+            jump.t, AlarmKind.CLOCK_JUMP, Severity.WARNING, jump.message, value=jump.seconds))
 
     def tick(self) -> None:
         """Emit a frame that has waited long enough for its other channels."""

@@ -12,6 +12,8 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
 
 # CHANNEL_UNITS and ChannelSpec live in tdmon.channels (the config builds channel specs
 # without importing the decoder); they are named here too for the decoder's users.
@@ -20,7 +22,7 @@ from tdmon.ingest.types import RawMessage, Rejected, Sample
 from tdmon.units import T_MAX, T_MIN, conversion, parse_time
 
 __all__ = ["ABS_VALUE_MAX", "CHANNEL_UNITS", "T_MAX", "T_MIN", "ChannelSpec", "Decoder",
-           "parse_payload", "parse_time", "topic_for"]
+           "SampleChecks", "parse_payload", "parse_time", "topic_for"]
 
 #: Timestamps outside [1970, 2200) are typos or unit mix-ups (ms instead of s), not data.
 
@@ -39,6 +41,25 @@ _JSON = json.JSONDecoder()
 _NOT_PLAIN = object()  # what `_plain_json_object` returns when json.loads must look
 
 
+@dataclass(frozen=True, slots=True)
+class SampleChecks:
+    """Checks of a decoded sample beyond its channel's bounds (docs/daemon.md, "Clock faults").
+
+    Attributes
+    ----------
+    earliest_t : a stamp before this [Unix s] is a rig clock that was never set (t = 0 is
+        1970-01-01), not data; None: no check
+    well_depth : total depth of the configured well [m]; None: no well file, no check
+    depth_margins : per depth channel (bit and hole depth), how far beyond ``well_depth`` a
+        value may lie [m]
+        (the well file may lag a few hundred metres of drilling behind the hole)
+    """
+
+    earliest_t: float | None = None
+    well_depth: float | None = None
+    depth_margins: Mapping[str, float] = field(default_factory=dict)
+
+
 class Decoder:
     """Decode raw messages of one rig (prefix) into Samples, or Rejected with a reason.
 
@@ -50,10 +71,25 @@ class Decoder:
         prefix: str,
         channels: Mapping[str, ChannelSpec] | list[ChannelSpec],
         max_payload_bytes: int = 4096,
+        checks: SampleChecks | None = None,
     ) -> None:
         specs = list(channels.values()) if isinstance(channels, Mapping) else list(channels)
         self.prefix = prefix.strip("/")
         self.max_payload_bytes = max_payload_bytes
+        self.checks = checks or SampleChecks()
+        self._earliest = self.checks.earliest_t
+        earliest = self._earliest
+        self._earliest_text = ("" if earliest is None else datetime.fromtimestamp(
+            earliest, UTC).strftime("%Y-%m-%d %H:%M:%SZ").replace(" 00:00:00Z", ""))
+        # per channel: (largest value, why) from the well's total depth
+        self._beyond_well: dict[str, tuple[float, str]] = {}
+        well_depth = self.checks.well_depth
+        if well_depth is not None:
+            for channel, margin in self.checks.depth_margins.items():
+                check_channel(channel)
+                self._beyond_well[channel] = (
+                    well_depth + margin, f"{well_depth + margin:g} m (the well's total depth "
+                                         f"{well_depth:g} m + {margin:g} m)")
         self._by_topic: dict[str, ChannelSpec] = {}
         self._factors: dict[str, dict[str, tuple[float, float]]] = {}
         self._default_factor: dict[str, tuple[float, float] | None] = {}
@@ -87,6 +123,9 @@ class Decoder:
         if isinstance(parsed, str):
             return _reject(raw, parsed)
         t, value, unit, seq = parsed
+        if self._earliest is not None and t < self._earliest:
+            return _reject(raw, f"t before the earliest accepted time ({_utc(t)} < "
+                                f"{self._earliest_text}: a rig clock that was never set)")
         channel = spec.channel
         # the usual case, a unit seen before or the configured one, without a method call
         factor = (self._default_factor[channel] if unit is None
@@ -106,6 +145,9 @@ class Decoder:
         if spec.maximum is not None and si_value > spec.maximum:
             return _reject(raw, f"value {si_value:g} above the {spec.channel} maximum "
                                 f"{spec.maximum:g} {CHANNEL_UNITS[spec.channel][1]}")
+        beyond = self._beyond_well.get(channel)
+        if beyond is not None and si_value > beyond[0]:
+            return _reject(raw, f"beyond the well: {channel} {si_value:g} m > {beyond[1]}")
         # positional: channel, t, value, source, topic, unit, receive_time
         return Sample(channel, t, si_value, raw.source, raw.topic, CHANNEL_UNITS[channel][1],
                       raw.receive_time, seq)
@@ -211,6 +253,11 @@ def _plain_json_object(text: str) -> object:
 def _reject(raw: RawMessage, reason: str) -> Rejected:
     return Rejected(reason=reason, raw=raw.payload, source=raw.source, topic=raw.topic,
                     receive_time=raw.receive_time)
+
+
+def _utc(t: float) -> str:
+    """``t`` [Unix s] as a UTC time for a message."""
+    return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def _clip(text: str, limit: int = 60) -> str:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tdmon.ingest.decode import ChannelSpec, Decoder, parse_payload, parse_time
+from tdmon.ingest.decode import ChannelSpec, Decoder, SampleChecks, parse_payload, parse_time
 from tdmon.ingest.types import RawMessage, Rejected, Sample, payload_text
 
 DECODER = Decoder("rig/F4", [
@@ -205,3 +205,48 @@ def test_payload_parsing_is_json_loads_whatever_surrounds_the_object(
 ])
 def test_payload_edge_cases(text: str, expected: object) -> None:
     assert parse_payload(text.encode()) == expected
+
+
+# -- sample checks (issue 13, item 8): a clock never set, negative depths, depths beyond the well
+
+CHECKED = Decoder("rig", [ChannelSpec("bit_depth", "bit_depth", "m", minimum=-2.0),
+                          ChannelSpec("hole_depth", "hole_depth", "ft", minimum=-2.0),
+                          ChannelSpec("hookload", "hookload", "kN")],
+                  checks=SampleChecks(earliest_t=946_684_800.0, well_depth=3000.0,
+                                      depth_margins={"bit_depth": 500.0, "hole_depth": 100.0}))
+
+
+@pytest.mark.parametrize(("topic", "body", "reason"), [
+    ("rig/hookload", {"t": 0, "value": 900},
+     "t before the earliest accepted time (1970-01-01T00:00:00Z < 2000-01-01: a rig clock "
+     "that was never set)"),
+    ("rig/hookload", {"t": "1999-12-31T23:59:59Z", "value": 900},
+     "t before the earliest accepted time (1999-12-31T23:59:59Z < 2000-01-01: a rig clock "
+     "that was never set)"),
+    ("rig/bit_depth", {"t": 1.7e9, "value": -2.5}, "value -2.5 below the bit_depth minimum -2 m"),
+    ("rig/bit_depth", {"t": 1.7e9, "value": 3500.5},
+     "beyond the well: bit_depth 3500.5 m > 3500 m (the well's total depth 3000 m + 500 m)"),
+    # 11 500 ft = 3505.2 m: in feet, beyond a 3000 m well with a 100 m margin
+    ("rig/hole_depth", {"t": 1.7e9, "value": 11_500},
+     "beyond the well: hole_depth 3505.2 m > 3100 m (the well's total depth 3000 m + 100 m)"),
+])
+def test_each_misleading_sample_is_rejected_with_its_reason(
+        topic: str, body: dict[str, object], reason: str) -> None:
+    rejected = CHECKED.decode(raw(topic, body))
+    assert isinstance(rejected, Rejected)
+    assert rejected.reason == reason
+
+
+@pytest.mark.parametrize(("topic", "value"), [
+    ("rig/bit_depth", -2.0), ("rig/bit_depth", 0.0), ("rig/bit_depth", 3500.0),
+    ("rig/hole_depth", 3100.0 / 0.3048), ("rig/hookload", 1e6),  # no depth limit on hook load
+])
+def test_values_at_the_limits_are_samples(topic: str, value: float) -> None:
+    sample = CHECKED.decode(raw(topic, {"t": "2000-01-01", "value": value}))
+    assert isinstance(sample, Sample)
+    assert sample.t == 946_684_800.0
+
+
+def test_without_checks_the_decoder_takes_any_time_and_depth() -> None:
+    sample = DECODER.decode(raw("rig/F4/bit_depth", {"t": 0, "value": -1e4, "unit": "m"}))
+    assert isinstance(sample, Sample) and sample.value == -1e4
