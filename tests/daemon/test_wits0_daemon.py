@@ -11,12 +11,13 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import pytest
 from daemon_support import make_config, running, wait_until
 
 from tdmon.config.daemon import DaemonConfig
 from tdmon.ingest.wits0 import encode_sample_frame, item_map
-from tdmon.record.reader import read_messages
+from tdmon.record.reader import read_messages, schemas_of
 
 T0 = 1_700_000_000.0
 ITEMS = item_map("metric")
@@ -43,9 +44,12 @@ def _config(tmp_path: Path, wits0: dict[str, Any]) -> DaemonConfig:
 
 
 def _recorded(tmp_path: Path) -> dict[str, list[dict[str, Any]]]:
+    """The recording's messages by topic, each checked against its recorded schema."""
     [recording] = (tmp_path / "rec").glob("*.mcap")
+    schemas = schemas_of(recording)
     out: dict[str, list[dict[str, Any]]] = {}
     for message in read_messages(recording):
+        jsonschema.validate(message.message, schemas[message.topic])
         out.setdefault(message.topic, []).append(message.message)
     return out
 
