@@ -114,7 +114,7 @@ class Decoder:
         """Decode one message (see :func:`parse_payload` for the rules)."""
         spec = self._by_topic.get(raw.topic)
         if spec is None:
-            return _reject(raw, f"unknown topic '{_clip(raw.topic)}'")
+            return _reject(raw, _source_error(raw) or f"unknown topic '{_clip(raw.topic)}'")
         if len(raw.payload) > self.max_payload_bytes:
             return _reject(
                 raw, f"payload too large ({len(raw.payload)} > {self.max_payload_bytes} bytes)"
@@ -208,6 +208,10 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
             return f"malformed JSON: {_clip(str(exc), 80)}"
     if not isinstance(obj, dict):
         return f"payload is a JSON {type(obj).__name__}, not an object"
+    error = obj.get("error")
+    if isinstance(error, str) and error:
+        # a source that translates another protocol (WITS0) passes on why a line was bad
+        return _clip(error, 200)
     if "t" not in obj:
         return "missing 't'"
     if "value" not in obj:
@@ -258,6 +262,19 @@ def _reject(raw: RawMessage, reason: str) -> Rejected:
 def _utc(t: float) -> str:
     """``t`` [Unix s] as a UTC time for a message."""
     return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def _source_error(raw: RawMessage) -> str | None:
+    """The reason a translating source (WITS0) gave for a message it could not map, if any:
+    such messages come on a topic of their own, which no channel owns."""
+    if raw.source != "wits0" or b'"error"' not in raw.payload:
+        return None
+    try:
+        obj = json.loads(raw.payload)
+    except (ValueError, RecursionError):
+        return None
+    error = obj.get("error") if isinstance(obj, dict) else None
+    return _clip(error, 200) if isinstance(error, str) and error else None
 
 
 def _clip(text: str, limit: int = 60) -> str:
