@@ -237,3 +237,21 @@ def _make_certs(folder: Path) -> None:
     (folder / "san.ext").write_text("subjectAltName=IP:127.0.0.1,DNS:localhost\n")
     run("x509", "-req", "-in", "server.csr", "-CA", "ca.crt", "-CAkey", "ca.key",
         "-CAcreateserial", "-days", "2", "-out", "server.crt", "-extfile", "san.ext")
+
+
+#: The fault-injection tests of docs/reliability.md, one command: ``pytest -m faults``.
+FAULT_TEST_FILES = frozenset({
+    "test_clock_faults.py", "test_delivery_sigkill.py", "test_seq_outage.py",
+    "test_mqtt_delivery.py", "test_publish_reconnect.py", "test_oversize_payloads.py",
+    "test_recovery_alarm.py", "test_recovery_and_retries.py", "test_nonmcap.py",
+    "test_startup_errors.py", "test_misleading_inputs.py", "test_password_file.py",
+    "test_broker_restart.py", "test_crash_recovery.py", "test_recorder_failure.py",
+    "test_crash_and_failure.py", "test_tls.py", "test_fuzz_daemon.py",
+})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the fault-injection tests (``-m faults``) by their file."""
+    for item in items:
+        if item.path.name in FAULT_TEST_FILES:
+            item.add_marker(pytest.mark.faults)

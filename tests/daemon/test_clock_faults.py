@@ -12,11 +12,14 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
 import aiomqtt
 import pytest
+import zenoh
 from daemon_support import WELL_FILE, make_config, payload, running, wait_until
 from mcap.writer import Writer
 
@@ -175,30 +178,72 @@ def test_clock_back_then_a_spike_on_the_new_clock_is_still_rejected() -> None:
     assert pipeline.stats.rejected_reasons == {"t in the future": 1}
 
 
-async def test_clock_faults_over_a_real_broker(mosquitto: Any, tmp_path: Path) -> None:
-    """A live daemon on mosquitto: a +30 day hook load is rejected, a rig clock going back an
-    hour raises one alarm, and model results come back on the new clock."""
-    config = make_config({"sources": {"mqtt": {"port": mosquitto.port,
-                                               "client_id": "tdmon-clock"}},
-                          "well": str(WELL_FILE), "align": {"max_wait": "3 s"}}, tmp_path)
-    async with (running(config, connected=("mqtt",)) as (built, sink),
-                aiomqtt.Client("127.0.0.1", mosquitto.port, identifier="rig") as rig):
+class _Rig:
+    """The rig's side of a live test: publishes payloads over MQTT (QoS 1) or Zenoh (blocking)."""
+
+    def __init__(self, put: Callable[[str, bytes], Awaitable[None]]) -> None:
+        self.put = put
+
+
+@asynccontextmanager
+async def _live(transport: str, tmp_path: Path, mosquitto_port: int | None,
+                free_tcp_port: Callable[[], int]) -> AsyncIterator[tuple[Any, Any, _Rig]]:
+    """A daemon on a real mosquitto or a real Zenoh peer session, and the rig's publisher."""
+    common = {"well": str(WELL_FILE), "align": {"max_wait": "3 s"}}
+    if transport == "mqtt":
+        config = make_config({"sources": {"mqtt": {"port": mosquitto_port,
+                                                   "client_id": "tdmon-clock"}}, **common},
+                             tmp_path)
+        async with (running(config, connected=("mqtt",)) as (built, sink),
+                    aiomqtt.Client("127.0.0.1", mosquitto_port, identifier="rig") as client):
+            async def put_mqtt(topic: str, data: bytes) -> None:
+                await client.publish(topic, data, qos=1)
+
+            yield built, sink, _Rig(put_mqtt)
+        return
+    rig_port, daemon_port = free_tcp_port(), free_tcp_port()
+    config = make_config({"sources": {"zenoh": {
+        "listen": [f"tcp/127.0.0.1:{daemon_port}"],
+        "connect": [f"tcp/127.0.0.1:{rig_port}"]}}, **common}, tmp_path)
+    rig_conf = zenoh.Config()
+    rig_conf.insert_json5("mode", '"peer"')
+    rig_conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{rig_port}"]))
+    rig_conf.insert_json5("scouting/multicast/enabled", "false")
+    rig_conf.insert_json5("scouting/gossip/enabled", "false")
+    session = zenoh.open(rig_conf)
+    try:
+        async with running(config, connected=("zenoh",)) as (built, sink):
+            await wait_until(lambda: len(list(session.info.peers_zid())) > 0, 10, "zenoh peer")
+            await asyncio.sleep(0.3)  # let the subscriptions propagate
+
+            async def put_zenoh(topic: str, data: bytes) -> None:
+                session.put(topic, data, congestion_control=zenoh.CongestionControl.BLOCK)
+
+            yield built, sink, _Rig(put_zenoh)
+    finally:
+        session.close()
+
+
+@pytest.mark.parametrize("transport", ["mqtt", "zenoh"])
+async def test_clock_faults_live(transport: str, mosquitto: Any, tmp_path: Path,
+                                 free_tcp_port: Callable[[], int]) -> None:
+    """A live daemon on mosquitto and on Zenoh: a +30 day hook load is rejected, a rig clock
+    going back an hour raises one alarm, and model results come back on the new clock."""
+    async with _live(transport, tmp_path, mosquitto.port, free_tcp_port) as (built, sink, rig):
         async def send(i: int, clock: float = 0.0) -> float:
             # the rig stamps with its clock (``clock`` off the true time), all three channels
             # of one step with one time, the hook load last so that each frame is complete
             t = time.time() + clock
             for channel in ("bit_depth", "torque", "hookload"):
                 unit = {"hookload": "kN", "torque": "kN*m", "bit_depth": "m"}[channel]
-                await rig.publish(f"rig/T1/{channel}", payload(t, _value(channel, i), unit),
-                                  qos=1)
+                await rig.put(f"rig/T1/{channel}", payload(t, _value(channel, i), unit))
             await asyncio.sleep(0.02)
             return t
 
         for i in range(10):
             await send(i)
         await wait_until(lambda: len(sink["model"]) >= 10, 20, "results before the faults")
-        await rig.publish("rig/T1/hookload", payload(time.time() + 30 * DAY, 950.0, "kN"),
-                          qos=1)
+        await rig.put("rig/T1/hookload", payload(time.time() + 30 * DAY, 950.0, "kN"))
         for i in range(10, 20):
             await send(i)
         await wait_until(lambda: len(sink["model"]) >= 20, 20, "results after the spike")

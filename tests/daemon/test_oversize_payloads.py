@@ -52,7 +52,8 @@ async def test_forty_10_mb_payloads_add_less_than_1_mb(mosquitto: Any, tmp_path:
                 sent_big.append((len(big), hashlib.sha256(big).hexdigest()))
                 await rig.publish("rig/T1/hookload", big, qos=1)
                 if i % 2 == 0:
-                    small = payload(t0 + i, 900.0 + i, "kN")
+                    # stamped in the past: a stamp ahead of the receive time is a clock fault
+                    small = payload(t0 - N_BIG + i, 900.0 + i, "kN")
                     sent_small.append(small)
                     await rig.publish("rig/T1/hookload", small, qos=1)
                 del big

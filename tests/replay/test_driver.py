@@ -31,8 +31,10 @@ REPLAYS = sorted((REPO / "replays").glob("*.mcap"))
 DAEMON_ALARM_KINDS = frozenset(AlarmKind)
 #: Kinds no replay can raise: the recorder's own failure needs a failing file system, its
 #: recovery a killed recorder (tests/record/test_crash_and_failure.py and
-#: tests/record/test_recovery_alarm.py cover them).
-NOT_FROM_REPLAYS = frozenset({"recorder_failed", "recorder_resumed", "recording_recovered"})
+#: tests/daemon/test_recovery_alarm.py cover them), a clock jump a rig clock that moves
+#: (tests/daemon/test_clock_faults.py).
+NOT_FROM_REPLAYS = frozenset({"recorder_failed", "recorder_resumed", "recording_recovered",
+                              "clock_jump"})
 
 
 @cache
