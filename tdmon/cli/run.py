@@ -51,6 +51,11 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--now", action="store_true",
                      help="shift times so that the first row is now (live-looking data)")
     pub.add_argument("--limit", type=int, help="stop after this many messages")
+    pub.add_argument("--wits0", metavar="tcp://HOST:PORT",
+                     help="serve WITS0 frames instead, as a rig's WITS server: one frame per "
+                          "time step to every connected client (docs/wits0.md, Simulator)")
+    pub.add_argument("--wits0-clients", type=int, default=1, metavar="N",
+                     help="with --wits0: wait for N clients before the first frame (0: none)")
     pub.set_defaults(func=_publish)
 
 
@@ -99,6 +104,10 @@ def _publish(args: argparse.Namespace) -> int:
                      None)
         shift = time.time() - first[0] if args.now and first else 0.0
         messages = pub.csv_messages(args.source, prefix, columns, args.time_column, shift)
+    if args.wits0:
+        from tdmon.cli.bridge import serve_wits0
+
+        return serve_wits0(args, messages, speed, _progress())
     if args.limit is not None:
         messages = islice(messages, args.limit)
 

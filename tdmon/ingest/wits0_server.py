@@ -1,0 +1,293 @@
+"""Play a rig's WITS0 server: serve a session's samples as WITS Level 0 frames over TCP.
+
+Used by ``tdmon publish X.mcap|X.csv --wits0 tcp://HOST:PORT`` for tests and demonstrations
+(docs/wits0.md, "Simulator"). The pieces are pure where they can be:
+
+- :func:`session_steps` groups the ``(t, topic, payload)`` messages of
+  :mod:`tdmon.ingest.publish` into time steps of SI channel values (one step per distinct
+  message time: one CSV row, or one logged instant of a recording);
+- :func:`build_frame` turns one step into the bytes of one frame: the date and time items
+  (0105, 0106) and every mapped channel in its configured WITS unit;
+- :class:`Wits0Server` owns the listening socket and the connected clients, and
+  :class:`Wits0Sender` lets :func:`tdmon.ingest.publish.publish` pace the frames at real time
+  x N like any other transport.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import math
+from collections.abc import AsyncIterator, Iterable, Iterator, Mapping
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from types import TracebackType
+from urllib.parse import urlsplit
+
+from tdmon.channels import CHANNEL_UNITS
+from tdmon.errors import IngestError
+from tdmon.ingest.decode import parse_payload
+from tdmon.units import conversion
+
+log = logging.getLogger(__name__)
+
+#: WITS record 01 (general time-based) date and time items: YYMMDD and HHMMSS
+DATE_ITEM = "0105"
+TIME_ITEM = "0106"
+
+#: How long one client may hold a frame back [s] before it is dropped (a stuck consumer must
+#: not stall the others)
+CLIENT_DRAIN_TIMEOUT = 10.0
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """All samples of one time step: ``t`` [Unix s] and SI values by canonical channel."""
+
+    t: float
+    values: Mapping[str, float]
+
+
+def session_steps(messages: Iterable[tuple[float, str, bytes]]) -> Iterator[Step]:
+    """Group consecutive messages with the same ``t`` into one step of SI values.
+
+    The channel is the topic's last level; topics of no canonical channel (results, alarms)
+    are skipped, and so are payloads that do not decode. The group's ``t`` (the CSV row's time,
+    the recording's log time) is the step's time: a WITS frame has one time for all its items.
+    """
+    factors: dict[tuple[str, str], tuple[float, float]] = {}
+    for t, group in itertools.groupby(messages, key=lambda message: message[0]):
+        values: dict[str, float] = {}
+        for _, topic, payload in group:
+            channel = topic.rsplit("/", 1)[-1]
+            if channel not in CHANNEL_UNITS:
+                continue
+            parsed = parse_payload(payload)
+            if isinstance(parsed, str):
+                log.debug("%s: skipped: %s", topic, parsed)
+                continue
+            _, value, unit = parsed
+            target = CHANNEL_UNITS[channel][0]
+            key = (channel, unit or target)
+            factor = factors.get(key)
+            if factor is None:
+                factor = factors[key] = conversion(unit or target, target)
+            values[channel] = value * factor[0] + factor[1]
+        if values:
+            yield Step(t, values)
+
+
+@dataclass(frozen=True, slots=True)
+class ServeAddress:
+    """Where the simulator listens: ``tcp://HOST:PORT``."""
+
+    host: str
+    port: int
+
+
+def parse_serve_url(text: str, flag: str = "--wits0") -> ServeAddress:
+    """``tcp://127.0.0.1:5001`` -> ServeAddress; anything else is the user's mistake."""
+    parts = urlsplit(text)
+    if parts.scheme != "tcp":
+        raise IngestError(f"{flag} '{text}': expected tcp://HOST:PORT (e.g. "
+                          "tcp://127.0.0.1:5001)")
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if not parts.hostname or port is None:
+        raise IngestError(f"{flag} '{text}': expected tcp://HOST:PORT with a port number")
+    return ServeAddress(parts.hostname, port)
+
+
+class Wits0Server:
+    """Listen on ``host:port`` and send every frame to every connected client.
+
+    An async context manager; clients may come and go at any time (a rig's WITS server does
+    not wait for anyone): a frame goes to the clients connected when it is sent. A client that
+    disconnects, or does not take a frame within ``drain_timeout`` seconds, is dropped.
+    Whatever a client sends (some consumers send their own frames back) is read and ignored.
+    """
+
+    def __init__(self, host: str, port: int, drain_timeout: float = CLIENT_DRAIN_TIMEOUT) -> None:
+        self.host = host
+        self.port = port
+        self.drain_timeout = drain_timeout
+        self.frames_sent = 0
+        self.clients_served = 0
+        self._server: asyncio.Server | None = None
+        self._clients: dict[asyncio.StreamWriter, asyncio.Task[None]] = {}
+        self._joined = asyncio.Condition()
+
+    @property
+    def clients(self) -> int:
+        """Clients connected now."""
+        return len(self._clients)
+
+    @property
+    def bound_port(self) -> int:
+        """The port listened on (the chosen one when ``port`` was 0)."""
+        assert self._server is not None, "not entered"
+        return int(self._server.sockets[0].getsockname()[1])
+
+    async def __aenter__(self) -> Wits0Server:
+        try:
+            self._server = await asyncio.start_server(self._accept, self.host, self.port)
+        except OSError as exc:
+            raise IngestError(f"wits0: cannot listen on {self.host}:{self.port}: "
+                              f"{exc.strerror or exc}") from exc
+        log.info("wits0: serving on %s:%d", self.host, self.bound_port)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._server is not None:
+            self._server.close()
+        for writer in list(self._clients):
+            await self._drop(writer)
+        if self._server is not None:
+            await self._server.wait_closed()
+            self._server = None
+
+    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        peer = writer.get_extra_info("peername")
+        log.info("wits0: client %s connected", peer)
+        self._clients[writer] = asyncio.create_task(self._discard_input(reader, writer))
+        self.clients_served += 1
+        async with self._joined:
+            self._joined.notify_all()
+
+    async def _discard_input(self, reader: asyncio.StreamReader,
+                             writer: asyncio.StreamWriter) -> None:
+        # reading also notices the client's end of the connection (EOF) between frames
+        with contextlib.suppress(OSError):
+            while await reader.read(4096):
+                pass
+        if writer in self._clients:
+            self._clients.pop(writer)
+            writer.close()
+
+    async def wait_for_clients(self, count: int = 1) -> None:
+        """Return once ``count`` clients are connected."""
+        async with self._joined:
+            await self._joined.wait_for(lambda: len(self._clients) >= count)
+
+    async def send(self, frame: bytes) -> None:
+        """Write one frame to every connected client; drop those that cannot take it."""
+        clients = list(self._clients)
+        for writer in clients:
+            writer.write(frame)
+        for writer in clients:
+            try:
+                await asyncio.wait_for(writer.drain(), self.drain_timeout)
+            except (OSError, TimeoutError) as exc:
+                log.warning("wits0: client %s dropped: %s", writer.get_extra_info("peername"),
+                            exc or type(exc).__name__)
+                await self._drop(writer)
+        self.frames_sent += 1
+
+    async def _drop(self, writer: asyncio.StreamWriter) -> None:
+        task = self._clients.pop(writer, None)
+        if task is not None:
+            task.cancel()
+        writer.close()
+        with contextlib.suppress(OSError):
+            await writer.wait_closed()
+
+
+class Wits0Sender:
+    """The :class:`tdmon.ingest.publish.Sender` of frames: the topic is ignored."""
+
+    def __init__(self, server: Wits0Server) -> None:
+        self.server = server
+
+    async def send(self, topic: str, payload: bytes) -> None:
+        await self.server.send(payload)
+
+    async def flush(self) -> None:
+        # the stream writers were drained frame by frame: nothing waits in a buffer of ours
+        return None
+
+
+@asynccontextmanager
+async def wits0_sender(address: ServeAddress, wait_clients: int = 1
+                       ) -> AsyncIterator[Wits0Sender]:
+    """Serve on ``address``; wait for ``wait_clients`` clients before the first frame (at
+    --speed max a session would otherwise be over before anybody connected)."""
+    async with Wits0Server(address.host, address.port) as server:
+        if wait_clients > 0:
+            log.info("wits0: waiting for %d client(s) on %s:%d", wait_clients, address.host,
+                     server.bound_port)
+            await server.wait_for_clients(wait_clients)
+        yield Wits0Sender(server)
+
+
+@dataclass(frozen=True, slots=True)
+class ServedItem:
+    """One channel served as a WITS item: its four-digit record+item code and the (pint)
+    unit its value is sent in."""
+
+    channel: str
+    code: str
+    unit: str
+
+
+def date_time_items(t: float) -> list[tuple[str, str]]:
+    """The 0105 (YYMMDD) and 0106 (HHMMSS) items of ``t`` [Unix s], in UTC.
+
+    WITS time has a resolution of one second: the fraction is cut off, not rounded, so that a
+    step never moves into the next second."""
+    moment = datetime.fromtimestamp(math.floor(t), UTC)
+    return [(DATE_ITEM, moment.strftime("%y%m%d")), (TIME_ITEM, moment.strftime("%H%M%S"))]
+
+
+def format_value(value: float) -> str:
+    """A WITS value: plain decimal, at most 10 significant digits, no exponent."""
+    text = f"{value:.10g}"
+    if "e" in text:
+        text = f"{value:.6f}".rstrip("0").rstrip(".")
+    return text
+
+
+def build_frame(t: float, values: Mapping[str, float], items: Iterable[ServedItem]) -> bytes:
+    """The bytes of one WITS0 frame for the SI ``values`` of a step at ``t`` [Unix s].
+
+    The frame opens with ``&&``, carries the date and time items then one line per mapped
+    channel that has a value (in the item's unit), and closes with ``!!``; lines end in CR LF.
+    """
+    lines = ["&&"]
+    lines.extend(code + text for code, text in date_time_items(t))
+    for item in items:
+        value = values.get(item.channel)
+        if value is None:
+            continue
+        scale, offset = conversion(CHANNEL_UNITS[item.channel][0], item.unit)
+        lines.append(item.code + format_value(value * scale + offset))
+    lines.append("!!")
+    return ("\r\n".join(lines) + "\r\n").encode("ascii")
+
+
+def default_served_items() -> tuple[ServedItem, ...]:
+    """The record-01 items the simulator serves, in metric units (provisional, until the
+    codec's map is merged)."""
+    return (
+        ServedItem("bit_depth", "0108", "m"),
+        ServedItem("hole_depth", "0110", "m"),
+        ServedItem("block_position", "0112", "m"),
+        ServedItem("hookload", "0114", "kN"),
+        ServedItem("wob", "0116", "kN"),
+        ServedItem("torque", "0118", "kN*m"),
+        ServedItem("rpm", "0120", "rpm"),
+        ServedItem("spp", "0121", "kPa"),
+        ServedItem("flow_in", "0130", "L/min"),
+        ServedItem("mud_density", "0132", "kg/m**3"),
+        ServedItem("mud_temp_out", "0133", "degC"),
+        ServedItem("mud_temp_in", "0134", "degC"),
+    )
