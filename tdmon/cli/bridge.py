@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import logging
 import signal
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable
+from contextlib import AbstractAsyncContextManager, AsyncExitStack, asynccontextmanager
 from itertools import islice
 from pathlib import Path
 from typing import Any
@@ -71,15 +73,142 @@ def serve_wits0(args: argparse.Namespace, messages: Iterable[tuple[float, str, b
 
     async def main() -> tuple[int, int]:
         try:
-            async with ws.wits0_sender(address, args.wits0_clients) as sender:
-                count = await pub.publish(frames, sender, speed, progress)
-                return count, sender.server.clients_served
+            async with ws.Wits0Server(address.host, address.port) as server:
+                # said once listening, so that a script may connect as soon as it reads this
+                print(f"tdmon: serving WITS0 on {address.host}:{server.bound_port}; waiting "
+                      f"for {args.wits0_clients} client(s)", file=sys.stderr, flush=True)
+                await server.wait_for_clients(args.wits0_clients)
+                count = await pub.publish(frames, ws.Wits0Sender(server), speed, progress)
+                return count, server.clients_served
         finally:
             progress(None)
 
-    print(f"tdmon: serving WITS0 on {address.host}:{address.port}; waiting for "
-          f"{args.wits0_clients} client(s)", file=sys.stderr, flush=True)
     count, clients = asyncio.run(main())
     print(f"tdmon: served {count} WITS0 frames to {clients} client(s) on "
           f"{address.host}:{address.port}", file=sys.stderr)
     return 0
+
+
+def bridge_wits0_command(args: argparse.Namespace) -> int:
+    """``tdmon bridge wits0``: supervised WITS0 input, tdmon payloads out."""
+    from tdmon.config.daemon import load_daemon_config
+
+    config = load_daemon_config(args.config) if args.config else None
+    prefix = (args.prefix or (config.prefix if config else "rig/F4")).strip("/")
+    if args.limit is not None and args.limit <= 0:
+        raise TdmonError("--limit must be positive")
+    open_source = _wits0_input(args, config, prefix)
+    open_sender, where = _output(args, config)
+    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    count = asyncio.run(_bridge_until_stopped(open_source, open_sender, prefix, args.limit))
+    print(f"tdmon: bridged {count} messages to {where} on {prefix}/...", file=sys.stderr)
+    return 0
+
+
+def _output(args: argparse.Namespace, config: Any
+            ) -> tuple[Callable[[], AbstractAsyncContextManager[Any]], str]:
+    """Where the bridge publishes: flags, else the config's [publish.*], else where its
+    [sources.mqtt] / [sources.zenoh] listen (like ``tdmon publish --config``)."""
+    from tdmon.config.daemon import MqttConfig, TlsConfig, ZenohConfig
+    from tdmon.ingest import publish as pub
+
+    mqtt: MqttConfig | None = None
+    zenoh: ZenohConfig | None = None
+    if args.mqtt:
+        host, _, port = args.mqtt.rpartition(":")
+        if not host or not port.isdigit():
+            raise TdmonError(f"--mqtt must be HOST:PORT, got '{args.mqtt}'")
+        mqtt = MqttConfig(host=host, port=int(port), client_id=args.client_id,
+                          username=args.username, password=args.password,
+                          tls=TlsConfig(ca_file=args.ca_file) if args.ca_file else None,
+                          clean_session=True)
+    elif args.zenoh_connect or args.zenoh_listen:
+        zenoh = ZenohConfig(connect=args.zenoh_connect, listen=args.zenoh_listen)
+    elif config is not None and config.publish.mqtt is not False:
+        mqtt = config.sources.mqtt if config.publish.mqtt is True else config.publish.mqtt
+    elif config is not None and config.publish.zenoh is not False:
+        zenoh = config.sources.zenoh if config.publish.zenoh is True else config.publish.zenoh
+    elif config is not None and config.sources.mqtt is not None:
+        mqtt = config.sources.mqtt.model_copy(
+            update={"client_id": args.client_id, "clean_session": True})
+    elif config is not None and config.sources.zenoh is not None:
+        source = config.sources.zenoh
+        zenoh = ZenohConfig(mode="peer" if source.mode == "peer" else "client",
+                            connect=source.listen or source.connect)
+    else:
+        raise TdmonError("say where to publish: --mqtt, --zenoh-connect/--zenoh-listen, or "
+                         "--config with [publish.mqtt]/[publish.zenoh] or an MQTT/Zenoh source")
+    if mqtt is not None:
+        chosen_mqtt = mqtt
+        if mqtt.client_id == (config.sources.mqtt.client_id if config is not None
+                              and config.sources.mqtt is not None else None):
+            # a daemon's own client id: the broker would throw one of the two off
+            chosen_mqtt = mqtt.model_copy(update={"client_id": args.client_id})
+        return (lambda: pub.mqtt_sender(chosen_mqtt, args.qos)), \
+            f"mqtt {mqtt.host}:{mqtt.port}"
+    assert zenoh is not None
+    chosen_zenoh = zenoh
+    where = ", ".join(zenoh.connect + zenoh.listen) or "default endpoints"
+    return (lambda: pub.zenoh_sender(chosen_zenoh)), f"zenoh {where}"
+
+
+async def _bridge_until_stopped(
+    open_source: Callable[[], AbstractAsyncContextManager[AsyncIterator[Any]]],
+    open_sender: Callable[[], AbstractAsyncContextManager[Any]],
+    prefix: str, limit: int | None,
+) -> int:
+    """Relay until SIGINT/SIGTERM (or ``limit`` messages); return how many were published."""
+    from tdmon.daemon.supervisor import supervise
+
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(signum, stop.set)
+    states: dict[str, str] = {}
+    count = 0
+    current: list[Any] = []  # the open sender, flushed before stopping
+
+    @asynccontextmanager
+    async def connect() -> AsyncIterator[tuple[Any, AsyncIterator[Any]]]:
+        # output and input are one pipe: losing either reopens both through the supervisor
+        async with AsyncExitStack() as stack:
+            sender = await stack.enter_async_context(open_sender())
+            source = await stack.enter_async_context(open_source())
+            current[:] = [sender]
+            try:
+                yield sender, source
+            finally:
+                current.clear()
+
+    async def work(connection: tuple[Any, AsyncIterator[Any]]) -> None:
+        nonlocal count
+        sender, source = connection
+        async for raw in source:
+            channel = raw.topic.rsplit("/", 1)[-1]
+            await sender.send(f"{prefix}/{channel}", raw.payload)
+            count += 1
+            if limit is not None and count >= limit:
+                stop.set()
+                await asyncio.Event().wait()  # hold the connection until the caller stops
+
+    task = asyncio.create_task(supervise("wits0 bridge", connect, work, states))
+    stopping = asyncio.create_task(stop.wait())
+    try:
+        await asyncio.wait({task, stopping}, return_when=asyncio.FIRST_COMPLETED)
+        if task.done():
+            task.result()  # a bug or an error that is not a connection's: raise it
+        if current:
+            try:
+                await asyncio.wait_for(current[0].flush(), 10.0)
+            except TdmonError as exc:
+                logging.getLogger(__name__).warning("wits0 bridge: %s", exc)
+            except TimeoutError:
+                logging.getLogger(__name__).warning("wits0 bridge: flush timed out")
+    finally:
+        for pending in (task, stopping):
+            pending.cancel()
+        await asyncio.gather(task, stopping, return_exceptions=True)
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(signum)
+    return count

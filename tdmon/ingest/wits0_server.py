@@ -20,8 +20,7 @@ import contextlib
 import itertools
 import logging
 import math
-from collections.abc import AsyncIterator, Iterable, Iterator, Mapping
-from contextlib import asynccontextmanager
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from types import TracebackType
@@ -175,7 +174,8 @@ class Wits0Server:
             writer.close()
 
     async def wait_for_clients(self, count: int = 1) -> None:
-        """Return once ``count`` clients are connected."""
+        """Return once ``count`` clients are connected (at --speed max a session would
+        otherwise be over before anybody connected)."""
         async with self._joined:
             await self._joined.wait_for(lambda: len(self._clients) >= count)
 
@@ -215,18 +215,6 @@ class Wits0Sender:
         # the stream writers were drained frame by frame: nothing waits in a buffer of ours
         return None
 
-
-@asynccontextmanager
-async def wits0_sender(address: ServeAddress, wait_clients: int = 1
-                       ) -> AsyncIterator[Wits0Sender]:
-    """Serve on ``address``; wait for ``wait_clients`` clients before the first frame (at
-    --speed max a session would otherwise be over before anybody connected)."""
-    async with Wits0Server(address.host, address.port) as server:
-        if wait_clients > 0:
-            log.info("wits0: waiting for %d client(s) on %s:%d", wait_clients, address.host,
-                     server.bound_port)
-            await server.wait_for_clients(wait_clients)
-        yield Wits0Sender(server)
 
 
 @dataclass(frozen=True, slots=True)
