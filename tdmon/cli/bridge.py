@@ -71,21 +71,25 @@ def serve_wits0(args: argparse.Namespace, messages: Iterable[tuple[float, str, b
     if args.limit is not None:
         frames = islice(frames, args.limit)
 
-    async def main() -> tuple[int, int]:
+    async def main() -> tuple[int, str]:
         try:
+            if isinstance(address, ws.SerialAddress):
+                async with ws.Wits0SerialPort(address.device, address.baud) as port:
+                    count = await pub.publish(frames, ws.Wits0Sender(port), speed, progress)
+                    return count, f"{address.device} at {address.baud} bit/s"
             async with ws.Wits0Server(address.host, address.port) as server:
                 # said once listening, so that a script may connect as soon as it reads this
                 print(f"tdmon: serving WITS0 on {address.host}:{server.bound_port}; waiting "
                       f"for {args.wits0_clients} client(s)", file=sys.stderr, flush=True)
                 await server.wait_for_clients(args.wits0_clients)
                 count = await pub.publish(frames, ws.Wits0Sender(server), speed, progress)
-                return count, server.clients_served
+                return count, (f"{server.clients_served} client(s) on "
+                               f"{address.host}:{server.bound_port}")
         finally:
             progress(None)
 
-    count, clients = asyncio.run(main())
-    print(f"tdmon: served {count} WITS0 frames to {clients} client(s) on "
-          f"{address.host}:{address.port}", file=sys.stderr)
+    count, where = asyncio.run(main())
+    print(f"tdmon: served {count} WITS0 frames to {where}", file=sys.stderr)
     return 0
 
 

@@ -51,9 +51,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--now", action="store_true",
                      help="shift times so that the first row is now (live-looking data)")
     pub.add_argument("--limit", type=int, help="stop after this many messages")
-    pub.add_argument("--wits0", metavar="tcp://HOST:PORT",
+    pub.add_argument("--wits0", metavar="URL",
                      help="serve WITS0 frames instead, as a rig's WITS server: one frame per "
-                          "time step to every connected client (docs/wits0.md, Simulator)")
+                          "time step to every client of tcp://HOST:PORT, or to "
+                          "serial:///dev/DEVICE?baud=9600 (docs/wits0.md, Simulator)")
     pub.add_argument("--wits0-clients", type=int, default=1, metavar="N",
                      help="with --wits0: wait for N clients before the first frame (0: none)")
     pub.set_defaults(func=_publish)

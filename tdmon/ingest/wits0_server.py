@@ -20,11 +20,14 @@ import contextlib
 import itertools
 import logging
 import math
+import os
+import termios
+import tty
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from types import TracebackType
-from urllib.parse import urlsplit
+from urllib.parse import parse_qs, urlsplit
 
 from tdmon.channels import CHANNEL_UNITS
 from tdmon.errors import IngestError
@@ -87,12 +90,36 @@ class ServeAddress:
     port: int
 
 
-def parse_serve_url(text: str, flag: str = "--wits0") -> ServeAddress:
-    """``tcp://127.0.0.1:5001`` -> ServeAddress; anything else is the user's mistake."""
+@dataclass(frozen=True, slots=True)
+class SerialAddress:
+    """The serial line the simulator writes to: ``serial:///dev/ttyS0?baud=9600``."""
+
+    device: str
+    baud: int = 9600
+
+
+#: Line speeds a serial URL may ask for [bit/s] (those termios names on every platform)
+BAUD_RATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
+
+_USAGE = "expected tcp://HOST:PORT or serial:///dev/DEVICE?baud=9600"
+
+
+def parse_serve_url(text: str, flag: str = "--wits0") -> ServeAddress | SerialAddress:
+    """``tcp://127.0.0.1:5001`` or ``serial:///dev/pts/3?baud=9600``; anything else is the
+    user's mistake."""
     parts = urlsplit(text)
+    if parts.scheme == "serial":
+        query = parse_qs(parts.query)
+        unknown = sorted(set(query) - {"baud"})
+        if not parts.path or parts.netloc or unknown:
+            raise IngestError(f"{flag} '{text}': {_USAGE}")
+        baud_text = query.get("baud", ["9600"])[-1]
+        if not baud_text.isdigit() or int(baud_text) not in BAUD_RATES:
+            raise IngestError(f"{flag} '{text}': baud must be one of "
+                              f"{', '.join(map(str, BAUD_RATES))}")
+        return SerialAddress(parts.path, int(baud_text))
     if parts.scheme != "tcp":
-        raise IngestError(f"{flag} '{text}': expected tcp://HOST:PORT (e.g. "
-                          "tcp://127.0.0.1:5001)")
+        raise IngestError(f"{flag} '{text}': {_USAGE} (e.g. tcp://127.0.0.1:5001)")
     try:
         port = parts.port
     except ValueError:
@@ -100,6 +127,62 @@ def parse_serve_url(text: str, flag: str = "--wits0") -> ServeAddress:
     if not parts.hostname or port is None:
         raise IngestError(f"{flag} '{text}': expected tcp://HOST:PORT with a port number")
     return ServeAddress(parts.hostname, port)
+
+
+class Wits0SerialPort:
+    """Write frames to a serial line (raw, 8N1, no flow control) at ``baud``.
+
+    An async context manager. The standard library's termios sets the line up, so no serial
+    package is needed to serve; writes run in a thread because a line at 9600 bit/s takes
+    about 0.2 s per frame. A pseudo-terminal (``os.openpty``) stands in for a line in tests.
+    """
+
+    def __init__(self, device: str, baud: int = 9600) -> None:
+        self.device = device
+        self.baud = baud
+        self.frames_sent = 0
+        self._fd: int | None = None
+
+    async def __aenter__(self) -> Wits0SerialPort:
+        try:
+            fd = os.open(self.device, os.O_RDWR | os.O_NOCTTY)
+        except OSError as exc:
+            raise IngestError(f"wits0: cannot open {self.device}: {exc.strerror or exc}") from exc
+        try:
+            tty.setraw(fd)
+            attributes = termios.tcgetattr(fd)
+            speed = getattr(termios, f"B{self.baud}")
+            attributes[4] = attributes[5] = speed  # output and input speed
+            attributes[2] = (attributes[2] & ~(termios.CSTOPB | termios.PARENB)) | termios.CLOCAL
+            termios.tcsetattr(fd, termios.TCSANOW, attributes)
+        except termios.error as exc:
+            os.close(fd)
+            raise IngestError(f"wits0: {self.device} is not a serial line: {exc}") from exc
+        self._fd = fd
+        log.info("wits0: writing to %s at %d bit/s", self.device, self.baud)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    async def send(self, frame: bytes) -> None:
+        """Write one frame (all of it: a full line buffer blocks the thread, not the loop)."""
+        assert self._fd is not None, "not entered"
+        await asyncio.to_thread(_write_all, self._fd, frame)
+        self.frames_sent += 1
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
 
 
 class Wits0Server:
@@ -203,9 +286,10 @@ class Wits0Server:
 
 
 class Wits0Sender:
-    """The :class:`tdmon.ingest.publish.Sender` of frames: the topic is ignored."""
+    """The :class:`tdmon.ingest.publish.Sender` of frames (to TCP clients or a serial line):
+    the topic is ignored."""
 
-    def __init__(self, server: Wits0Server) -> None:
+    def __init__(self, server: Wits0Server | Wits0SerialPort) -> None:
         self.server = server
 
     async def send(self, topic: str, payload: bytes) -> None:

@@ -5,9 +5,11 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import select
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -15,6 +17,7 @@ import pytest
 from tdmon.errors import IngestError
 from tdmon.ingest.publish import csv_messages, publish, recording_messages
 from tdmon.ingest.wits0_server import (
+    SerialAddress,
     ServedItem,
     Step,
     Wits0Sender,
@@ -71,7 +74,11 @@ def test_session_steps_group_by_time_and_convert(tmp_path: Path) -> None:
 
 def test_serve_url_mistakes() -> None:
     assert parse_serve_url("tcp://127.0.0.1:5001").port == 5001
-    for bad in ("127.0.0.1:5001", "udp://127.0.0.1:5001", "tcp://127.0.0.1", "tcp://:5001"):
+    assert parse_serve_url("serial:///dev/pts/3?baud=19200") == SerialAddress("/dev/pts/3",
+                                                                               19200)
+    assert parse_serve_url("serial:///dev/ttyS0") == SerialAddress("/dev/ttyS0", 9600)
+    for bad in ("127.0.0.1:5001", "udp://127.0.0.1:5001", "tcp://127.0.0.1", "tcp://:5001",
+                "serial:///dev/ttyS0?baud=1234", "serial:///dev/ttyS0?parity=E"):
         with pytest.raises(IngestError, match="--wits0"):
             parse_serve_url(bad)
 
@@ -162,3 +169,35 @@ def test_cli_serves_the_replay(free_tcp_port) -> None:  # type: ignore[no-untype
         process.kill()
         process.wait()
     check_against_replay(parse_frames(b"".join(chunks)))
+
+
+def test_cli_writes_frames_to_a_serial_line() -> None:
+    # a pseudo-terminal pair stands in for the line: tdmon writes to the slave end
+    master, slave = os.openpty()
+    device = os.ttyname(slave)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "tdmon", "publish", str(REPLAY), "--wits0",
+         f"serial://{device}?baud=115200", "--speed", "max", "--limit", "40"],
+        stderr=subprocess.PIPE, env=env, text=True)
+    data = b""
+    try:
+        os.set_blocking(master, False)
+        deadline = time.monotonic() + 120
+        while data.count(b"!!\r\n") < 40 and time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 1.0)
+            if ready:
+                data += os.read(master, 65536)
+        assert process.wait(120) == 0
+        assert process.stderr is not None
+        assert f"served 40 WITS0 frames to {device} at 115200 bit/s" in process.stderr.read()
+    finally:
+        process.kill()
+        process.wait()
+        os.close(master)
+        os.close(slave)
+    frames = parse_frames(data)
+    truth = replay_truth()
+    assert len(frames) == 40
+    assert [float(f["0114"]) for f in frames] == pytest.approx(
+        [v / 1e3 for v in truth["hookload"][:40]], rel=1e-9)
