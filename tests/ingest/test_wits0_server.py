@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -18,6 +19,7 @@ from tdmon.errors import IngestError
 from tdmon.ingest.publish import csv_messages, publish, recording_messages
 from tdmon.ingest.wits0_server import (
     SerialAddress,
+    ServeAddress,
     ServedItem,
     Step,
     Wits0Sender,
@@ -73,7 +75,7 @@ def test_session_steps_group_by_time_and_convert(tmp_path: Path) -> None:
 
 
 def test_serve_url_mistakes() -> None:
-    assert parse_serve_url("tcp://127.0.0.1:5001").port == 5001
+    assert parse_serve_url("tcp://127.0.0.1:5001") == ServeAddress("127.0.0.1", 5001)
     assert parse_serve_url("serial:///dev/pts/3?baud=19200") == SerialAddress("/dev/pts/3",
                                                                                19200)
     assert parse_serve_url("serial:///dev/ttyS0") == SerialAddress("/dev/ttyS0", 9600)
@@ -149,7 +151,7 @@ async def test_a_client_leaving_does_not_stop_the_others() -> None:
     assert len(frames) == 21 and frames[0]["0114"] == "1000"
 
 
-def test_cli_serves_the_replay(free_tcp_port) -> None:  # type: ignore[no-untyped-def]
+def test_cli_serves_the_replay(free_tcp_port: Callable[[], int]) -> None:
     port = free_tcp_port()
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     process = subprocess.Popen(
