@@ -60,13 +60,16 @@ def serve_wits0(args: argparse.Namespace, messages: Iterable[tuple[float, str, b
     to every connected client, paced at real time x ``speed`` (None: at once)."""
     from tdmon.ingest import publish as pub
     from tdmon.ingest import wits0_server as ws
+    from tdmon.ingest.wits0 import item_map
 
     address = ws.parse_serve_url(args.wits0)
     if args.wits0_clients < 0:
         raise TdmonError("--wits0-clients must be 0 or more")
-    items = ws.default_served_items()
+    if args.wits0_decimals is not None and not 0 <= args.wits0_decimals <= 9:
+        raise TdmonError("--wits0-decimals must be between 0 and 9")
+    items = item_map(args.wits0_units)
     frames: Iterable[tuple[float, str, bytes]] = (
-        (step.t, "wits0", ws.build_frame(step.t, step.values, items))
+        (step.t, "wits0", ws.build_frame(step, items, decimals=args.wits0_decimals))
         for step in ws.session_steps(messages))
     if args.limit is not None:
         frames = islice(frames, args.limit)

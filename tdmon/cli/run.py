@@ -57,6 +57,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                           "serial:///dev/DEVICE?baud=9600 (docs/wits0.md, Simulator)")
     pub.add_argument("--wits0-clients", type=int, default=1, metavar="N",
                      help="with --wits0: wait for N clients before the first frame (0: none)")
+    pub.add_argument("--wits0-units", default="metric", choices=["metric", "field"],
+                     help="with --wits0: the WITS unit set of the items (default metric)")
+    pub.add_argument("--wits0-decimals", type=int, metavar="N",
+                     help="with --wits0: round values to N decimals (default: every digit)")
     pub.set_defaults(func=_publish)
 
 

@@ -6,8 +6,9 @@ Used by ``tdmon publish X.mcap|X.csv --wits0 tcp://HOST:PORT`` for tests and dem
 - :func:`session_steps` groups the ``(t, topic, payload)`` messages of
   :mod:`tdmon.ingest.publish` into time steps of SI channel values (one step per distinct
   message time: one CSV row, or one logged instant of a recording);
-- :func:`build_frame` turns one step into the bytes of one frame: the date and time items
-  (0105, 0106) and every mapped channel in its configured WITS unit;
+- :func:`build_frame` turns one step into the bytes of one frame with the codec
+  (:func:`tdmon.ingest.wits0.encode_sample_frame`): the date and time items (0105, 0106) and
+  every mapped channel of the step in its configured WITS unit;
 - :class:`Wits0Server` owns the listening socket and the connected clients, and
   :class:`Wits0Sender` lets :func:`tdmon.ingest.publish.publish` pace the frames at real time
   x N like any other transport.
@@ -19,26 +20,22 @@ import asyncio
 import contextlib
 import itertools
 import logging
-import math
 import os
 import termios
 import tty
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import tzinfo
 from types import TracebackType
 from urllib.parse import parse_qs, urlsplit
 
 from tdmon.channels import CHANNEL_UNITS
 from tdmon.errors import IngestError
 from tdmon.ingest.decode import parse_payload
+from tdmon.ingest.wits0 import ItemSpec, encode_sample_frame
 from tdmon.units import conversion
 
 log = logging.getLogger(__name__)
-
-#: WITS record 01 (general time-based) date and time items: YYMMDD and HHMMSS
-DATE_ITEM = "0105"
-TIME_ITEM = "0106"
 
 #: How long one client may hold a frame back [s] before it is dropped (a stuck consumer must
 #: not stall the others)
@@ -301,65 +298,10 @@ class Wits0Sender:
 
 
 
-@dataclass(frozen=True, slots=True)
-class ServedItem:
-    """One channel served as a WITS item: its four-digit record+item code and the (pint)
-    unit its value is sent in."""
-
-    channel: str
-    code: str
-    unit: str
-
-
-def date_time_items(t: float) -> list[tuple[str, str]]:
-    """The 0105 (YYMMDD) and 0106 (HHMMSS) items of ``t`` [Unix s], in UTC.
-
-    WITS time has a resolution of one second: the fraction is cut off, not rounded, so that a
-    step never moves into the next second."""
-    moment = datetime.fromtimestamp(math.floor(t), UTC)
-    return [(DATE_ITEM, moment.strftime("%y%m%d")), (TIME_ITEM, moment.strftime("%H%M%S"))]
-
-
-def format_value(value: float) -> str:
-    """A WITS value: plain decimal, at most 10 significant digits, no exponent."""
-    text = f"{value:.10g}"
-    if "e" in text:
-        text = f"{value:.6f}".rstrip("0").rstrip(".")
-    return text
-
-
-def build_frame(t: float, values: Mapping[str, float], items: Iterable[ServedItem]) -> bytes:
-    """The bytes of one WITS0 frame for the SI ``values`` of a step at ``t`` [Unix s].
-
-    The frame opens with ``&&``, carries the date and time items then one line per mapped
-    channel that has a value (in the item's unit), and closes with ``!!``; lines end in CR LF.
-    """
-    lines = ["&&"]
-    lines.extend(code + text for code, text in date_time_items(t))
-    for item in items:
-        value = values.get(item.channel)
-        if value is None:
-            continue
-        scale, offset = conversion(CHANNEL_UNITS[item.channel][0], item.unit)
-        lines.append(item.code + format_value(value * scale + offset))
-    lines.append("!!")
-    return ("\r\n".join(lines) + "\r\n").encode("ascii")
-
-
-def default_served_items() -> tuple[ServedItem, ...]:
-    """The record-01 items the simulator serves, in metric units (provisional, until the
-    codec's map is merged)."""
-    return (
-        ServedItem("bit_depth", "0108", "m"),
-        ServedItem("hole_depth", "0110", "m"),
-        ServedItem("block_position", "0112", "m"),
-        ServedItem("hookload", "0114", "kN"),
-        ServedItem("wob", "0116", "kN"),
-        ServedItem("torque", "0118", "kN*m"),
-        ServedItem("rpm", "0120", "rpm"),
-        ServedItem("spp", "0121", "kPa"),
-        ServedItem("flow_in", "0130", "L/min"),
-        ServedItem("mud_density", "0132", "kg/m**3"),
-        ServedItem("mud_temp_out", "0133", "degC"),
-        ServedItem("mud_temp_in", "0134", "degC"),
-    )
+def build_frame(step: Step, items: Mapping[str, ItemSpec], tz: tzinfo | None = None,
+                decimals: int | None = None) -> bytes:
+    """The bytes of one WITS0 frame for ``step``: its date and time (0105, 0106, whole seconds
+    in ``tz``, default UTC) and each of its channels that ``items`` maps, in the item's WITS
+    unit, rounded to ``decimals`` places when given (a rig's server sends a few; None sends
+    every digit, so that a consumer gets the session's values back)."""
+    return encode_sample_frame(step.t, step.values, items, tz, decimals)

@@ -17,15 +17,14 @@ import pytest
 
 from tdmon.errors import IngestError
 from tdmon.ingest.publish import csv_messages, publish, recording_messages
+from tdmon.ingest.wits0 import FrameParser, WitsFrame, decode_frame, item_map
 from tdmon.ingest.wits0_server import (
     SerialAddress,
     ServeAddress,
-    ServedItem,
     Step,
     Wits0Sender,
     Wits0Server,
     build_frame,
-    default_served_items,
     parse_serve_url,
     session_steps,
 )
@@ -34,31 +33,33 @@ REPO = Path(__file__).resolve().parents[2]
 REPLAY = REPO / "replays" / "trip-out-tight-spot.mcap"
 
 
-def parse_frames(data: bytes) -> list[dict[str, str]]:
-    """Frames as {code: text}, split by hand (independent of the code under test)."""
-    frames: list[dict[str, str]] = []
-    current: dict[str, str] | None = None
-    for line in data.decode("ascii").split("\r\n"):
-        if line == "&&":
-            current = {}
-        elif line == "!!":
-            assert current is not None
-            frames.append(current)
-            current = None
-        elif line:
-            assert current is not None, line
-            current[line[:4]] = line[4:]
-    assert current is None, "a frame was cut off"
-    return frames
+def parse_frames(data: bytes) -> list[WitsFrame]:
+    """The frames of a stream, with the codec's parser fed in uneven pieces as reads come."""
+    parser = FrameParser()
+    frames = []
+    for start in range(0, len(data), 1000):
+        frames.extend(parser.feed(data[start:start + 1000]))
+    frames.extend(parser.close())
+    assert all(isinstance(f, WitsFrame) and f.error is None and not f.errors for f in frames)
+    return frames  # type: ignore[return-value]
 
 
 def test_build_frame_known_bytes() -> None:
-    # 2016-10-04T17:00:15.7Z: the fraction is cut, not rounded
-    items = (ServedItem("hookload", "0114", "kN"), ServedItem("bit_depth", "0108", "ft"),
-             ServedItem("torque", "0118", "kN*m"))
-    frame = build_frame(1475600415.7, {"hookload": 654267.8, "bit_depth": 1000.0}, items)
-    assert frame == (b"&&\r\n0105161004\r\n0106170015\r\n0114654.2678\r\n"
-                     b"01083280.839895\r\n!!\r\n")  # 1000 m = 3280.839895 ft; no torque value
+    # 2016-10-04T17:00:15.7Z: the fraction is cut, not rounded; KDN is 10 kN; no torque value
+    frame = build_frame(Step(1475600415.7, {"hookload": 654250.0, "bit_depth": 1000.0}),
+                        item_map("metric"))
+    assert frame == (b"&&\r\n0105161004\r\n0106170015\r\n011465.425\r\n"
+                     b"01081000.0\r\n!!\r\n")
+
+
+def test_build_frame_field_units_and_decimals() -> None:
+    frame = build_frame(Step(0.0, {"hookload": 1e6, "bit_depth": 1000.0, "mud_temp_in": 20.0}),
+                        item_map("field"), decimals=2)
+    lines = frame.decode().split("\r\n")
+    # 1 kip = 4448.2216152605 N, 1 ft = 0.3048 m, 20 degC = 68 degF (independent numbers)
+    assert lines[1:3] == ["0105700101", "0106000000"]
+    assert sorted(lines[3:6]) == sorted([f"0114{1e6 / 4448.2216152605:.2f}",
+                                         f"0108{1000 / 0.3048:.2f}", "013468.0"])
 
 
 def test_session_steps_group_by_time_and_convert(tmp_path: Path) -> None:
@@ -93,24 +94,22 @@ def replay_truth() -> dict[str, list[float]]:
     return truth
 
 
-def check_against_replay(frames: list[dict[str, str]]) -> None:
+def check_against_replay(frames: list[WitsFrame]) -> None:
     truth = replay_truth()
-    items = {item.code: item for item in default_served_items()}
+    items = item_map("metric")
     # one frame per logged second of the replay, each with the date and time
     assert len(frames) == len(truth["hookload"]) == 1500
-    assert frames[0]["0105"] == "240301" and frames[0]["0106"] == "060000"  # 2024-03-01 06:00
-    assert frames[-1]["0106"] == "062459"  # 1499 s later
+    decoded = [decode_frame(frame, items, receive_time=0.0) for frame in frames]
+    assert all(d.time_from == "wits" for d in decoded)
+    assert decoded[0].t == 1709272800.0  # 2024-03-01T06:00:00Z (the replay's 06:00:00.2)
+    assert [d.t for d in decoded] == [1709272800.0 + k for k in range(1500)]
     received: dict[str, list[float]] = {}
-    for frame in frames:
-        for code, text in frame.items():
-            if code in items:
-                received.setdefault(items[code].channel, []).append(float(text))
+    for frame in decoded:
+        for item in frame.items:
+            received.setdefault(item.channel, []).append(item.value)
     assert set(received) == set(truth)
-    scale = {"hookload": 1e-3, "wob": 1e-3, "torque": 1e-3, "spp": 1e-3,
-             "flow_in": 60e3, "rpm": 60 / (2 * 3.141592653589793)}
     for channel, values in truth.items():
-        expected = [v * scale.get(channel, 1.0) for v in values]
-        assert received[channel] == pytest.approx(expected, rel=1e-9, abs=1e-9), channel
+        assert received[channel] == pytest.approx(values, rel=1e-12, abs=1e-12), channel
 
 
 async def read_all(port: int) -> bytes:
@@ -121,7 +120,8 @@ async def read_all(port: int) -> bytes:
 
 
 async def test_two_clients_get_every_step_of_a_replay() -> None:
-    frames = ((step.t, "wits0", build_frame(step.t, step.values, default_served_items()))
+    items = item_map("metric")
+    frames = ((step.t, "wits0", build_frame(step, items))
               for step in session_steps(recording_messages(REPLAY)))
     async with Wits0Server("127.0.0.1", 0) as server:
         clients = [asyncio.create_task(read_all(server.bound_port)) for _ in range(2)]
@@ -135,8 +135,7 @@ async def test_two_clients_get_every_step_of_a_replay() -> None:
 
 
 async def test_a_client_leaving_does_not_stop_the_others() -> None:
-    step = Step(1475600400.0, {"hookload": 1e6})
-    frame = build_frame(step.t, step.values, default_served_items())
+    frame = build_frame(Step(1475600400.0, {"hookload": 1e6}), item_map("metric"))
     async with Wits0Server("127.0.0.1", 0) as server:
         stayer = asyncio.create_task(read_all(server.bound_port))
         leaver = socket.create_connection(("127.0.0.1", server.bound_port))
@@ -148,7 +147,7 @@ async def test_a_client_leaving_does_not_stop_the_others() -> None:
             await asyncio.sleep(0.01)
         assert server.clients == 1
     frames = parse_frames(await stayer)
-    assert len(frames) == 21 and frames[0]["0114"] == "1000"
+    assert len(frames) == 21 and frames[0].lines[2].text == "0114100.0"  # 1000 kN in KDN
 
 
 def test_cli_serves_the_replay(free_tcp_port: Callable[[], int]) -> None:
@@ -201,5 +200,7 @@ def test_cli_writes_frames_to_a_serial_line() -> None:
     frames = parse_frames(data)
     truth = replay_truth()
     assert len(frames) == 40
-    assert [float(f["0114"]) for f in frames] == pytest.approx(
-        [v / 1e3 for v in truth["hookload"][:40]], rel=1e-9)
+    items = item_map("metric")
+    hookload = [item.value for frame in frames
+                for item in decode_frame(frame, items, 0.0).items if item.channel == "hookload"]
+    assert hookload == pytest.approx(truth["hookload"][:40], rel=1e-12)
