@@ -116,16 +116,74 @@ class McapSourceConfig(_Model):
         return value
 
 
+class Wits0ItemConfig(_Model):
+    """A feed's change to one WITS item (docs/wits0.md): the channel it feeds (``false``:
+    none) and its WITS unit name (e.g. "KDN", "KLB")."""
+
+    channel: str | Literal[False] | None = None
+    unit: str | None = Field(default=None, min_length=1)
+
+    @field_validator("channel")
+    @classmethod
+    def _channel(cls, value: str | bool | None) -> str | bool | None:
+        if isinstance(value, str):
+            check_channel(value)
+        return value
+
+
+class Wits0Config(_Model):
+    """A WITS Level 0 feed (docs/wits0.md): as TCP client of the rig's WITS server, as TCP
+    server the rig pushes to, or on a serial line."""
+
+    mode: Literal["tcp-client", "tcp-server", "serial"] = "tcp-client"
+    host: str | None = None  # tcp-client: the rig's WITS server
+    listen: str = "127.0.0.1"  # tcp-server: the address to listen on
+    port: int | None = Field(default=None, ge=1, le=65535)
+    device: str | None = None  # serial: e.g. /dev/ttyUSB0
+    baud_rate: int = Field(default=9600, gt=0)
+    # the default unit set of the items: the WITS specification's metric or field units
+    units: Literal["metric", "field"] = "metric"
+    # item code ("0114") -> channel and/or unit, over the default record 01 map
+    items: dict[str, Wits0ItemConfig] = Field(default_factory=dict)
+    # the zone of the date and time items (0105, 0106): an IANA name
+    timezone: str = "UTC"
+    # a feed silent for this long counts as lost: the daemon reconnects
+    timeout: Seconds = Field(default=30.0, gt=0)
+
+    @field_validator("timezone")
+    @classmethod
+    def _zone(cls, value: str) -> str:
+        from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+        try:
+            ZoneInfo(value)
+        except (ZoneInfoNotFoundError, ValueError):
+            raise ValueError(f"unknown time zone '{value}' (an IANA name such as 'UTC' or "
+                             "'Europe/Oslo')") from None
+        return value
+
+    @model_validator(mode="after")
+    def _endpoint(self) -> Wits0Config:
+        if self.mode == "tcp-client" and (self.host is None or self.port is None):
+            raise ValueError("mode 'tcp-client' needs host and port (the rig's WITS server)")
+        if self.mode == "tcp-server" and self.port is None:
+            raise ValueError("mode 'tcp-server' needs port (where the rig connects)")
+        if self.mode == "serial" and not self.device:
+            raise ValueError("mode 'serial' needs device (e.g. '/dev/ttyUSB0')")
+        return self
+
+
 class SourcesConfig(_Model):
     mqtt: MqttConfig | None = None
     zenoh: ZenohConfig | None = None
     mcap: McapSourceConfig | None = None
+    wits0: Wits0Config | None = None
 
     @model_validator(mode="after")
     def _at_least_one(self) -> SourcesConfig:
-        if self.mqtt is None and self.zenoh is None and self.mcap is None:
-            raise ValueError("configure at least one source: [sources.mqtt], [sources.zenoh] "
-                             "or [sources.mcap]")
+        if self.mqtt is None and self.zenoh is None and self.mcap is None and self.wits0 is None:
+            raise ValueError("configure at least one source: [sources.mqtt], [sources.zenoh], "
+                             "[sources.mcap] or [sources.wits0]")
         return self
 
 

@@ -7,11 +7,15 @@ reopens after a failure). A new transport is its module in ``tdmon.ingest``, a s
 
 from __future__ import annotations
 
-from tdmon.config.daemon import McapSourceConfig, MqttConfig, ZenohConfig
+from tdmon.config.daemon import McapSourceConfig, MqttConfig, Wits0Config, ZenohConfig
 from tdmon.daemon.daemon import SourceSpec
 from tdmon.daemon.wiring import Entry, Table, Wiring
+from tdmon.errors import ConfigError
+from tdmon.ingest.decode import topic_for
 from tdmon.ingest.mcap_source import McapSource
 from tdmon.ingest.mqtt import MqttSource
+from tdmon.ingest.wits0 import MAX_FRAME_BYTES, ItemOverride, item_map, resolve_timezone
+from tdmon.ingest.wits0_source import REJECT_TOPIC, Wits0Source
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for
 
 
@@ -51,9 +55,33 @@ async def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
     wiring.sources.append(SourceSpec("mcap", open_mcap, finite=True))
 
 
+async def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
+    """Read a rig's WITS0 feed; its items go in as samples on the configured channel topics
+    (docs/wits0.md). The item map is checked here, where the codec's unit table is."""
+    config = wiring.config
+    overrides = {code: ItemOverride(item.channel, item.unit)
+                 for code, item in section.items.items()}
+    try:
+        items = item_map(section.units, overrides)
+    except ValueError as exc:
+        raise ConfigError(str(config.source_file), "sources.wits0.items", str(exc)) from None
+    topics = {spec.channel: topic_for(config.prefix, spec.topic)
+              for spec in config.channel_specs()}
+    reject_topic = topic_for(config.prefix, REJECT_TOPIC)
+    tz = resolve_timezone(section.timezone)  # checked when the config was read
+    # the first item message of a frame carries the frame: keep it under the payload limit
+    max_frame = max(256, min(MAX_FRAME_BYTES, config.queues.max_payload_bytes - 512))
+
+    def open_wits0() -> Wits0Source:
+        return Wits0Source(section, items, topics, reject_topic, tz, max_frame)
+
+    wiring.sources.append(SourceSpec("wits0", open_wits0))
+
+
 #: ``[sources.<name>]`` -> its builder, in the order the sources are started.
 SOURCES: Table = {
     "zenoh": Entry(lambda config: config.sources.zenoh, zenoh_source),
     "mqtt": Entry(lambda config: config.sources.mqtt, mqtt_source),
     "mcap": Entry(lambda config: config.sources.mcap, mcap_source),
+    "wits0": Entry(lambda config: config.sources.wits0, wits0_source),
 }
