@@ -24,7 +24,7 @@ from collections.abc import Sequence  # noqa: E402
 from tdmon import __version__  # noqa: E402
 from tdmon.errors import TdmonError  # noqa: E402
 
-_COMMAND_MODULES = ("model", "lab", "run", "record", "replay")
+_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge")
 
 
 def build_parser() -> argparse.ArgumentParser:

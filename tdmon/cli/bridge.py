@@ -35,8 +35,11 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
             "Ctrl-C or SIGTERM stops cleanly (exit 0). See docs/wits0.md, Bridge."))
     wits0.add_argument("--config", type=Path, help="daemon TOML: [sources.wits0], prefix, "
                                                    "where to publish")
-    wits0.add_argument("--wits0", metavar="tcp://HOST:PORT",
-                       help="the rig's WITS0 server to connect to (default map, metric units)")
+    wits0.add_argument("--wits0", metavar="URL",
+                       help="the rig's WITS0 server to connect to, tcp://HOST:PORT, or a "
+                            "serial line, serial:///dev/DEVICE?baud=9600 (default item map)")
+    wits0.add_argument("--wits0-units", default="metric", choices=["metric", "field"],
+                       help="with --wits0: the WITS unit set the rig sends (default metric)")
     wits0.add_argument("--prefix", help="topic prefix (default: the config's, else rig/F4)")
     wits0.add_argument("--mqtt", metavar="HOST:PORT", help="MQTT broker to publish to")
     wits0.add_argument("--username")
@@ -108,7 +111,7 @@ def bridge_wits0_command(args: argparse.Namespace) -> int:
     open_sender, where = _output(args, config)
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    count = asyncio.run(_bridge_until_stopped(open_source, open_sender, prefix, args.limit))
+    count = asyncio.run(_bridge_until_stopped(open_source, open_sender, args.limit))
     print(f"tdmon: bridged {count} messages to {where} on {prefix}/...", file=sys.stderr)
     return 0
 
@@ -163,7 +166,7 @@ def _output(args: argparse.Namespace, config: Any
 async def _bridge_until_stopped(
     open_source: Callable[[], AbstractAsyncContextManager[AsyncIterator[Any]]],
     open_sender: Callable[[], AbstractAsyncContextManager[Any]],
-    prefix: str, limit: int | None,
+    limit: int | None,
 ) -> int:
     """Relay until SIGINT/SIGTERM (or ``limit`` messages); return how many were published."""
     from tdmon.daemon.supervisor import supervise
@@ -192,8 +195,8 @@ async def _bridge_until_stopped(
         nonlocal count
         sender, source = connection
         async for raw in source:
-            channel = raw.topic.rsplit("/", 1)[-1]
-            await sender.send(f"{prefix}/{channel}", raw.payload)
+            # already on <prefix>/<channel> (or <prefix>/wits0 for what the feed rejected)
+            await sender.send(raw.topic, raw.payload)
             count += 1
             if limit is not None and count >= limit:
                 stop.set()
@@ -219,3 +222,47 @@ async def _bridge_until_stopped(
         for signum in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(signum)
     return count
+
+
+def _wits0_input(args: argparse.Namespace, config: Any, prefix: str
+                 ) -> Callable[[], AbstractAsyncContextManager[AsyncIterator[Any]]]:
+    """The feed: ``--wits0 URL`` (a TCP client or a serial line with the default item map in
+    ``--wits0-units``), else the config's ``[sources.wits0]``. Its messages are those the
+    daemon's own WITS0 source makes, on ``<prefix>/<channel>`` and ``<prefix>/wits0``."""
+    from tdmon.config.daemon import QueuesConfig, Wits0Config
+    from tdmon.errors import ConfigError
+    from tdmon.ingest.wits0 import MAX_FRAME_BYTES, ItemOverride, item_map, resolve_timezone
+    from tdmon.ingest.wits0_server import SerialAddress, parse_serve_url
+    from tdmon.ingest.wits0_source import REJECT_TOPIC, Wits0Source
+
+    where = "--wits0"
+    if args.wits0:
+        address = parse_serve_url(args.wits0)
+        if isinstance(address, SerialAddress):
+            section = Wits0Config(mode="serial", device=address.device,
+                                  baud_rate=address.baud, units=args.wits0_units)
+        else:
+            section = Wits0Config(mode="tcp-client", host=address.host, port=address.port,
+                                  units=args.wits0_units)
+    elif config is not None and config.sources.wits0 is not None:
+        section = config.sources.wits0
+        where = str(config.source_file)
+    else:
+        raise TdmonError("say where the feed is: --wits0 tcp://HOST:PORT, or --config with "
+                         "a [sources.wits0] section")
+    overrides = {code: ItemOverride(item.channel, item.unit)
+                 for code, item in section.items.items()}
+    try:
+        items = item_map(section.units, overrides)
+    except ValueError as exc:
+        raise ConfigError(where, "sources.wits0.items", str(exc)) from None
+    topics = {spec.channel: f"{prefix}/{spec.channel}" for spec in items.values()}
+    tz = resolve_timezone(section.timezone)
+    # the first message of a frame carries the frame: keep it under the consumers' limit
+    limit = (config.queues if config is not None else QueuesConfig()).max_payload_bytes
+    max_frame = max(256, min(MAX_FRAME_BYTES, limit - 512))
+
+    def open_source() -> Wits0Source:
+        return Wits0Source(section, items, topics, f"{prefix}/{REJECT_TOPIC}", tz, max_frame)
+
+    return open_source

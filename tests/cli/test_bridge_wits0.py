@@ -22,12 +22,8 @@ from tdmon.config.daemon import ZenohConfig
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.publish import recording_messages
 from tdmon.ingest.types import RawMessage, Sample
-from tdmon.ingest.wits0_server import (
-    Wits0Server,
-    build_frame,
-    default_served_items,
-    session_steps,
-)
+from tdmon.ingest.wits0 import item_map
+from tdmon.ingest.wits0_server import Wits0Server, build_frame, session_steps
 from tdmon.ingest.zenoh_io import open_session
 
 REPO = Path(__file__).resolve().parents[2]
@@ -51,8 +47,9 @@ def start_bridge(port: int, *output: str, limit: int) -> subprocess.Popen[str]:
 
 async def serve_replay(server: Wits0Server, steps: list[Any]) -> None:
     await asyncio.wait_for(server.wait_for_clients(1), 60)
+    items = item_map("metric")
     for step in steps:
-        await server.send(build_frame(step.t, step.values, default_served_items()))
+        await server.send(build_frame(step, items))
 
 
 def check_payloads(received: list[tuple[str, bytes]], truth: list[tuple[int, str, float]]
