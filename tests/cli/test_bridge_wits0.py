@@ -7,6 +7,7 @@ import asyncio
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -15,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import aiomqtt
+import pytest
 import zenoh
 
 from tdmon.channels import CHANNELS
@@ -147,3 +149,66 @@ async def _until(condition: Any, timeout: float = 120.0) -> None:
     while not condition():
         assert time.monotonic() < deadline, "timed out"
         await asyncio.sleep(0.05)
+
+
+def test_simulator_to_the_daemon_recording(tmp_path: Path, free_tcp_port: Any) -> None:
+    """`tdmon publish --wits0` -> `tdmon run` with a [sources.wits0] TCP client -> the flight
+    recording holds every sample of the replay, at its second, with its value."""
+    from tdmon.record.reader import read_messages
+
+    port = free_tcp_port()
+    config = tmp_path / "wits0.toml"
+    config.write_text(f"""
+prefix = "sim/trip-out"
+well = "{REPO / 'replays/scenarios/wells/example-7-1-glydril.toml'}"
+[sources.wits0]
+mode = "tcp-client"
+host = "127.0.0.1"
+port = {port}
+[recorder]
+enabled = true
+output = "{tmp_path / 'rec'}"
+[align]
+stale_timeout = "20 s"
+""")
+    log = tmp_path / "daemon.log"
+    simulator = subprocess.Popen(
+        [sys.executable, "-m", "tdmon", "publish", str(REPLAY), "--wits0",
+         f"tcp://127.0.0.1:{port}", "--speed", "max"],
+        stderr=subprocess.PIPE, env=ENV, text=True)
+    try:
+        assert simulator.stderr is not None
+        assert "serving WITS0" in simulator.stderr.readline()
+        with log.open("w") as err:
+            daemon = subprocess.Popen([sys.executable, "-m", "tdmon", "run", "--config",
+                                       str(config)], stderr=err, env=ENV)
+            try:
+                assert simulator.wait(120) == 0
+                assert "served 1500 WITS0 frames to 1 client(s)" in simulator.stderr.read()
+                # the simulator closed the connection once done: the source says so, and a
+                # graceful stop processes everything that arrived before it
+                deadline = time.monotonic() + 60
+                while "connection closed by the rig" not in log.read_text():
+                    assert time.monotonic() < deadline, log.read_text()
+                    time.sleep(0.1)
+                daemon.send_signal(signal.SIGTERM)
+                assert daemon.wait(60) == 0, log.read_text()
+            finally:
+                if daemon.poll() is None:
+                    daemon.kill()
+                    daemon.wait()
+    finally:
+        if simulator.poll() is None:
+            simulator.kill()
+            simulator.wait()
+    text = log.read_text()
+    truth = replay_truth()
+    assert f"stopped: {len(truth)} samples, 0 rejected, 0 dropped" in text, text
+    samples = [m.message for path in (tmp_path / "rec").glob("*.mcap")
+               for m in read_messages(path, "/tdmon/sample")]
+    assert len(samples) == len(truth)
+    for channel in {c for _, c, _ in truth}:
+        got = [(s["t"], s["value"]) for s in samples if s["channel"] == channel]
+        want = [(float(second), value) for second, c, value in truth if c == channel]
+        assert [t for t, _ in got] == [t for t, _ in want], channel
+        assert [v for _, v in got] == pytest.approx([v for _, v in want], rel=1e-12), channel
