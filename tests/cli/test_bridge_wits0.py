@@ -212,3 +212,67 @@ stale_timeout = "20 s"
         want = [(float(second), value) for second, c, value in truth if c == channel]
         assert [t for t, _ in got] == [t for t, _ in want], channel
         assert [v for _, v in got] == pytest.approx([v for _, v in want], rel=1e-12), channel
+
+
+async def test_bridge_from_a_daemon_file(mosquitto: Any, tmp_path: Path) -> None:
+    """--config: the feed from [sources.wits0] (field units there), the output from
+    [publish.mqtt], the prefix from the file."""
+    steps = list(session_steps(recording_messages(REPLAY)))[:20]
+    expected = sum(len(step.values) for step in steps)
+    received: list[tuple[str, bytes]] = []
+    async with aiomqtt.Client("127.0.0.1", mosquitto.port, identifier="bridge-test") as client:
+        await client.subscribe("rig/from-file/#", qos=1)
+        async with Wits0Server("127.0.0.1", 0) as server:
+            config = tmp_path / "bridge.toml"
+            config.write_text(f"""
+prefix = "rig/from-file"
+[sources.wits0]
+host = "127.0.0.1"
+port = {server.bound_port}
+units = "field"
+[publish.mqtt]
+host = "127.0.0.1"
+port = {mosquitto.port}
+client_id = "bridge-from-file"
+""")
+            bridge = subprocess.Popen(
+                [sys.executable, "-m", "tdmon", "bridge", "wits0", "--config", str(config),
+                 "--limit", str(expected)], stderr=subprocess.PIPE, env=ENV, text=True)
+            try:
+                await asyncio.wait_for(server.wait_for_clients(1), 60)
+                items = item_map("field")
+                for step in steps:
+                    await server.send(build_frame(step, items))
+
+                async def collect() -> None:
+                    async for message in client.messages:
+                        received.append((str(message.topic), bytes(message.payload)))
+                        if len(received) == expected:
+                            return
+
+                await asyncio.wait_for(collect(), 120)
+                assert await asyncio.to_thread(bridge.wait, 60) == 0
+            finally:
+                bridge.kill()
+                bridge.wait()
+    first = {topic: json.loads(payload) for topic, payload in reversed(received)}
+    # the replay's first hook load, 1479516 N, went out in klbf and came back in N
+    assert math.isclose(first["rig/from-file/hookload"]["value"], 1479516.0, rel_tol=1e-12)
+    assert first["rig/from-file/hookload"]["unit"] == "N"
+    assert first["rig/from-file/hookload"]["wits"].startswith("0114332.6")  # 332.6... klbf
+
+
+def test_bridge_mistakes_are_one_line_and_exit_2(tmp_path: Path) -> None:
+    cases = [
+        ([], "say where the feed is"),
+        (["--wits0", "udp://127.0.0.1:5001", "--mqtt", "127.0.0.1:1883"], "--wits0"),
+        (["--wits0", "tcp://127.0.0.1:5001"], "say where to publish"),
+        (["--wits0", "tcp://127.0.0.1:5001", "--mqtt", "nowhere"], "--mqtt must be HOST:PORT"),
+    ]
+    for args, expected in cases:
+        result = subprocess.run(
+            [sys.executable, "-m", "tdmon", "bridge", "wits0", *args],
+            capture_output=True, text=True, env=ENV, timeout=60)
+        assert result.returncode == 2, (args, result.stderr)
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+        assert expected in result.stderr, result.stderr
