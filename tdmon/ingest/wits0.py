@@ -335,7 +335,11 @@ class FrameParser:
         """End of the stream: report what is left (an unfinished frame, garbage)."""
         out: list[WitsFrame | FrameError] = []
         if self._partial:
-            self._line(bytes(self._partial), out, cut=True)
+            # a last line without its end: part of the open frame, or garbage
+            if self._frame is not None:
+                self._frame.append(bytes(self._partial))
+            elif not self._skipping and self._partial.strip():
+                self._garbage += self._partial[: self.max_frame_bytes - len(self._garbage)]
             self._partial.clear()
         if self._frame is not None:
             raw = b"".join(self._frame)

@@ -129,11 +129,13 @@ class Wits0Source:
         self._parser = FrameParser(max_frame_bytes)
         self._pending: deque[RawMessage] = deque()
         self._transport: _Transport | None = None
+        self._lost: IngestError | None = None
 
     async def __aenter__(self) -> Wits0Source:
         config = self.config
         self._parser = FrameParser(self.max_frame_bytes)
         self._pending.clear()
+        self._lost = None
         transport: _Transport
         if config.mode == "tcp-client":
             transport = _TcpClient(config)
@@ -157,13 +159,24 @@ class Wits0Source:
     async def __anext__(self) -> RawMessage:
         assert self._transport is not None, "not entered"
         while not self._pending:
+            if self._lost is not None:
+                raise self._lost
+            data: bytes | IngestError | None
             try:
                 data = await asyncio.wait_for(self._transport.read(), self.config.timeout)
             except TimeoutError:
-                raise IngestError(f"{self._transport.describe()}: no data for "
-                                  f"{self.config.timeout:g} s") from None
+                data = IngestError(f"{self._transport.describe()}: no data for "
+                                   f"{self.config.timeout:g} s")
+            except IngestError as exc:
+                data = exc
+            if isinstance(data, IngestError):
+                # what the stream left unfinished is recorded before the error is raised
+                self._lost = data
+                self._messages(self._parser.close(), time.time())
+                continue
             if data is None:
                 # a new connection replaced the old one (server mode): start afresh
+                self._messages(self._parser.close(), time.time())
                 self._parser = FrameParser(self.max_frame_bytes)
                 continue
             self._messages(self._parser.feed(data), time.time())
@@ -233,7 +246,8 @@ class _TcpServer:
         self._chunks: asyncio.Queue[tuple[int, bytes | None]] = asyncio.Queue(maxsize=64)
         self._current = 0  # the connection whose bytes count
         self._writers: dict[int, asyncio.StreamWriter] = {}
-        self._replaced = False
+        self._reading = 0  # the connection whose bytes read() returned last
+        self._stash: bytes | None = None
 
     def describe(self) -> str:
         return f"wits0 listening on {self.listen}:{self.port}"
@@ -250,8 +264,6 @@ class _TcpServer:
         for old in list(self._writers.values()):
             old.close()  # its reader ends; what it still sends is ignored
         self._writers[me] = writer
-        if me > 1:
-            self._replaced = True
         log.info("%s: rig connected from %s", self.describe(), writer.get_extra_info("peername"))
         try:
             while me == self._current:
@@ -267,13 +279,21 @@ class _TcpServer:
             writer.close()
 
     async def read(self) -> bytes | None:
+        if self._stash is not None:
+            stashed, self._stash = self._stash, None
+            return stashed
         while True:
-            if self._replaced:
-                self._replaced = False
-                return None
             me, data = await self._chunks.get()
-            if me == self._current:
-                return data
+            if me != self._current:
+                continue  # from a connection already replaced
+            if me != self._reading:
+                first = self._reading == 0
+                self._reading = me
+                if not first:
+                    # the stream changed: say so before the new connection's first bytes
+                    self._stash = data
+                    return None
+            return data
 
     async def close(self) -> None:
         for writer in list(self._writers.values()):
