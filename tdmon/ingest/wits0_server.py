@@ -1,6 +1,7 @@
-"""Play a rig's WITS0 server: serve a session's samples as WITS Level 0 frames over TCP.
+"""Play a rig's WITS0 server: serve a session's samples as WITS Level 0 frames over TCP or
+a serial line.
 
-Used by ``tdmon publish X.mcap|X.csv --wits0 tcp://HOST:PORT`` for tests and demonstrations
+Used by ``tdmon publish X.mcap|X.csv --wits0 URL`` for tests and demonstrations
 (docs/wits0.md, "Simulator"). The pieces are pure where they can be:
 
 - :func:`session_steps` groups the ``(t, topic, payload)`` messages of
@@ -53,9 +54,16 @@ class Step:
 def session_steps(messages: Iterable[tuple[float, str, bytes]]) -> Iterator[Step]:
     """Group consecutive messages with the same ``t`` into one step of SI values.
 
-    The channel is the topic's last level; topics of no canonical channel (results, alarms)
-    are skipped, and so are payloads that do not decode. The group's ``t`` (the CSV row's time,
-    the recording's log time) is the step's time: a WITS frame has one time for all its items.
+    The channel is the topic's last level (as in the bundled replays, the importers' files and
+    the CSV route); other topics are skipped, and so are payloads that do not decode. A payload
+    without a unit is taken as SI. When a channel appears twice in one step the last value
+    counts. The group's ``t`` (the CSV row's time, the recording's log time) is the step's
+    time: a WITS frame has one time for all its items.
+
+    Raises
+    ------
+    IngestError
+        A payload's unit is unknown or does not fit its channel.
     """
     factors: dict[tuple[str, str], tuple[float, float]] = {}
     for t, group in itertools.groupby(messages, key=lambda message: message[0]):
@@ -73,7 +81,11 @@ def session_steps(messages: Iterable[tuple[float, str, bytes]]) -> Iterator[Step
             key = (channel, unit or target)
             factor = factors.get(key)
             if factor is None:
-                factor = factors[key] = conversion(unit or target, target)
+                try:
+                    factor = factors[key] = conversion(unit or target, target)
+                except ValueError as exc:
+                    raise IngestError(f"{topic}: unit '{unit}' not usable for {channel}: "
+                                      f"{exc}") from None
             values[channel] = value * factor[0] + factor[1]
         if values:
             yield Step(t, values)
@@ -142,7 +154,8 @@ class Wits0SerialPort:
 
     async def __aenter__(self) -> Wits0SerialPort:
         try:
-            fd = os.open(self.device, os.O_RDWR | os.O_NOCTTY)
+            # non-blocking open: without CLOCAL (set below) a real port waits for a carrier
+            fd = os.open(self.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         except OSError as exc:
             raise IngestError(f"wits0: cannot open {self.device}: {exc.strerror or exc}") from exc
         try:
@@ -152,6 +165,7 @@ class Wits0SerialPort:
             attributes[4] = attributes[5] = speed  # output and input speed
             attributes[2] = (attributes[2] & ~(termios.CSTOPB | termios.PARENB)) | termios.CLOCAL
             termios.tcsetattr(fd, termios.TCSANOW, attributes)
+            os.set_blocking(fd, True)  # writes wait in their thread for a full line buffer
         except termios.error as exc:
             os.close(fd)
             raise IngestError(f"wits0: {self.device} is not a serial line: {exc}") from exc
@@ -172,7 +186,11 @@ class Wits0SerialPort:
     async def send(self, frame: bytes) -> None:
         """Write one frame (all of it: a full line buffer blocks the thread, not the loop)."""
         assert self._fd is not None, "not entered"
-        await asyncio.to_thread(_write_all, self._fd, frame)
+        try:
+            await asyncio.to_thread(_write_all, self._fd, frame)
+        except OSError as exc:
+            raise IngestError(f"wits0: writing to {self.device} failed: "
+                              f"{exc.strerror or exc}") from exc
         self.frames_sent += 1
 
 
@@ -277,9 +295,13 @@ class Wits0Server:
         task = self._clients.pop(writer, None)
         if task is not None:
             task.cancel()
-        writer.close()
-        with contextlib.suppress(OSError):
-            await writer.wait_closed()
+        writer.close()  # sends what is still buffered, then closes
+        try:
+            await asyncio.wait_for(writer.wait_closed(), self.drain_timeout)
+        except TimeoutError:
+            writer.transport.abort()  # a client that reads nothing more must not hold us
+        except OSError:
+            pass
 
 
 class Wits0Sender:
@@ -295,7 +317,6 @@ class Wits0Sender:
     async def flush(self) -> None:
         # the stream writers were drained frame by frame: nothing waits in a buffer of ours
         return None
-
 
 
 def build_frame(step: Step, items: Mapping[str, ItemSpec], tz: tzinfo | None = None,

@@ -204,3 +204,34 @@ def test_cli_writes_frames_to_a_serial_line() -> None:
     hookload = [item.value for frame in frames
                 for item in decode_frame(frame, items, 0.0).items if item.channel == "hookload"]
     assert hookload == pytest.approx(truth["hookload"][:40], rel=1e-12)
+
+
+async def test_a_client_that_reads_nothing_is_dropped_and_the_others_keep_going() -> None:
+    frame = build_frame(Step(1475600400.0, {"hookload": 1e6, "bit_depth": 2500.0}),
+                        item_map("metric"))
+    received = 0
+
+    async def keep_reading(port: int) -> None:
+        nonlocal received
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        while chunk := await reader.read(65536):
+            received += len(chunk)
+        writer.close()
+
+    stuck = socket.socket()
+    stuck.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    async with Wits0Server("127.0.0.1", 0, drain_timeout=0.5) as server:
+        reading = asyncio.create_task(keep_reading(server.bound_port))
+        stuck.connect(("127.0.0.1", server.bound_port))  # and never reads
+        await asyncio.wait_for(server.wait_for_clients(2), 30)
+        sent = 0
+        while server.clients == 2:
+            assert sent < 1_000_000, "the stuck client was never dropped"
+            await server.send(frame)
+            sent += 1
+        for _ in range(100):  # the reader is served on
+            await server.send(frame)
+        sent += 100
+    await asyncio.wait_for(reading, 60)
+    stuck.close()
+    assert received == sent * len(frame)
