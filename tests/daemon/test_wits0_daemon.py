@@ -11,12 +11,13 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import pytest
 from daemon_support import make_config, running, wait_until
 
 from tdmon.config.daemon import DaemonConfig
-from tdmon.ingest.wits0 import encode_sample_frame, item_map
-from tdmon.record.reader import read_messages
+from tdmon.ingest.wits0 import ItemOverride, encode_sample_frame, item_map
+from tdmon.record.reader import read_messages, schemas_of
 
 T0 = 1_700_000_000.0
 ITEMS = item_map("metric")
@@ -43,9 +44,12 @@ def _config(tmp_path: Path, wits0: dict[str, Any]) -> DaemonConfig:
 
 
 def _recorded(tmp_path: Path) -> dict[str, list[dict[str, Any]]]:
+    """The recording's messages by topic, each checked against its recorded schema."""
     [recording] = (tmp_path / "rec").glob("*.mcap")
+    schemas = schemas_of(recording)
     out: dict[str, list[dict[str, Any]]] = {}
     for message in read_messages(recording):
+        jsonschema.validate(message.message, schemas[message.topic])
         out.setdefault(message.topic, []).append(message.message)
     return out
 
@@ -191,13 +195,23 @@ async def test_serial_through_a_pseudo_terminal(tmp_path: Path) -> None:
     _check_samples(_recorded(tmp_path)["/tdmon/sample"], range(8))
 
 
-def test_the_example_rig_config_loads() -> None:
+def test_the_example_rig_config_loads(tmp_path: Path) -> None:
     from tdmon.config.daemon import load_daemon_config
 
     path = Path(__file__).resolve().parents[2] / "config" / "daemon" / "wits0-rig.toml"
     config = load_daemon_config(path)
     wits0 = config.sources.wits0
     assert wits0 is not None and wits0.mode == "tcp-client" and wits0.port is not None
+    # the commented item example is valid too: uncommented, 0115 in kN feeds the hook load
+    text = "\n".join(line[2:] if line.startswith(("# [", "# channel", "# unit")) else line
+                     for line in path.read_text().splitlines())
+    example = tmp_path / "wits0-example.toml"
+    example.write_text(text)
+    section = load_daemon_config(example).sources.wits0
+    assert section is not None
+    items = item_map(section.units, {code: ItemOverride(item.channel, item.unit)
+                                     for code, item in section.items.items()})
+    assert "0114" not in items and items["0115"].to_si(1.5) == 1500.0
 
 
 def test_config_mistakes_name_their_key(tmp_path: Path) -> None:
