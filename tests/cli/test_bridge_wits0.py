@@ -23,7 +23,7 @@ from tdmon.channels import CHANNELS
 from tdmon.config.daemon import ZenohConfig
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.publish import recording_messages
-from tdmon.ingest.types import RawMessage, Sample
+from tdmon.ingest.types import RawMessage, Rejected, Sample
 from tdmon.ingest.wits0 import item_map
 from tdmon.ingest.wits0_server import Wits0Server, build_frame, session_steps
 from tdmon.ingest.zenoh_io import open_session
@@ -82,23 +82,34 @@ async def test_bridge_to_mqtt(mosquitto: Any) -> None:
         await client.subscribe(f"{PREFIX}/#", qos=1)
         async with Wits0Server("127.0.0.1", 0) as server:
             bridge = start_bridge(server.bound_port, "--mqtt", f"127.0.0.1:{mosquitto.port}",
-                                  limit=len(truth))
+                                  limit=len(truth) + 1)
             try:
                 await serve_replay(server, steps)
+                # a frame with no item of the map: the feed rejects it, the bridge passes that on
+                await server.send(b"&&\r\n0105240301\r\n0106070000\r\n01991\r\n!!\r\n")
 
                 async def collect() -> None:
                     async for message in client.messages:
                         received.append((str(message.topic), bytes(message.payload)))
-                        if len(received) == len(truth):
+                        if len(received) == len(truth) + 1:
                             return
 
                 await asyncio.wait_for(collect(), 120)
                 assert await asyncio.to_thread(bridge.wait, 60) == 0
                 assert bridge.stderr is not None
-                assert f"bridged {len(truth)} messages" in bridge.stderr.read()
+                assert f"bridged {len(truth) + 1} messages" in bridge.stderr.read()
             finally:
                 bridge.kill()
                 bridge.wait()
+    rejects = [(topic, payload) for topic, payload in received if topic == f"{PREFIX}/wits0"]
+    assert len(rejects) == 1
+    topic, payload = rejects[0]
+    received.remove(rejects[0])
+    assert json.loads(payload)["error"] == "no item of the frame is mapped to a channel"
+    # a consuming daemon rejects it (no channel has that topic) and records why
+    rejected = Decoder(PREFIX, [ChannelSpec(c, c) for c in CHANNELS]).decode(
+        RawMessage("mqtt", topic, payload, 0.0))
+    assert isinstance(rejected, Rejected) and "unknown topic" in rejected.reason
     check_payloads(received, truth)
 
 
