@@ -103,8 +103,13 @@ def bridge_wits0_command(args: argparse.Namespace) -> int:
     """``tdmon bridge wits0``: supervised WITS0 input, tdmon payloads out."""
     from tdmon.config.daemon import load_daemon_config
 
+    from tdmon.channels import validate_prefix
+
     config = load_daemon_config(args.config) if args.config else None
-    prefix = (args.prefix or (config.prefix if config else "rig/F4")).strip("/")
+    try:
+        prefix = validate_prefix(args.prefix or (config.prefix if config else "rig/F4"))
+    except ValueError as exc:
+        raise TdmonError(f"--prefix: {exc}") from None
     if args.limit is not None and args.limit <= 0:
         raise TdmonError("--limit must be positive")
     open_source = _wits0_input(args, config, prefix)

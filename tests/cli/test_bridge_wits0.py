@@ -279,6 +279,7 @@ def test_bridge_mistakes_are_one_line_and_exit_2(tmp_path: Path) -> None:
         (["--wits0", "udp://127.0.0.1:5001", "--mqtt", "127.0.0.1:1883"], "--wits0"),
         (["--wits0", "tcp://127.0.0.1:5001"], "say where to publish"),
         (["--wits0", "tcp://127.0.0.1:5001", "--mqtt", "nowhere"], "--mqtt must be HOST:PORT"),
+        (["--wits0", "tcp://127.0.0.1:5001", "--prefix", "rig/#"], "--prefix: prefix 'rig/#'"),
     ]
     for args, expected in cases:
         result = subprocess.run(
@@ -287,3 +288,19 @@ def test_bridge_mistakes_are_one_line_and_exit_2(tmp_path: Path) -> None:
         assert result.returncode == 2, (args, result.stderr)
         assert len(result.stderr.strip().splitlines()) == 1, result.stderr
         assert expected in result.stderr, result.stderr
+
+
+def test_bridge_stops_on_sigterm_while_the_rig_is_away(mosquitto: Any,
+                                                       free_tcp_port: Any) -> None:
+    bridge = start_bridge(free_tcp_port(), "--mqtt", f"127.0.0.1:{mosquitto.port}", limit=10)
+    try:
+        assert bridge.stderr is not None
+        # nobody listens on the feed's port: the supervisor says so and waits to retry
+        while "retrying" not in (line := bridge.stderr.readline()):
+            assert line, "the bridge ended before retrying"
+        bridge.send_signal(signal.SIGTERM)
+        assert bridge.wait(60) == 0
+        assert "bridged 0 messages" in bridge.stderr.read()
+    finally:
+        bridge.kill()
+        bridge.wait()
