@@ -101,9 +101,8 @@ def serve_wits0(args: argparse.Namespace, messages: Iterable[tuple[float, str, b
 
 def bridge_wits0_command(args: argparse.Namespace) -> int:
     """``tdmon bridge wits0``: supervised WITS0 input, tdmon payloads out."""
-    from tdmon.config.daemon import load_daemon_config
-
     from tdmon.channels import validate_prefix
+    from tdmon.config.daemon import load_daemon_config
 
     config = load_daemon_config(args.config) if args.config else None
     try:
