@@ -12,9 +12,14 @@ from collections.abc import AsyncIterator, Callable, Iterable
 from contextlib import AbstractAsyncContextManager, AsyncExitStack, asynccontextmanager
 from itertools import islice
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tdmon.errors import TdmonError
+
+if TYPE_CHECKING:  # heavy modules stay out of the command line's start-up
+    from tdmon.config.daemon import DaemonConfig
+    from tdmon.ingest.publish import Sender
+    from tdmon.ingest.types import RawMessage
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -120,8 +125,8 @@ def bridge_wits0_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _output(args: argparse.Namespace, config: Any
-            ) -> tuple[Callable[[], AbstractAsyncContextManager[Any]], str]:
+def _output(args: argparse.Namespace, config: DaemonConfig | None
+            ) -> tuple[Callable[[], AbstractAsyncContextManager[Sender]], str]:
     """Where the bridge publishes: flags, else the config's [publish.*], else where its
     [sources.mqtt] / [sources.zenoh] listen (like ``tdmon publish --config``)."""
     from tdmon.config.daemon import MqttConfig, TlsConfig, ZenohConfig
@@ -168,8 +173,8 @@ def _output(args: argparse.Namespace, config: Any
 
 
 async def _bridge_until_stopped(
-    open_source: Callable[[], AbstractAsyncContextManager[AsyncIterator[Any]]],
-    open_sender: Callable[[], AbstractAsyncContextManager[Any]],
+    open_source: Callable[[], AbstractAsyncContextManager[AsyncIterator[RawMessage]]],
+    open_sender: Callable[[], AbstractAsyncContextManager[Sender]],
     limit: int | None,
 ) -> int:
     """Relay until SIGINT/SIGTERM (or ``limit`` messages); return how many were published."""
@@ -181,10 +186,10 @@ async def _bridge_until_stopped(
         loop.add_signal_handler(signum, stop.set)
     states: dict[str, str] = {}
     count = 0
-    current: list[Any] = []  # the open sender, flushed before stopping
+    current: list[Sender] = []  # the open sender, flushed before stopping
 
     @asynccontextmanager
-    async def connect() -> AsyncIterator[tuple[Any, AsyncIterator[Any]]]:
+    async def connect() -> AsyncIterator[tuple[Sender, AsyncIterator[RawMessage]]]:
         # output and input are one pipe: losing either reopens both through the supervisor
         async with AsyncExitStack() as stack:
             sender = await stack.enter_async_context(open_sender())
@@ -195,7 +200,7 @@ async def _bridge_until_stopped(
             finally:
                 current.clear()
 
-    async def work(connection: tuple[Any, AsyncIterator[Any]]) -> None:
+    async def work(connection: tuple[Sender, AsyncIterator[RawMessage]]) -> None:
         nonlocal count
         sender, source = connection
         async for raw in source:
@@ -228,8 +233,8 @@ async def _bridge_until_stopped(
     return count
 
 
-def _wits0_input(args: argparse.Namespace, config: Any, prefix: str
-                 ) -> Callable[[], AbstractAsyncContextManager[AsyncIterator[Any]]]:
+def _wits0_input(args: argparse.Namespace, config: DaemonConfig | None, prefix: str
+                 ) -> Callable[[], AbstractAsyncContextManager[AsyncIterator[RawMessage]]]:
     """The feed: ``--wits0 URL`` (a TCP client or a serial line with the default item map in
     ``--wits0-units``), else the config's ``[sources.wits0]``. Its messages are those the
     daemon's own WITS0 source makes, on ``<prefix>/<channel>`` and ``<prefix>/wits0``."""
