@@ -1,7 +1,8 @@
-"""Sources (MQTT, Zenoh, MCAP replay) and the pure payload decoders kept apart from them.
+"""Sources (MQTT, Zenoh, MCAP replay, WITS0) and the pure payload decoders kept apart from them.
 
 ``decode`` (bytes -> Sample | Rejected, no I/O), ``types`` (RawMessage, Sample, Rejected and
 their daemon message shapes), ``mqtt`` / ``zenoh_io`` / ``mcap_source`` (async context
-managers yielding RawMessages, plus the result publishers), ``publish`` (the rig side used by
+managers yielding RawMessages, plus the result publishers), ``wits0`` (the pure WITS Level 0
+codec) and ``wits0_source`` (its daemon source), ``publish`` (the rig side used by
 ``tdmon publish``). Reconnecting is the daemon supervisor's job, not the sources'.
 """

@@ -13,9 +13,10 @@ from typing import Any
 
 import jsonschema
 import pytest
-from daemon_support import make_config, running, wait_until
+from daemon_support import CollectSink, linear_model, make_config, running, wait_until
 
 from tdmon.config.daemon import DaemonConfig
+from tdmon.daemon.build import build_daemon
 from tdmon.ingest.wits0 import ItemOverride, encode_sample_frame, item_map
 from tdmon.record.reader import read_messages, schemas_of
 
@@ -130,6 +131,15 @@ async def test_tcp_client_reads_a_rig_server_and_records_samples_and_rejections(
     assert BAD_FRAME.decode() in frames_seen
     assert all(r["source"] == "wits0" for r in raw)
     assert len(raw) == len(recorded["/tdmon/sample"]) + len(recorded["/tdmon/rejected"])
+
+    # the recording replays through the ordinary decoder: the same samples and rejections
+    [recording] = (tmp_path / "rec").glob("*.mcap")
+    replay = make_config({"sources": {"mcap": {"path": str(recording)}}}, tmp_path)
+    sink = CollectSink()
+    async with build_daemon(replay, model=linear_model(), extra_sinks=[sink]) as built:
+        await asyncio.wait_for(built.daemon.run(), 60)
+    assert sink["sample"] == recorded["/tdmon/sample"]
+    assert sink["rejected"] == recorded["/tdmon/rejected"]
 
 
 async def test_a_silent_feed_times_out_and_the_daemon_reconnects(tmp_path: Path) -> None:
