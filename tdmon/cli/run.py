@@ -72,6 +72,16 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--seq", action="store_true",
                      help="number each channel's messages (\"seq\": 1, 2, ...) so that the "
                           "daemon can count the ones that never arrive (CSV sources)")
+    pub.add_argument("--wits0", metavar="URL",
+                     help="serve WITS0 frames instead, as a rig's WITS server: one frame per "
+                          "time step to every client of tcp://HOST:PORT, or to "
+                          "serial:///dev/DEVICE?baud=9600 (docs/wits0.md, Simulator)")
+    pub.add_argument("--wits0-clients", type=int, default=1, metavar="N",
+                     help="with --wits0: wait for N clients before the first frame (0: none)")
+    pub.add_argument("--wits0-units", default="metric", choices=["metric", "field"],
+                     help="with --wits0: the WITS unit set of the items (default metric)")
+    pub.add_argument("--wits0-decimals", type=int, metavar="N",
+                     help="with --wits0: round values to N decimals (default: every digit)")
     pub.set_defaults(func=_publish)
 
 
@@ -172,6 +182,10 @@ def _publish(args: argparse.Namespace) -> int:
         messages = pub.csv_messages(args.source, prefix, columns, args.time_column, shift,
                                     seq=args.seq)
         total = pub.csv_message_count(args.source, columns)
+    if args.wits0:
+        from tdmon.cli.bridge import serve_wits0
+
+        return serve_wits0(args, messages, speed, _progress())  # counts frames, not messages
     if args.limit is not None:
         messages = islice(messages, args.limit)
         total = args.limit if total is None else min(total, args.limit)
