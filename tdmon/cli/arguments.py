@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from tdmon.config.daemon import MqttConfig, ZenohConfig
     from tdmon.display import UnitSystem
 
 UNIT_SYSTEMS = ("si", "field")
@@ -73,3 +74,32 @@ def display_units(args: argparse.Namespace, config: str | None = None) -> UnitSy
     from tdmon.display import resolve
 
     return resolve(getattr(args, "units", None), config)
+
+
+def flag_targets(args: argparse.Namespace, password: str | None
+                 ) -> tuple[MqttConfig | None, ZenohConfig | None]:
+    """Where ``--mqtt HOST:PORT`` or ``--zenoh-connect``/``--zenoh-listen`` say to publish
+    (``tdmon publish``, ``tdmon bridge``); (None, None) when neither is given."""
+    from tdmon.config.daemon import MqttConfig, TlsConfig, ZenohConfig
+    from tdmon.errors import TdmonError
+
+    if args.mqtt:
+        host, _, port = args.mqtt.rpartition(":")
+        if not host or not port.isdigit():
+            raise TdmonError(f"--mqtt must be HOST:PORT, got '{args.mqtt}'")
+        return MqttConfig(host=host, port=int(port), client_id=args.client_id,
+                          username=args.username, password=password,
+                          tls=TlsConfig(ca_file=args.ca_file) if args.ca_file else None,
+                          clean_session=True), None
+    if args.zenoh_connect or args.zenoh_listen:
+        return None, ZenohConfig(connect=args.zenoh_connect, listen=args.zenoh_listen)
+    return None, None
+
+
+def toward_zenoh_source(source: ZenohConfig) -> ZenohConfig:
+    """A session that reaches a daemon's Zenoh source: connect where it listens (or where it
+    connects), as a peer if it is one, else as a client."""
+    from tdmon.config.daemon import ZenohConfig
+
+    return ZenohConfig(mode="peer" if source.mode == "peer" else "client",
+                       connect=source.listen or source.connect)

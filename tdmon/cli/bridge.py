@@ -14,6 +14,7 @@ from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tdmon.cli.arguments import flag_targets, toward_zenoh_source
 from tdmon.errors import TdmonError
 
 if TYPE_CHECKING:  # heavy modules stay out of the command line's start-up
@@ -129,35 +130,22 @@ def _output(args: argparse.Namespace, config: DaemonConfig | None
             ) -> tuple[Callable[[], AbstractAsyncContextManager[Sender]], str]:
     """Where the bridge publishes: flags, else the config's [publish.*], else where its
     [sources.mqtt] / [sources.zenoh] listen (like ``tdmon publish --config``)."""
-    from tdmon.config.daemon import MqttConfig, TlsConfig, ZenohConfig
     from tdmon.ingest import publish as pub
 
-    mqtt: MqttConfig | None = None
-    zenoh: ZenohConfig | None = None
-    if args.mqtt:
-        host, _, port = args.mqtt.rpartition(":")
-        if not host or not port.isdigit():
-            raise TdmonError(f"--mqtt must be HOST:PORT, got '{args.mqtt}'")
-        mqtt = MqttConfig(host=host, port=int(port), client_id=args.client_id,
-                          username=args.username, password=args.password,
-                          tls=TlsConfig(ca_file=args.ca_file) if args.ca_file else None,
-                          clean_session=True)
-    elif args.zenoh_connect or args.zenoh_listen:
-        zenoh = ZenohConfig(connect=args.zenoh_connect, listen=args.zenoh_listen)
-    elif config is not None and config.publish.mqtt is not False:
-        mqtt = config.sources.mqtt if config.publish.mqtt is True else config.publish.mqtt
-    elif config is not None and config.publish.zenoh is not False:
-        zenoh = config.sources.zenoh if config.publish.zenoh is True else config.publish.zenoh
-    elif config is not None and config.sources.mqtt is not None:
-        mqtt = config.sources.mqtt.model_copy(
-            update={"client_id": args.client_id, "clean_session": True})
-    elif config is not None and config.sources.zenoh is not None:
-        source = config.sources.zenoh
-        zenoh = ZenohConfig(mode="peer" if source.mode == "peer" else "client",
-                            connect=source.listen or source.connect)
-    else:
-        raise TdmonError("say where to publish: --mqtt, --zenoh-connect/--zenoh-listen, or "
-                         "--config with [publish.mqtt]/[publish.zenoh] or an MQTT/Zenoh source")
+    mqtt, zenoh = flag_targets(args, args.password)
+    if mqtt is None and zenoh is None:
+        if config is not None and config.publish.mqtt is not False:
+            mqtt = config.sources.mqtt if config.publish.mqtt is True else config.publish.mqtt
+        elif config is not None and config.publish.zenoh is not False:
+            zenoh = config.sources.zenoh if config.publish.zenoh is True else config.publish.zenoh
+        elif config is not None and config.sources.mqtt is not None:
+            mqtt = config.sources.mqtt.model_copy(
+                update={"client_id": args.client_id, "clean_session": True})
+        elif config is not None and config.sources.zenoh is not None:
+            zenoh = toward_zenoh_source(config.sources.zenoh)
+        else:
+            raise TdmonError("say where to publish: --mqtt, --zenoh-connect/--zenoh-listen, or "
+                             "--config with [publish.mqtt]/[publish.zenoh] or an MQTT/Zenoh source")
     if mqtt is not None:
         chosen_mqtt = mqtt
         if mqtt.client_id == (config.sources.mqtt.client_id if config is not None

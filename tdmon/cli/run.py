@@ -14,7 +14,12 @@ from collections.abc import Coroutine, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tdmon.cli.arguments import add_units_option, display_units
+from tdmon.cli.arguments import (
+    add_units_option,
+    display_units,
+    flag_targets,
+    toward_zenoh_source,
+)
 from tdmon.errors import TdmonError
 
 if TYPE_CHECKING:
@@ -150,7 +155,7 @@ def port_in_use(host: str, port: int) -> str | None:
 def _publish(args: argparse.Namespace) -> int:
     from itertools import islice
 
-    from tdmon.config.daemon import MqttConfig, TlsConfig, ZenohConfig, load_daemon_config
+    from tdmon.config.daemon import load_daemon_config
     from tdmon.ingest import publish as pub
 
     config = load_daemon_config(args.config) if args.config else None
@@ -190,32 +195,20 @@ def _publish(args: argparse.Namespace) -> int:
         messages = islice(messages, args.limit)
         total = args.limit if total is None else min(total, args.limit)
 
-    mqtt: MqttConfig | None = None
-    zenoh: ZenohConfig | None = None
-    if args.mqtt:
-        host, _, port = args.mqtt.rpartition(":")
-        if not host or not port.isdigit():
-            raise TdmonError(f"--mqtt must be HOST:PORT, got '{args.mqtt}'")
-        mqtt = MqttConfig(host=host, port=int(port), client_id=args.client_id,
-                          username=args.username, password=_password(args),
-                          tls=TlsConfig(ca_file=args.ca_file) if args.ca_file else None,
-                          clean_session=True)
-    elif args.zenoh_connect or args.zenoh_listen:
-        zenoh = ZenohConfig(connect=args.zenoh_connect, listen=args.zenoh_listen)
-    elif config is not None and config.sources.mqtt is not None:
-        update: dict[str, Any] = {"client_id": args.client_id, "clean_session": True}
-        password = _password(args, fallback=config.sources.mqtt.resolved_password())
-        if password is not None:
-            update["password"] = password
-        if args.username:
-            update["username"] = args.username
-        mqtt = config.sources.mqtt.model_copy(update=update)
-    elif config is not None and config.sources.zenoh is not None:
-        source = config.sources.zenoh
-        zenoh = ZenohConfig(mode="peer" if source.mode == "peer" else "client",
-                            connect=source.listen or source.connect)
-    else:
-        raise TdmonError("say where to publish: --config, --mqtt or --zenoh-connect")
+    mqtt, zenoh = flag_targets(args, _password(args) if args.mqtt else None)
+    if mqtt is None and zenoh is None:
+        if config is not None and config.sources.mqtt is not None:
+            update: dict[str, Any] = {"client_id": args.client_id, "clean_session": True}
+            password = _password(args, fallback=config.sources.mqtt.resolved_password())
+            if password is not None:
+                update["password"] = password
+            if args.username:
+                update["username"] = args.username
+            mqtt = config.sources.mqtt.model_copy(update=update)
+        elif config is not None and config.sources.zenoh is not None:
+            zenoh = toward_zenoh_source(config.sources.zenoh)
+        else:
+            raise TdmonError("say where to publish: --config, --mqtt or --zenoh-connect")
 
     def say(line: str) -> None:
         print(f"tdmon: publish: {line}", file=sys.stderr, flush=True)
