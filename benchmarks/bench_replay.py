@@ -80,11 +80,11 @@ relative = 0.003
 
 [noise.channels.bit_depth]
 relative = 0.0
-absolute = 0.005
+absolute = "0.005 m"
 
 [noise.channels.block_position]
 relative = 0.0
-absolute = 0.005
+absolute = "0.005 m"
 """
     cycle = """
 [[phase]]
