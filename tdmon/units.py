@@ -31,7 +31,9 @@ _OFFSET_IN_COMPOUND = re.compile(r"\b(degC|degF|celsius|fahrenheit)\b")
 # plain number, "12 1/4 in" would be 12 times the unit "1/4 in", i.e. 3 in.
 _MIXED_FRACTION = re.compile(
     r"\s*(?P<sign>[-+]?)(?:(?P<whole>\d+)(?:\s+|-))?(?P<num>\d+)/(?P<den>\d+)\s*(?P<unit>.*?)\s*")
-_LEADING_NUMBER = re.compile(r"\s*[-+]?[\d.](?!\s*/)")  # but "1/min" is a unit
+# A unit that starts with a number ("8 N"), an operator ("+ 1/4 in") or a fraction of numbers
+# ("1/4 in", after "12.5"): pint would multiply the value by it. "1/min" is a unit.
+_LEADING_NUMBER = re.compile(r"\s*(?:[-+*/]|[\d.](?!\s*/\s*[^\d\s])|\d+\s*/\s*\d)")
 _DECIMAL = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")
 
 
@@ -48,8 +50,8 @@ def _split(text: str) -> tuple[float, str]:
         raise ValueError(f"'{text}' is not a number followed by a unit (e.g. '9950 ft')")
     number, unit = float(match.group(1)), match.group(2)
     if _LEADING_NUMBER.match(unit):
-        raise ValueError(f"'{text}': the unit '{unit}' starts with a number; write one number "
-                         "and a unit (e.g. '12.25 in' or '12 1/4 in')")
+        raise ValueError(f"'{text}': the unit '{unit}' starts with a number or an operator; "
+                         "write one number and a unit (e.g. '12.25 in' or '12 1/4 in')")
     return number, unit
 
 

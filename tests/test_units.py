@@ -19,7 +19,8 @@ def test_oilfield_sizes_read_as_mixed_fractions(text: str, inches: float) -> Non
     assert parse_quantity(text, "m") == pytest.approx(inches * INCH, rel=1e-12)
 
 
-@pytest.mark.parametrize("text", ["12 1 in", "8 2.5 N", "1/0 in"])
+@pytest.mark.parametrize("text", ["12 1 in", "8 2.5 N", "1/0 in", "12 + 1/4 in", "5 - 1/2 in",
+                                  "5 -1/2 in", "12.5 1/4 in", "0.5 1/2 m"])
 def test_a_second_number_in_the_unit_is_refused(text: str) -> None:
     with pytest.raises(ValueError, match=r"unit|denominator"):
         parse_quantity(text, "m")

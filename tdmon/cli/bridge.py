@@ -253,7 +253,14 @@ def _wits0_input(args: argparse.Namespace, config: DaemonConfig | None, prefix: 
         items = item_map(section.units, overrides)
     except ValueError as exc:
         raise ConfigError(where, "sources.wits0.items", str(exc)) from None
+    # the daemon file's channel topics ([channels.X] topic), as its own WITS0 source uses them,
+    # so that a `tdmon run` with the same file takes what the bridge publishes
     topics = {spec.channel: f"{prefix}/{spec.channel}" for spec in items.values()}
+    if config is not None:
+        from tdmon.ingest.decode import topic_for
+
+        topics.update({spec.channel: topic_for(prefix, spec.topic)
+                       for spec in config.channel_specs()})
     tz = resolve_timezone(section.timezone)
     # the first message of a frame carries the frame: keep it under the consumers' limit
     limit = (config.queues if config is not None else QueuesConfig()).max_payload_bytes

@@ -10,7 +10,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Coroutine, Iterable
+from collections.abc import Coroutine, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -72,7 +72,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--time-column", default="time_utc")
     pub.add_argument("--speed", default="max", help="real time x N, or 'max' (default)")
     pub.add_argument("--now", action="store_true",
-                     help="shift times so that the first row is now (live-looking data)")
+                     help="shift times to the present (live-looking data): the first row is "
+                          "now at --speed 1; faster, the last row is now, so that no sample "
+                          "is stamped ahead of the clock (the daemon refuses those)")
     pub.add_argument("--limit", type=int, help="stop after this many messages")
     pub.add_argument("--seq", action="store_true",
                      help="number each channel's messages (\"seq\": 1, 2, ...) so that the "
@@ -174,16 +176,15 @@ def _publish(args: argparse.Namespace) -> int:
     messages: Iterable[tuple[float, str, bytes]]
     total: int | None
     if args.source.suffix.lower() == ".mcap":
-        first = next(iter(pub.recording_messages(args.source, prefix)), None)
-        shift = time.time() - first[0] if args.now and first else 0.0
+        shift = _now_shift(args.now, speed, (t for t, _, _ in
+                                             pub.recording_messages(args.source, prefix)))
         messages = ((t + shift, topic, body) for t, topic, body in
                     pub.recording_messages(args.source, prefix))
         total = pub.recording_message_count(args.source)
     else:
         columns = pub.parse_columns(args.columns) if args.columns else pub.VOLVE_COLUMNS
-        first = next(iter(pub.csv_messages(args.source, prefix, columns, args.time_column)),
-                     None)
-        shift = time.time() - first[0] if args.now and first else 0.0
+        shift = _now_shift(args.now, speed, (t for t, _, _ in pub.csv_messages(
+            args.source, prefix, columns, args.time_column)))
         messages = pub.csv_messages(args.source, prefix, columns, args.time_column, shift,
                                     seq=args.seq)
         total = pub.csv_message_count(args.source, columns)
@@ -316,6 +317,23 @@ def read_password_file(path: Path, what: str) -> str:
         print(f"tdmon: warning: {path} holds a clear-text password and is readable by others "
               f"(chmod 600 {path})", file=sys.stderr)
     return password
+
+
+def _now_shift(now: bool, speed: float | None, times: Iterator[float]) -> float:
+    """How far ``--now`` moves a session's times [s]. At real time the first row is stamped
+    now and the rest follow as the rig's clock would; played faster, the session would run
+    ahead of the clock (a daemon rejects stamps in the future), so the last row is now."""
+    if not now:
+        return 0.0
+    first = next(times, None)
+    if first is None:
+        return 0.0
+    if speed == 1.0:
+        return time.time() - first
+    last = first
+    for last in times:  # noqa: B007 (the last time is what is wanted)
+        pass
+    return time.time() - last
 
 
 def _progress(total: int | None = None) -> Any:

@@ -31,6 +31,7 @@ class _Sampling:
     intervals: deque[float] = field(default_factory=lambda: deque(maxlen=INTERVALS_KEPT))
     median: float | None = None
     since_median: int = 0
+    rebase: bool = False  # the rig clock jumped: the next sample starts the timing again
 
 
 class LossDetector:
@@ -64,6 +65,12 @@ class LossDetector:
             alarms.append(alarm)
         return alarms
 
+    def reanchor(self) -> None:
+        """The rig clock jumped: the next interval of every channel spans the jump, so it is
+        neither a gap (a clock gone forward) nor ignored for ever (a clock gone back)."""
+        for state in self._sampling.values():
+            state.rebase = True
+
     def _check_seq(self, sample: Sample) -> dict[str, Any] | None:
         seq = sample.seq
         assert seq is not None
@@ -84,6 +91,9 @@ class LossDetector:
         state = self._sampling.get(sample.channel)
         if state is None:
             self._sampling[sample.channel] = _Sampling(sample.t)
+            return None
+        if state.rebase:
+            state.last_t, state.rebase = sample.t, False
             return None
         interval = sample.t - state.last_t
         if interval <= 0:

@@ -191,6 +191,8 @@ class Pipeline:
         stats.last_sample_t = decoded.t
         if self._sinks_for("/tdmon/sample"):
             self._write("/tdmon/sample", log_ns, sample_message(decoded))
+        if jump is not None:
+            self.loss.reanchor()
         for alarm in self.loss.observe(decoded):
             self._write("/tdmon/alarm", log_ns, alarm)
         stats.seq_lost = self.loss.seq_lost
@@ -203,6 +205,7 @@ class Pipeline:
             for jump in self._take_jumps():
                 if self.clock is not None:
                     self.clock.reanchor(jump.offset)
+                self.loss.reanchor()
                 self._clock_jump(jump, log_ns)
         for frame in frames:
             self._run_steps(frame)

@@ -448,7 +448,8 @@ def resolve_curves(block: LogBlock, source: str, *,
             continue
         column = columns[curve.mnemonic.lower()]
         uom = unit_override or curve.unit or (block.units[column] if block.units else "")
-        unit = unit_override or pint_unit(uom)
+        # an override is a WITSML uom like any other ("1/min" is rev/min, "c/s" rev/s)
+        unit = pint_unit(uom)
         if unit is None:
             raise IngestError(f"{source}: curve '{curve.mnemonic}' ({channel}) has no unit "
                               f"('{uom}'); give one with --curve {channel}="

@@ -162,8 +162,9 @@ def _child(element: ET.Element, name: str) -> ET.Element | None:
 
 
 def _measure(element: ET.Element, name: str, target: str, source: str,
-             where: str) -> tuple[float, str] | None:
-    """(value in ``target``, the uom read) of child ``name``; None when absent or below 0."""
+             where: str, signed: bool = False) -> tuple[float, str] | None:
+    """(value in ``target``, the uom read) of child ``name``; None when absent, below 0 (a
+    null such as -9999) unless ``signed``, or a -999.25 / -9999 style null when signed."""
     child = _child(element, name)
     if child is None or not (child.text or "").strip():
         return None
@@ -172,7 +173,7 @@ def _measure(element: ET.Element, name: str, target: str, source: str,
         value = float(child.text or "")
     except ValueError:
         raise IngestError(f"{source}: {where}/{name}: '{child.text}' is not a number") from None
-    if not math.isfinite(value) or value < 0:
+    if not math.isfinite(value) or (value < 0 and not signed) or value <= -999.0:
         return None
     unit = pint_unit(uom) or target
     try:
@@ -198,10 +199,11 @@ def parse_trajectory(element: ET.Element, source: str) -> Trajectory:
         where = f"trajectory '{uid}' station {index}"
         values = []
         for name, target in (("md", "m"), ("incl", "degree"), ("azi", "degree")):
-            found = _measure(station, name, target, source, where)
+            # azimuths may be written from -180 to 180 deg: wrapped to 0-360 below
+            found = _measure(station, name, target, source, where, signed=name == "azi")
             if found is None:
                 break
-            values.append(found[0])
+            values.append(found[0] % 360.0 if name == "azi" else found[0])
             uoms.setdefault(name, found[1])
         if len(values) == 3:
             stations.append(Station(*values))
@@ -555,6 +557,7 @@ def draft_well(objects: WellObjects, *, tubular: Tubular | None = None,
         "", "[well]", f'name = "{objects.well or trajectory.name}"',
         'element_length = "10 m"', block_line, "",
         "[survey]",
+        'angle_unit = "deg"',
         f"# md [m], inclination and azimuth [deg] from trajectory uid {trajectory.uid}",
         "stations = [", *station_lines, "]", "",
         *hole_lines, *string_lines, *fluid_lines, "",

@@ -245,6 +245,9 @@ units = "field"
 host = "127.0.0.1"
 port = {mosquitto.port}
 client_id = "bridge-from-file"
+[channels.hookload]
+topic = "HKLD"
+unit = "kN"
 """)
             bridge = subprocess.Popen(
                 [sys.executable, "-m", "tdmon", "bridge", "wits0", "--config", str(config),
@@ -267,10 +270,12 @@ client_id = "bridge-from-file"
                 bridge.kill()
                 bridge.wait()
     first = {topic: json.loads(payload) for topic, payload in reversed(received)}
-    # the replay's first hook load, 1479516 N, went out in klbf and came back in N
-    assert math.isclose(first["rig/from-file/hookload"]["value"], 1479516.0, rel_tol=1e-12)
-    assert first["rig/from-file/hookload"]["unit"] == "N"
-    assert first["rig/from-file/hookload"]["wits"].startswith("0114332.6")  # 332.6... klbf
+    # the replay's first hook load, 1479516 N, went out in klbf and came back in N, on the
+    # file's own topic for the channel ([channels.hookload] topic), as its daemon reads it
+    assert "rig/from-file/hookload" not in first
+    assert math.isclose(first["rig/from-file/HKLD"]["value"], 1479516.0, rel_tol=1e-12)
+    assert first["rig/from-file/HKLD"]["unit"] == "N"
+    assert first["rig/from-file/HKLD"]["wits"].startswith("0114332.6")  # 332.6... klbf
 
 
 def test_bridge_mistakes_are_one_line_and_exit_2(tmp_path: Path) -> None:

@@ -10,6 +10,8 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any
 
+import pytest
+
 from tdmon.daemon.daemon import AckWindow, Daemon, SourceSpec, recorders_of
 from tdmon.daemon.loss import LossDetector
 from tdmon.daemon.pipeline import Stats
@@ -191,6 +193,24 @@ def test_a_sampling_gap_is_one_alarm_per_gap() -> None:
     assert len(alarms) == 1 and loss.sampling_gaps == 1
     assert alarms[0]["value"] == 49  # about 5.0 / 0.1 - 1 samples
     assert "no hookload samples for 5.0 s" in alarms[0]["message"]
+
+
+@pytest.mark.parametrize("jump", [3600.0, -3600.0])
+def test_a_clock_jump_is_neither_a_gap_nor_a_blind_spot(jump: float) -> None:
+    loss = LossDetector()
+    t = 0.0
+    for _ in range(40):
+        t += 0.5
+        assert loss.observe(_sample("rig/a/hookload", t)) == []
+    loss.reanchor()  # the pipeline calls this when the rig clock jumps
+    t += jump
+    assert loss.observe(_sample("rig/a/hookload", t)) == []  # not 3600 s of missing samples
+    for _ in range(5):
+        t += 0.5
+        loss.observe(_sample("rig/a/hookload", t))
+    t += 10.0  # a real gap on the new clock is still seen (after a jump back too)
+    alarms = loss.observe(_sample("rig/a/hookload", t))
+    assert [a["value"] for a in alarms] == [19] and loss.sampling_gaps == 1
 
 
 def test_decoder_takes_seq_and_never_rejects_for_it() -> None:

@@ -90,3 +90,23 @@ def test_recording_messages_replace_the_prefix(tmp_path: Path) -> None:
     assert list(recording_messages(path, "rig/NEW")) == [
         (5.0, "rig/NEW/hookload", b'{"t": 1, "value": 2}')]
     assert next(iter(recording_messages(path)))[1] == "rig/OLD/hookload"
+
+
+def test_now_never_stamps_a_faster_than_real_time_session_ahead_of_the_clock() -> None:
+    """--now at --speed 1 puts the first row at now; faster (or max) the last row, so that no
+    sample of the session is ever ahead of the clock when it is sent."""
+    import time
+
+    from tdmon.cli.run import _now_shift
+
+    times = [1000.0, 1015.0, 1030.0, 1045.0]
+    before = time.time()
+    live = _now_shift(True, 1.0, iter(times))
+    fast = _now_shift(True, 60.0, iter(times))
+    as_fast_as_possible = _now_shift(True, None, iter(times))
+    after = time.time()
+    assert before <= times[0] + live <= after
+    assert before <= times[-1] + fast <= after
+    assert before <= times[-1] + as_fast_as_possible <= after
+    assert _now_shift(False, 60.0, iter(times)) == 0.0
+    assert _now_shift(True, 60.0, iter([])) == 0.0

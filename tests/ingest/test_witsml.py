@@ -298,3 +298,50 @@ def test_curve_map_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
                  "--map", str(curve_map)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "map.toml" in err and "hookpoint" in err
+
+
+def test_review_fixes_draft_states_degrees_and_override_units_read_as_witsml(
+        tmp_path: Path) -> None:
+    """A near-vertical well heading north drafts to a file that loads (the draft states its
+    angle unit, so the radians check does not refuse it); a curve unit given on the command
+    line is read like a WITSML uom (1/min is rev/min, not rad/min)."""
+    import io
+
+    from tdmon.config.well import load_well_model
+    from tdmon.ingest.witsml import block_samples, iter_log, resolve_curves
+    from tdmon.ingest.witsml_well import (
+        GeometrySection,
+        Station,
+        Trajectory,
+        Tubular,
+        TubularComponent,
+        WellboreGeometry,
+        WellObjects,
+        draft_well,
+    )
+
+    trajectory = Trajectory("t", "traj", "x.xml", (Station(0, 0, 0), Station(500, 0.3, 0),
+                            Station(1000, 1.5, 2.0), Station(1500, 2.5, 4.0)), "md m")
+    component = TubularComponent("c1", "drill pipe", 1, 1400, 0.127, 0.1086, 29.0, 0.168, 5.5e8)
+    tubular = Tubular("tb", "dp", "x.xml", "drilling", "", (component,))
+    geometry = WellboreGeometry("g", "geo", "x.xml", (
+        GeometrySection("casing", 0, 800, 0.22, 0.244), GeometrySection("open hole", 800, 1500,
+                                                                        0.216)))
+    draft = draft_well(WellObjects("W", trajectory, (tubular,), geometry, None, None),
+                       block_weight="655 kN", fluid_density="1.2 sg")
+    path = tmp_path / "draft.toml"
+    path.write_text(draft.text.replace("# friction = ", "friction = "))
+    assert load_well_model(path).survey.md[-1] == pytest.approx(1500.0)
+
+    xml = b"""<logs xmlns="http://www.witsml.org/schemas/1series"><log uid="L1">
+<nameWell>W</nameWell><indexType>date time</indexType><indexCurve>TIME</indexCurve>
+<logCurveInfo><mnemonic>TIME</mnemonic><unit>s</unit></logCurveInfo>
+<logCurveInfo><mnemonic>HKLD</mnemonic><unit>kN</unit></logCurveInfo>
+<logCurveInfo><mnemonic>BITDEP</mnemonic><unit>m</unit></logCurveInfo>
+<logCurveInfo><mnemonic>RPM</mnemonic><unit>unitless</unit></logCurveInfo>
+<logData><mnemonicList>TIME,HKLD,BITDEP,RPM</mnemonicList><unitList>s,kN,m,unitless</unitList>
+<data>2020-01-01T00:00:00Z,1000,100,60</data></logData></log></logs>"""
+    block, rows = list(iter_log(io.BytesIO(xml), "x"))[:2]
+    for unit in ("rpm", "1/min"):
+        curves = resolve_curves(block, "x", overrides={"rpm": ("RPM", unit)})
+        assert dict(block_samples(rows, curves, "x"))["rpm"] == pytest.approx(2 * math.pi)
