@@ -130,13 +130,13 @@ def parse_time(t: object) -> float | str:
         try:
             stamp = datetime.fromisoformat(t)
         except ValueError:
-            return f"'t' is not ISO 8601: '{_clip(t)}'"
+            return f"'t' is not ISO 8601: '{clip(t)}'"
         if stamp.tzinfo is None:
             stamp = stamp.replace(tzinfo=UTC)
         try:
             seconds = stamp.timestamp()
         except (OverflowError, OSError, ValueError):
-            return f"'t' out of range: '{_clip(t)}'"
+            return f"'t' out of range: '{clip(t)}'"
     else:
         return f"'t' must be Unix seconds or ISO 8601, got {type(t).__name__}"
     if not math.isfinite(seconds):
@@ -146,5 +146,6 @@ def parse_time(t: object) -> float | str:
     return seconds
 
 
-def _clip(text: str, limit: int = 60) -> str:
+def clip(text: str, limit: int = 60) -> str:
+    """``text`` cut to ``limit`` characters with "..." (for quoting user input in errors)."""
     return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -20,6 +20,7 @@ from datetime import UTC, datetime
 from tdmon.channels import CHANNEL_UNITS, ChannelSpec, check_channel
 from tdmon.ingest.types import RawMessage, Rejected, Sample
 from tdmon.units import T_MAX, T_MIN, conversion, parse_time
+from tdmon.units import clip as _clip
 
 __all__ = ["ABS_VALUE_MAX", "CHANNEL_UNITS", "T_MAX", "T_MIN", "ChannelSpec", "Decoder",
            "SampleChecks", "parse_payload", "parse_time", "topic_for"]
@@ -277,5 +278,3 @@ def _source_error(raw: RawMessage) -> str | None:
     return _clip(error, 200) if isinstance(error, str) and error else None
 
 
-def _clip(text: str, limit: int = 60) -> str:
-    return text if len(text) <= limit else text[: limit - 3] + "..."

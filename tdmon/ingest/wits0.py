@@ -30,7 +30,7 @@ from typing import Final, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from tdmon.channels import CHANNEL_UNITS, check_channel
-from tdmon.units import T_MAX, T_MIN, conversion
+from tdmon.units import T_MAX, T_MIN, clip, conversion
 
 __all__ = [
     "DATE_CODE", "DEFAULT_ITEMS", "MAX_FRAME_BYTES", "TIME_CODE", "WITS_UNITS", "DecodedFrame",
@@ -282,11 +282,11 @@ def parse_line(text: str) -> WitsLine | LineError | None:
     if not line:
         return None
     if len(line) < 5:
-        return LineError(line, f"line '{_clip(line)}' is too short for a four-digit code and "
+        return LineError(line, f"line '{clip(line, 40)}' is too short for a four-digit code and "
                                "a value")
     code, value = line[:4], line[4:].strip()
     if not code.isdigit() or not code.isascii():
-        return LineError(line, f"line '{_clip(line)}' does not start with a four-digit item "
+        return LineError(line, f"line '{clip(line, 40)}' does not start with a four-digit item "
                                "code")
     if not value:
         return LineError(line, f"item {code} has no value")
@@ -463,12 +463,12 @@ def decode_frame(frame: WitsFrame, items: Mapping[str, ItemSpec], receive_time: 
         number = _number(line.value)
         if number is None:
             errors.append(LineError(line.text, f"item {code} ({spec.channel}): value "
-                                               f"'{_clip(line.value)}' is not a number"))
+                                               f"'{clip(line.value, 40)}' is not a number"))
             continue
         si = spec.to_si(number)
         if not math.isfinite(si):
             errors.append(LineError(line.text, f"item {code} ({spec.channel}): value "
-                                               f"'{_clip(line.value)}' out of range"))
+                                               f"'{clip(line.value, 40)}' out of range"))
             continue
         values.append(ItemValue(code, spec.channel, si, line.text))
     if t is None:
@@ -486,7 +486,7 @@ def wits_time(date: str, clock: str, tz: tzinfo | None = None) -> float | str:
     for what, text in (("date", date), ("time", clock)):
         match = re.fullmatch(r"(\d{1,6})(?:\.0*)?", text.strip())
         if match is None or not match.group(1).isascii():
-            return f"{what} '{_clip(text)}' is not {'YYMMDD' if what == 'date' else 'HHMMSS'}"
+            return f"{what} '{clip(text, 40)}' is not {'YYMMDD' if what == 'date' else 'HHMMSS'}"
         digits.append(match.group(1).zfill(6))
     (d, c) = digits
     year = int(d[:2])
@@ -579,7 +579,3 @@ def encode_sample_frame(t: float | None, values: Mapping[str, float],
     for code, value in si_to_items(values, items).items():
         fields[code] = round(value, decimals) if decimals is not None else value
     return encode_frame(fields)
-
-
-def _clip(text: str, limit: int = 40) -> str:
-    return text if len(text) <= limit else text[: limit - 3] + "..."
