@@ -305,16 +305,17 @@ def _password(args: argparse.Namespace, fallback: str | None = None) -> str | No
 
 def read_password_file(path: Path, what: str) -> str:
     """The first line of a password file; warns when others may read it."""
-    from tdmon.config.daemon import warn_if_readable_by_others
-
     try:
         text = path.read_text(encoding="utf-8")
+        mode = path.stat().st_mode
     except (OSError, UnicodeDecodeError) as exc:
         raise TdmonError(f"{what}: cannot read {path}: {exc}") from None
     password = text.splitlines()[0] if text else ""
     if not password:
         raise TdmonError(f"{what}: {path} is empty: put the password on its first line")
-    warn_if_readable_by_others(path, what)
+    if mode & 0o077:
+        print(f"tdmon: warning: {path} holds a clear-text password and is readable by others "
+              f"(chmod 600 {path})", file=sys.stderr)
     return password
 
 
