@@ -5,5 +5,6 @@ their daemon message shapes), ``mqtt`` / ``zenoh_io`` / ``mcap_source`` (async c
 managers yielding RawMessages, plus the result publishers), ``wits0`` (the pure WITS Level 0
 codec), ``wits0_source`` (its daemon source) and ``wits0_server`` (the simulator's server),
 ``witsml`` and ``witsml_well`` (WITSML 1.4.1.1 logs and well objects), ``lab`` (tribometer
-CSV files), ``publish`` (the rig side used by ``tdmon publish``). Reconnecting is the daemon supervisor's job, not the sources'.
+CSV files), ``publish`` (the rig side used by ``tdmon publish``). Reconnecting is the daemon
+supervisor's job, not the sources'.
 """
