@@ -85,6 +85,16 @@ class CalibrationStep:
         self.state, outputs = self.estimator.close(self.state)
         _send(outputs, emit)
 
+    def use_model(self, model: WellModel) -> None:
+        """Go on with a new string or fluid on the same hole grid (a new run's well file,
+        :mod:`tdmon.daemon.steps.coverage`): the friction profile and mu(T) keep what they
+        have learnt, later windows are solved with ``model``."""
+        self.estimator = FrictionEstimator(model, self.estimator.settings)
+        windows = self.state.windows
+        windows.profile.model = model
+        if windows.mu_t is not None:
+            windows.mu_t.model = model
+
     # -- what the estimator holds, for the profile step and for tests ---------------------
 
     @property
