@@ -227,6 +227,22 @@ WELL: Final = _object(
         "tvd_m": {**_NUMBERS, "minItems": 2},
         "north_m": {**_NUMBERS, "minItems": 2},
         "east_m": {**_NUMBERS, "minItems": 2},
+        # which run this is, for reports (optional: older recordings lack them)
+        "well_file": {"type": ["string", "null"]},
+        "daemon_file": {"type": ["string", "null"]},
+        "method": {"type": ["string", "null"], "description": "monitor curves' method"},
+        "backcalc_method": {"type": ["string", "null"],
+                            "description": "back-calculation's method (null: off)"},
+        "mu_t_mode": {"type": "string"},
+        "mu_t_law": {"type": ["string", "null"]},
+        "sections": {"type": "array", "items": {
+            "type": "object",
+            "properties": {"name": _TEXT, "kind": {"enum": ["cased", "open"]},
+                           "top_m": _NUMBER, "bottom_m": _NUMBER,
+                           "friction": {"type": ["string", "null"]}},
+            "required": ["kind", "top_m", "bottom_m"],
+        }},
+        "notes": {"type": "array", "items": _TEXT},
     },
     ("t", "md_m", "tvd_m", "north_m", "east_m"),
 )

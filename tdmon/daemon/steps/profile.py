@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from tdmon.daemon.build import WellFile
     from tdmon.daemon.steps.calibrate import CalibrationStep
 
-__all__ = ["MAX_PROFILE_POINTS", "ProfileStep", "profile_step"]
+__all__ = ["MAX_PROFILE_POINTS", "ProfileStep", "profile_step", "run_context"]
 
 
 class ProfileStep:
@@ -136,12 +136,36 @@ def profile_step(config: DaemonConfig, well_file: WellFile, grid: Any,
         "name": well_file.well.name or well_file.path.stem,
         "md_m": grid.md[nodes].tolist(), "tvd_m": grid.tvd[nodes].tolist(),
         "north_m": grid.north[nodes].tolist(), "east_m": grid.east[nodes].tolist(),
+        **run_context(config, well_file, setup, calibration),
     }
     elements = _thin(grid.n_elements)
     return ProfileStep(well_message, grid.element_mid_md[elements], elements,
                        temperature=setup.temperature, friction=setup.friction,
                        calibration=calibration, interval=config.calibration.profile_interval,
                        mu_t_note=setup.note)
+
+
+def run_context(config: DaemonConfig, well_file: WellFile, setup: MuTSetup,
+                calibration: CalibrationStep | None) -> dict[str, Any]:
+    """What a report needs to say which run this was: the files, the torque-and-drag methods,
+    the hole sections and the friction law being calibrated (fields of the ``well`` message).
+    """
+    law = setup.law
+    return {
+        "well_file": well_file.path.name,
+        "daemon_file": None if config.source_file is None else config.source_file.name,
+        "method": config.monitor.method,
+        "backcalc_method": None if calibration is None else calibration.settings.method,
+        "mu_t_mode": "off" if law is None else setup.mode,
+        "mu_t_law": None if law is None else law.describe(),
+        "sections": [
+            {"name": section.name, "kind": section.kind, "top_m": section.top,
+             "bottom_m": section.bottom,
+             "friction": None if section.friction is None
+             else section.friction.friction_model().describe()}
+            for section in well_file.config.hole
+        ],
+    }
 
 
 def _thin(n: int) -> NDArray[np.int64]:
