@@ -174,6 +174,7 @@ def _replay(args: argparse.Namespace) -> int:
     from tdmon.config.daemon import load_daemon_config
     from tdmon.config.expectations import load_expectations
     from tdmon.display import using
+    from tdmon.record.digest import summarize
     from tdmon.replay.driver import check_replay_file, raw_message_count, replay
     from tdmon.replay.expectations import check_replay, find_expectations
 
@@ -213,6 +214,8 @@ def _replay(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     summary = result.summary()
+    # the engineer's numbers (well, run, friction, alarms, mu(T) verdict) from the recording
+    summary.update(summarize([args.out]))
     if result.interrupted:
         # the recording is finished but partial: expectations about the whole file do not apply
         expectations = None
