@@ -39,6 +39,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     run.add_argument("--config", required=True, type=Path, help="daemon TOML file")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
+    run.add_argument("--status-every", type=_seconds, default=10.0, metavar="SECONDS",
+                     help="print a status line on stderr this often: sample rate, rig state, "
+                          "latest friction, alarms (default 10; 0: never). One line rewritten "
+                          "in place on a terminal, plain lines otherwise")
     add_units_option(run, "the Rerun views (default: $TDMON_UNITS, else the file's [display] "
                      "units)")
     run.set_defaults(func=_run)
@@ -92,7 +96,19 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.set_defaults(func=_publish)
 
 
+def _seconds(text: str) -> float:
+    """A non-negative number of seconds for an option (argparse reports the mistake)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number of seconds") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"'{text}' must be 0 or more seconds")
+    return value
+
+
 def _run(args: argparse.Namespace) -> int:
+    from tdmon.cli.status import StatusLine
     from tdmon.config.daemon import load_daemon_config
     from tdmon.daemon.runner import run_daemon
     from tdmon.display import using
@@ -102,9 +118,24 @@ def _run(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     config = load_daemon_config(args.config)
     startup_checks(config, args.config)
+    status = StatusLine(args.status_every) if args.status_every > 0 else None
+
+    async def main() -> Any:
+        if status is None:
+            return await run_daemon(config)
+        printer = asyncio.create_task(status.run())
+        try:
+            return await run_daemon(config, extra_sinks=[status])
+        finally:
+            printer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await printer
+            status.show()  # where it ended, before the one-line summary
+            status.close()
+
     # the Rerun views are built inside the daemon: they read the units from tdmon.display
     with using(display_units(args, config.display.units)):
-        stats = asyncio.run(run_daemon(config))
+        stats = asyncio.run(main())
     print(f"tdmon: stopped: {stats.samples_in} samples, {stats.rejected} rejected, "
           f"{stats.dropped} dropped, {stats.duplicates} duplicates, {stats.out_of_order} "
           f"out of order, {stats.frames} frames", file=sys.stderr)
