@@ -112,3 +112,16 @@ def test_report_page_names_the_well_and_states_the_friction(
     written = json.loads((report / "summary.json").read_text())
     for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t"):
         assert written[key] == summary[key], key
+
+
+def test_summarize_recording_adds_the_same_numbers(replayed: tuple[Path, dict[str, Any]]
+                                                   ) -> None:
+    """The demo's summary of a live daemon's recording: the replay's counts and the same
+    engineer's numbers as ``tdmon replay --json``."""
+    from tdmon.replay.driver import summarize_recording
+
+    out, summary = replayed
+    recorded = summarize_recording(out)
+    assert recorded["windows"] == summary["windows"] and recorded["alarms"] == summary["alarms"]
+    for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t"):
+        assert recorded[key] == summary[key], key
