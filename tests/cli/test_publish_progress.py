@@ -35,9 +35,13 @@ def _start(csv: Path, port: int, err: Path) -> subprocess.Popen[bytes]:
 
 
 def _stop(process: subprocess.Popen[bytes]) -> int:
+    """SIGINT, then the exit code; death by SIGINT itself (-2, which a shell reports as 130,
+    as for exit code 130) counts as 130: a SIGINT during the interpreter's own start-up or
+    shutdown ends it that way."""
     process.send_signal(signal.SIGINT)
     try:
-        return process.wait(15)
+        code = process.wait(15)
+        return 130 if code == -signal.SIGINT else code
     finally:
         if process.poll() is None:
             process.kill()
