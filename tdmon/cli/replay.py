@@ -258,5 +258,16 @@ def _print_summary(s: dict[str, Any]) -> None:
           f"{counts(s['estimates'])}")
     print(f"  alarms: {counts(s['alarms'])}")
     print(f"  rig states: {shares}")
+    if s.get("well", {}).get("name"):
+        print(f"  well: {s['well']['name']}")
+    friction = ", ".join(
+        f"{r['operation']} {r['section_words']} {r['mu_median']:.3f}"
+        + (f" (sd {r['mu_sd']:.3f}, {r['windows']} windows)" if r["mu_sd"] is not None
+           else f" ({r['windows']} window)")
+        for r in s.get("friction", []))
+    if friction:
+        print(f"  friction (median): {friction}")
+    if s.get("mu_t", {}).get("status", "none") != "none":
+        print(f"  {s['mu_t']['words']}")
     print(f"  wall time {s['wall_s']:.2f} s, {s['rate_msg_per_s']:.0f} messages/s"
           + (f"; {s['non_finite']} results with NaN/inf" if s["non_finite"] else ""))
