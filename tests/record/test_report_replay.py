@@ -125,3 +125,20 @@ def test_summarize_recording_adds_the_same_numbers(replayed: tuple[Path, dict[st
     assert recorded["windows"] == summary["windows"] and recorded["alarms"] == summary["alarms"]
     for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t"):
         assert recorded[key] == summary[key], key
+
+
+def test_well_message_context_meets_its_schema(replayed: tuple[Path, dict[str, Any]]) -> None:
+    import jsonschema
+
+    from tdmon.record.schemas import WELL
+
+    out, _ = replayed
+    [well] = [m for _, _, m in read_messages(out, ["/tdmon/well"])]
+    jsonschema.validate(well, WELL)
+    assert well["sections"][0] == {"name": "9-5/8 in casing", "kind": "cased", "top_m": 0.0,
+                                   "bottom_m": 2500.0, "friction": "mu = 0.18 + 0.001 T"}
+    assert well["mu_t_mode"] == "family" and well["mu_t_law"] == "mu = 0.23 + 0.0013 T"
+    # a section without its required keys is refused: the schema is not a blank cheque
+    broken = {**well, "sections": [{"kind": "cased"}]}
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(broken, WELL)
