@@ -72,8 +72,10 @@ class ReportData:
     recordings: list[str] = field(default_factory=list)
 
 
-def load(paths: Sequence[str | os.PathLike[str]]) -> ReportData:
-    """Read the topics the report uses from MCAP files (an unfinished one up to its end)."""
+def load(paths: Sequence[str | os.PathLike[str]], *, allow_unfinished: bool = False
+         ) -> ReportData:
+    """Read the topics the report uses from finished MCAP files (``allow_unfinished``: an
+    unfinished one too, up to its last flush; else it is refused with a RecordError)."""
     data = ReportData(recordings=[str(p) for p in paths])
     buckets = {
         "/tdmon/model": data.models, "/tdmon/estimate": data.estimates,
@@ -81,9 +83,9 @@ def load(paths: Sequence[str | os.PathLike[str]]) -> ReportData:
         "/tdmon/profile": data.profiles, "/tdmon/well": data.wells,
     }
     for path in paths:
-        for topic, n in topic_counts(path).items():
+        for topic, n in topic_counts(path, allow_unfinished=allow_unfinished).items():
             data.counts[topic] = data.counts.get(topic, 0) + n
-        for topic, _, message in read_messages(path, _TOPICS, allow_unfinished=True):
+        for topic, _, message in read_messages(path, _TOPICS, allow_unfinished=allow_unfinished):
             buckets[topic].append(message)
     return data
 
@@ -292,6 +294,7 @@ def summary_path(out_dir: str | os.PathLike[str]) -> Path:
     return Path(out_dir) / "summary.json"
 
 
-def summarize(paths: Sequence[str | os.PathLike[str]]) -> dict[str, Any]:
+def summarize(paths: Sequence[str | os.PathLike[str]], *, allow_unfinished: bool = False
+              ) -> dict[str, Any]:
     """:func:`digest` of recordings read from disk (the summary JSON's engineer's part)."""
-    return digest(load(paths))
+    return digest(load(paths, allow_unfinished=allow_unfinished))

@@ -381,5 +381,6 @@ def summarize_recording(path: str | Path) -> dict[str, Any]:
         "estimates": dict(sorted(summary.estimates.items())),
         "alarms": dict(sorted(summary.alarms.items())),
         "state_shares": dict(sorted(summary.shares().items())),
-        **summarize([path]),  # the engineer's numbers, as in tdmon replay --json
+        # the engineer's numbers, as in tdmon replay --json
+        **summarize([path], allow_unfinished=True),
     }

@@ -98,3 +98,14 @@ def test_profile_bins_not_informed_by_data_are_greyed(tmp_path: Path,
     report.write_report([_profile_recording(tmp_path / "b", None)], tmp_path / "plain")
     assert not any(math.isnan(x) for x in lines["local friction profile"])
     assert "not informed" not in (tmp_path / "plain" / "report.html").read_text()
+
+
+def test_report_refuses_an_unfinished_recording(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    source = Path(__file__).resolve().parents[2] / "replays" / "trip-in-noisy.mcap"
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(source.read_bytes()[: source.stat().st_size // 2])
+    assert main(["report", str(cut), "--out", str(tmp_path / "report")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tdmon recover" in err[0], err
+    assert not (tmp_path / "report").exists()
