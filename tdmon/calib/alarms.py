@@ -181,9 +181,11 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
         if ratio < warn:
             continue
         severity = Severity.CRITICAL if ratio >= 1.0 else Severity.WARNING
+        where = "at surface" if loads.md[worst] < 0.5 else f"at {loads.md[worst]:.0f} m MD"
+        limit_name = "make-up torque" if name == "makeup_torque" else name.replace("_", " ")
         alarms.append(Alarm(t, kind, severity,
-                            f"{operation} {label} at {loads.md[worst]:.0f} m is "
-                            f"{100 * ratio:.0f} % of the {name.replace('_', ' ')} limit",
+                            f"{operation.replace('_', '-')} {label} {where} is "
+                            f"{100 * ratio:.0f} % of the {limit_name} limit",
                             float(load[worst]), float(limit[worst])))
     return alarms
 

@@ -188,11 +188,14 @@ def back_calculate(
         raise FitError(f"cannot model {operation} at bit depth {bit_depth:.1f} m: {exc}") from exc
     if f_low * f_high > 0.0:
         unit = "kN m" if quantity == "torque" else "kN"
+        # in the engineer's words: no friction factor in the searched range explains it
+        what = "torque" if quantity == "torque" else "hook load"
         raise FitError(
-            f"{operation} {quantity} {measured / 1e3:.1f} {unit} at {bit_depth:.1f} m is outside "
-            f"the modelled range {min(f_low, f_high) / 1e3 + measured / 1e3:.1f}.."
-            f"{max(f_low, f_high) / 1e3 + measured / 1e3:.1f} {unit} for mu in "
-            f"[{low:g}, {high:g}]: root not bracketed")
+            f"measured {operation.replace('_', '-')} {what} {measured / 1e3:.1f} {unit} at "
+            f"{bit_depth:.1f} m bit depth cannot be matched by any friction factor from {low:g} "
+            f"to {high:g} (the model gives {min(f_low, f_high) / 1e3 + measured / 1e3:.1f} to "
+            f"{max(f_low, f_high) / 1e3 + measured / 1e3:.1f} {unit}): check the well file, "
+            "block weight and sensor")
     if f_low == 0.0 or f_high == 0.0:
         mu = low if f_low == 0.0 else high
     else:

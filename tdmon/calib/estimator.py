@@ -250,7 +250,7 @@ class FrictionEstimator:
             estimate = self._solve(window, w.mu_cased(window.state))
         except FitError as exc:
             out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
-                                    f"{window.state} window at {window.bit_depth:.0f} m: {exc}")))
+                                    f"{window.state} window rejected: {exc}")))
             return replace(w, rejected=count(w.rejected, "not_bracketed")), out
         out.append(Output("estimate", self._window_message(window, estimate, block)))
         if window.state in REAMING_AXIAL_OPERATION:

@@ -279,8 +279,8 @@ def identifiability(parametrisation: MuTParametrisation, state: MuTState, *,
         reason, ok = "scale mode: the temperature dependence is the lab fit's, only its level " \
                      "is calibrated", False
     elif high - low < min_range:
-        reason, ok = (f"temperature range seen {high - low:.1f} K is narrower than "
-                      f"{min_range:g} K"), False
+        reason, ok = (f"the temperature range seen, {high - low:.1f} K, is narrower than the "
+                      f"{min_range:g} K needed"), False
     elif interval[0] <= 0.0 <= interval[1]:
         reason, ok = "the slope's 95 % interval includes zero", False
     else:

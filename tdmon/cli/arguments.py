@@ -9,6 +9,7 @@ import argparse
 import math
 import re
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -103,3 +104,23 @@ def toward_zenoh_source(source: ZenohConfig) -> ZenohConfig:
 
     return ZenohConfig(mode="peer" if source.mode == "peer" else "client",
                        connect=source.listen or source.connect)
+
+
+def output_file(path: Path, what: str = "") -> Path:
+    """``path`` with its missing parent folders created, as every command that writes a file
+    does (docs/configuration.md, "Output files"); a folder that cannot be made is one line.
+
+    Raises
+    ------
+    TdmonError
+        Naming the file (and ``what``, e.g. the flag) and the reason.
+    """
+    from tdmon.errors import TdmonError
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        label = f"{what}: " if what else ""
+        raise TdmonError(f"{label}cannot create the folder of {path}: "
+                         f"{exc.strerror or exc}") from exc
+    return path

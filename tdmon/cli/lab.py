@@ -60,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      "verdict, rank ...")
     out.add_argument("--png", type=Path, metavar="FILE",
                      help="draw the runs, the averages and the fitted laws with 95 %% confidence "
-                     "bands (the thesis's Figure 15)")
+                     "bands (the thesis's Figure 15); the ranked fits are printed too")
     fit.set_defaults(func=_run_fit)
 
 
@@ -111,11 +111,12 @@ def _run_fit(args: argparse.Namespace) -> int:
     if args.json:
         json.dump(_document(args.data, fits), sys.stdout, allow_nan=False)
         print()
-    elif args.png is not None:
-        _plot(fits, args.png, args.data)
-        print(f"wrote {args.png}")
     else:
+        # the figure does not replace the numbers: the ranked fits with their coefficients
         _print(fits, args.data)
+        if args.png is not None:
+            _plot(fits, args.png, args.data)
+            print(f"\nwrote {args.png}")
     return 0
 
 

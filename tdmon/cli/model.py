@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tdmon.cli.arguments import add_units_option, display_units, quantity_arg
+from tdmon.cli.arguments import add_units_option, display_units, output_file, quantity_arg
 from tdmon.errors import ConfigError, TdmonError
 
 if TYPE_CHECKING:
@@ -239,7 +239,7 @@ def _columns(result: Broomstick) -> tuple[list[str], list[np.ndarray[Any, Any]]]
 def _write_csv(path: Path, result: Broomstick) -> None:
     names, columns = _columns(result)
     try:
-        with path.open("w", newline="") as handle:
+        with output_file(path, "--csv").open("w", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow(names)
             writer.writerows(np.column_stack(columns).tolist())

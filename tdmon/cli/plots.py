@@ -27,8 +27,11 @@ def _figure(columns: int) -> Figure:
 
 
 def save(figure: Figure, path: Path) -> None:
+    """Write a figure (PNG), creating missing parent folders."""
+    from tdmon.cli.arguments import output_file
+
     try:
-        figure.savefig(path, dpi=120)
+        figure.savefig(output_file(path), dpi=120)
     except OSError as exc:
         raise TdmonError(f"cannot write {path}: {exc.strerror}") from exc
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from tdmon.cli.arguments import add_units_option, display_units
+from tdmon.cli.arguments import add_units_option, display_units, output_file
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -58,6 +58,8 @@ def _recover(args: argparse.Namespace) -> int:
 
     if args.out is not None and len(args.files) != 1:
         raise RecordError("--out needs exactly one input file")
+    if args.out is not None:
+        output_file(args.out, "--out")
     for path in args.files:
         result = recover_file(path, args.out)
         if result.status == "complete":

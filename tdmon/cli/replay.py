@@ -174,6 +174,7 @@ def _replay(args: argparse.Namespace) -> int:
     from tdmon.config.daemon import load_daemon_config
     from tdmon.config.expectations import load_expectations
     from tdmon.display import using
+    from tdmon.record.digest import summarize
     from tdmon.replay.driver import check_replay_file, raw_message_count, replay
     from tdmon.replay.expectations import check_replay, find_expectations
 
@@ -213,6 +214,8 @@ def _replay(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     summary = result.summary()
+    # the engineer's numbers (well, run, friction, alarms, mu(T) verdict) from the recording
+    summary.update(summarize([args.out]))
     if result.interrupted:
         # the recording is finished but partial: expectations about the whole file do not apply
         expectations = None
@@ -255,5 +258,16 @@ def _print_summary(s: dict[str, Any]) -> None:
           f"{counts(s['estimates'])}")
     print(f"  alarms: {counts(s['alarms'])}")
     print(f"  rig states: {shares}")
+    if s.get("well", {}).get("name"):
+        print(f"  well: {s['well']['name']}")
+    friction = ", ".join(
+        f"{r['operation']} {r['section_words']} {r['mu_median']:.3f}"
+        + (f" (sd {r['mu_sd']:.3f}, {r['windows']} windows)" if r["mu_sd"] is not None
+           else f" ({r['windows']} window)")
+        for r in s.get("friction", []))
+    if friction:
+        print(f"  friction (median): {friction}")
+    if s.get("mu_t", {}).get("status", "none") != "none":
+        print(f"  {s['mu_t']['words']}")
     print(f"  wall time {s['wall_s']:.2f} s, {s['rate_msg_per_s']:.0f} messages/s"
           + (f"; {s['non_finite']} results with NaN/inf" if s["non_finite"] else ""))

@@ -40,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     run.add_argument("--config", required=True, type=Path, help="daemon TOML file")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
+    run.add_argument("--status-every", type=_seconds, default=10.0, metavar="SECONDS",
+                     help="print a status line on stderr this often: sample rate, rig state, "
+                          "latest friction, alarms (default 10; 0: never). One line rewritten "
+                          "in place on a terminal, plain lines otherwise")
     add_units_option(run, "the Rerun views (default: $TDMON_UNITS, else the file's [display] "
                      "units)")
     run.set_defaults(func=_run)
@@ -77,6 +81,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                           "now at --speed 1; faster, the last row is now, so that no sample "
                           "is stamped ahead of the clock (the daemon refuses those)")
     pub.add_argument("--limit", type=int, help="stop after this many messages")
+    pub.add_argument("--status-every", type=_seconds, default=10.0, metavar="SECONDS",
+                     help="not on a terminal (a script, a log file): print the progress "
+                          "(messages sent of the total, rate, time left) this often on stderr "
+                          "(default 10; 0: never). A terminal gets a progress bar")
     pub.add_argument("--seq", action="store_true",
                      help="number each channel's messages (\"seq\": 1, 2, ...) so that the "
                           "daemon can count the ones that never arrive (CSV sources)")
@@ -93,23 +101,62 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.set_defaults(func=_publish)
 
 
+def _seconds(text: str) -> float:
+    """A non-negative number of seconds for an option (argparse reports the mistake)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number of seconds") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"'{text}' must be 0 or more seconds")
+    return value
+
+
 def _run(args: argparse.Namespace) -> int:
+    from tdmon.cli.status import StatusLine
     from tdmon.config.daemon import load_daemon_config
     from tdmon.daemon.runner import run_daemon
     from tdmon.display import using
 
+    interruptible()
     # before the file is read: its warnings (a password file readable by others) use it
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     config = load_daemon_config(args.config)
     startup_checks(config, args.config)
+    status = StatusLine(args.status_every) if args.status_every > 0 else None
+
+    async def main() -> Any:
+        if status is None:
+            return await run_daemon(config)
+        printer = asyncio.create_task(status.run())
+        try:
+            return await run_daemon(config, extra_sinks=[status])
+        finally:
+            printer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await printer
+            status.show()  # where it ended, before the one-line summary
+            status.close()
+
     # the Rerun views are built inside the daemon: they read the units from tdmon.display
     with using(display_units(args, config.display.units)):
-        stats = asyncio.run(run_daemon(config))
+        stats = asyncio.run(main())
     print(f"tdmon: stopped: {stats.samples_in} samples, {stats.rejected} rejected, "
           f"{stats.dropped} dropped, {stats.duplicates} duplicates, {stats.out_of_order} "
           f"out of order, {stats.frames} frames", file=sys.stderr)
     return 0
+
+
+def interruptible() -> None:
+    """Let SIGINT interrupt us even when started with it ignored.
+
+    A shell without job control starts a background job (``tdmon publish ... &`` in a script)
+    with SIGINT ignored, and Python then installs no handler of its own: ``kill -INT`` would
+    do nothing until the event loop installs its handlers, and be lost if it came earlier.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def startup_checks(config: DaemonConfig, file: Path) -> None:
@@ -157,6 +204,8 @@ def port_in_use(host: str, port: int) -> str | None:
 
 def _publish(args: argparse.Namespace) -> int:
     from itertools import islice
+
+    interruptible()
 
     from tdmon.config.daemon import load_daemon_config
     from tdmon.ingest import publish as pub
@@ -231,7 +280,7 @@ def _publish(args: argparse.Namespace) -> int:
 
         for signum in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(signum, stop, signum.name)
-        progress = _progress(total)
+        progress = _progress(total, args.status_every)
         sent = [0]
 
         def on_sent(count: int) -> None:
@@ -258,6 +307,12 @@ def _publish(args: argparse.Namespace) -> int:
             async with pub.zenoh_sender(zenoh) as zsender:
                 await _interruptible(pub.publish(messages, zsender, speed, on_sent),
                                      stopped_by)
+            return sent[0]
+        except asyncio.CancelledError:
+            # stopped while connecting (an MQTT broker, a Zenoh peer not there yet)
+            if not stopped_by:
+                raise
+            task.uncancel()
             return sent[0]
         finally:
             progress(None)
@@ -337,11 +392,14 @@ def _now_shift(now: bool, speed: float | None, times: Iterator[float]) -> float:
     return time.time() - last
 
 
-def _progress(total: int | None = None) -> Any:
-    """A callback updating a tqdm bar on a terminal (and nothing otherwise): count, rate and,
-    when the number of messages is known, total and time left."""
+def _progress(total: int | None = None, every: float = 0.0) -> Any:
+    """A callback taking the count of messages sent (None: done). On a terminal a tqdm bar
+    (count, rate and, when the number of messages is known, total and time left); otherwise,
+    every ``every`` seconds (0: never), a plain line with the same."""
     if not sys.stderr.isatty():
-        return lambda count: None
+        if every <= 0:
+            return lambda count: None
+        return _ProgressLines(total, every)
     from tqdm import tqdm
 
     bar = tqdm(unit="msg", file=sys.stderr, total=total)
@@ -355,3 +413,43 @@ def _progress(total: int | None = None) -> Any:
         state["last"] = count
 
     return update
+
+
+class _ProgressLines:
+    """Progress as plain lines on stderr, for scripts and log files:
+    ``tdmon: publish: 1200 of 11169 messages (10.7 %), 118 msg/s, about 1 min 24 s left``."""
+
+    def __init__(self, total: int | None, every: float) -> None:
+        self.total = total
+        self.every = every
+        self.start = time.monotonic()
+        self.next = self.start + every
+
+    def __call__(self, count: int | None) -> None:
+        now = time.monotonic()
+        if count is None or now < self.next:
+            return
+        self.next = now + self.every
+        print(f"tdmon: publish: {self.line(count, now - self.start)}", file=sys.stderr,
+              flush=True)
+
+    def line(self, count: int, elapsed: float) -> str:
+        """The progress after ``count`` messages in ``elapsed`` seconds."""
+        rate = count / elapsed if elapsed > 0 else 0.0
+        if self.total is None:
+            return f"{count} messages, {rate:.0f} msg/s"
+        share = 100.0 * count / self.total if self.total else 100.0
+        left = f", about {_duration((self.total - count) / rate)} left" if rate > 0 else ""
+        return f"{count} of {self.total} messages ({share:.1f} %), {rate:.0f} msg/s{left}"
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``3 min 05 s``, ``2 h 07 min``."""
+    seconds = max(0, round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    minutes, seconds = divmod(seconds, 60)
+    if minutes < 60:
+        return f"{minutes} min {seconds:02d} s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours} h {minutes:02d} min"

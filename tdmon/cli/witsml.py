@@ -12,6 +12,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from tdmon.cli.arguments import output_file
 from tdmon.errors import ConfigError, IngestError
 
 
@@ -172,7 +173,7 @@ def _draft(args: argparse.Namespace, files: list[Path]) -> dict[str, Any]:
         note = f"Licence: {VOLVE_LICENCE}; attribution: \"{VOLVE_ATTRIBUTION}\""
     draft = draft_well(objects, tubular=tubular, block_weight=block_weight,
                        fluid_density=fluid_density, licence_note=note or None)
-    out = Path(args.well_out)
+    out = output_file(Path(args.well_out), "--well-out")
     try:
         out.write_text(draft.text, encoding="utf-8")
     except OSError as exc:

@@ -353,7 +353,15 @@ async def mqtt_sender(config: MqttConfig, qos: int = 1,
 @asynccontextmanager
 async def zenoh_sender(config: ZenohConfig, wait_for_peer: float = 5.0
                        ) -> AsyncIterator[ZenohSender]:
-    session = await asyncio.to_thread(open_session, config)
+    opening = asyncio.ensure_future(asyncio.to_thread(open_session, config))
+    try:
+        session = await asyncio.shield(opening)
+    except asyncio.CancelledError:
+        # stopped (Ctrl-C) while the session opens in its thread: it opens anyway, and an
+        # open session left behind can hold the process at exit, so close it first
+        with contextlib.suppress(Exception):
+            await asyncio.to_thread((await opening).close)
+        raise
     try:
         deadline = time.monotonic() + wait_for_peer
         # peer-to-peer puts go nowhere until a subscriber's session has connected

@@ -1,10 +1,17 @@
-"""Post-well report of flight recordings: an HTML page with figures and a CSV of estimates.
+"""Post-well report of flight recordings: one HTML page for a drilling engineer, its figures,
+a CSV of window estimates and the summary JSON.
+
+The page says which well and run (files, methods, hole sections), which operations were seen,
+the friction factor per operation and hole section with its uncertainty in words and numbers,
+the alarms in plain words (most important first) and the mu(T) verdict; the numbers come from
+:func:`tdmon.record.digest.digest`, which is also written as ``summary.json``. Every figure
+has a caption with its units; a figure without data is replaced by a note saying why.
 
 Figures follow the thesis's conventions: depth downwards on the vertical axis, loads on the
 horizontal one, the broomstick band as one line per friction factor. Figures and tables are in
 the display units of :mod:`tdmon.display` (SI: kN, kN m, m, degC; field: klbf, kft lbf, ft,
-degF); ``estimates.csv`` stays SI, the unit in its column names. The page is self-contained
-(PNG figures embedded as data URIs) and the PNGs are also written beside it.
+degF); ``estimates.csv`` and ``summary.json`` stay SI, the unit in their keys. The page is
+self-contained (PNG figures embedded as data URIs) and the PNGs are also written beside it.
 """
 
 from __future__ import annotations
@@ -12,10 +19,11 @@ from __future__ import annotations
 import base64
 import csv
 import html
+import json
 import math
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
@@ -24,11 +32,17 @@ import numpy as np
 
 from tdmon.display import UnitSystem, unit_system
 from tdmon.errors import RecordError
-from tdmon.record.reader import read_messages, topic_counts
-from tdmon.vocabulary import EstimateKind, RigState
+from tdmon.record.digest import (
+    ReportData,
+    digest,
+    friction_words,
+    load,
+    summary_path,
+)
+from tdmon.vocabulary import ROTATING_STATES, EstimateKind, RigState
 
-_TOPICS: Final = ("/tdmon/model", "/tdmon/estimate", "/tdmon/state", "/tdmon/alarm",
-                  "/tdmon/profile")
+__all__ = ["ReportData", "ReportResult", "load", "write_estimates_csv", "write_report"]
+
 _STATE_COLOURS: Final[dict[str, str]] = {
     RigState.IN_SLIPS: "#7f7f7f", RigState.PICK_UP: "#d62728", RigState.SLACK_OFF: "#1f77b4",
     RigState.ROTATING_OFF_BOTTOM: "#2ca02c", RigState.REAMING: "#9467bd",
@@ -37,18 +51,10 @@ _STATE_COLOURS: Final[dict[str, str]] = {
 }
 _CSV_FIELDS: Final = ("time_utc", "t", "kind", "operation", "mu", "mu_std", "bit_depth_m")
 _SI: Final = unit_system("si")
-
-
-@dataclass
-class ReportData:
-    """The messages a report needs, gathered in one pass over the recordings."""
-
-    models: list[dict[str, Any]] = field(default_factory=list)
-    estimates: list[dict[str, Any]] = field(default_factory=list)
-    states: list[dict[str, Any]] = field(default_factory=list)
-    alarms: list[dict[str, Any]] = field(default_factory=list)
-    profiles: list[dict[str, Any]] = field(default_factory=list)
-    counts: dict[str, int] = field(default_factory=dict)
+_METHOD_WORDS: Final = {
+    "soft-string": "soft string (3D Johancsik, consistent sign convention)",
+    "aadnoy": "Aadnoy's published formulas (the thesis's Tables 19-22, Aadnoy 2010)",
+}
 
 
 @dataclass
@@ -58,22 +64,16 @@ class ReportResult:
     html: Path
     csv: Path
     figures: list[Path]
+    summary: Path
 
 
-def load(paths: Sequence[str | os.PathLike[str]]) -> ReportData:
-    """Read the topics the report uses from finished MCAP files."""
-    data = ReportData()
-    buckets = {
-        "/tdmon/model": data.models, "/tdmon/estimate": data.estimates,
-        "/tdmon/state": data.states, "/tdmon/alarm": data.alarms,
-        "/tdmon/profile": data.profiles,
-    }
-    for path in paths:
-        for topic, n in topic_counts(path).items():
-            data.counts[topic] = data.counts.get(topic, 0) + n
-        for topic, _, message in read_messages(path, _TOPICS):
-            buckets[topic].append(message)
-    return data
+@dataclass(frozen=True)
+class Figure:
+    """A figure's outcome: the PNG and its caption, or no PNG and the note saying why."""
+
+    title: str
+    path: Path | None
+    text: str  # the caption, or the note replacing an empty figure
 
 
 def _utc(t: float) -> str:
@@ -87,7 +87,7 @@ def _num(value: Any) -> float:
 
 
 def _legend(axes: Any, **options: Any) -> None:
-    # an empty recording leaves a panel without labelled lines: no legend then (matplotlib warns)
+    # a panel without labelled lines gets no legend (matplotlib warns)
     if axes.get_legend_handles_labels()[0]:
         axes.legend(**options)
 
@@ -149,23 +149,33 @@ def _depth_axis(axes: Any, title: str, xlabel: str, ylabel: str) -> None:
     axes.grid(True, alpha=0.3)
 
 
-def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
+def _shoe(data: ReportData) -> float | None:
+    """MD of the deepest casing shoe [m] from the ``well`` message's sections (None: unknown)."""
+    sections = (data.wells[0].get("sections") or []) if data.wells else []
+    cased = [_num(s.get("bottom_m")) for s in sections if s.get("kind") == "cased"]
+    cased = [md for md in cased if math.isfinite(md)]
+    return max(cased) if cased else None
+
+
+def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
     """Measured hook load against bit depth over the broomstick band."""
+    title = "Hook load against bit depth"
     models = [m for m in data.models if math.isfinite(_num(m.get("bit_depth_m")))]
     if not models:
-        return None
+        return Figure(title, None, "No hook-load figure: the recording holds no modelled loads "
+                      "(no /tdmon/model messages: no well file, or no bit depth received).")
     models.sort(key=lambda m: _num(m["bit_depth_m"]))
     depth = units.depth(np.array([_num(m["bit_depth_m"]) for m in models]))
     figure, axes = _figure()
     band_mu = models[-1].get("band", {}).get("mu", [])
     for i, mu in enumerate(band_mu):
         for column, style in (("pick_up_N", "-"), ("slack_off_N", "--")):
-            load = np.array([
+            load_n = np.array([
                 _num(m["band"][column][i]) if i < len(m["band"].get(column, [])) else math.nan
                 for m in models
             ])
             label = f"mu = {mu:.2f}" if column == "pick_up_N" else None
-            axes.plot(units.force(load), depth, style, color=f"C{i}", lw=0.9, label=label)
+            axes.plot(units.force(load_n), depth, style, color=f"C{i}", lw=0.9, label=label)
     rotating = np.array([_num(m["hookload_N"].get("rotating")) for m in models])
     axes.plot(units.force(rotating), depth, ":", color="k", lw=1.0, label="rotating (model)")
     measured = np.array([_num(m["measured"].get("hookload_N")) for m in models])
@@ -175,109 +185,175 @@ def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Pa
         mask = np.array([s == state for s in states])
         axes.scatter(units.force(measured[mask]), depth[mask], s=5, color=_STATE_COLOURS.get(
             state, "k"), label=f"measured, {state}", zorder=3)
-    _depth_axis(axes, "Hook load against depth (broomstick: solid pick-up, dashed slack-off)",
-                f"Hook load [{units.label('force')}]", f"Bit depth [{units.label('depth')} MD]")
+    _depth_axis(axes, "Hook load against bit depth", f"Hook load [{units.label('force')}]",
+                f"Bit depth [{units.label('depth')} MD]")
     _legend(axes, fontsize=7, loc="best")
-    return _save(figure, path)
+    caption = (
+        f"Measured hook load [{units.label('force')}] against bit depth "
+        f"[{units.label('depth')} MD], one dot per model frame coloured by rig state, over the "
+        "modelled broomstick band: solid lines pick-up, dashed slack-off, one colour per "
+        f"friction factor ({', '.join(f'{mu:.2f}' for mu in band_mu) or 'none'}); dotted: the "
+        "rotating (friction-free axial) hook load.")
+    return Figure(title, _save(figure, path), caption)
 
 
-def torque_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
-    """Measured surface torque against depth with the modelled rotating torque."""
-    models = [m for m in data.models if math.isfinite(_num(m["measured"].get("torque_Nm")))]
-    if not models:
-        return None
+def torque_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
+    """Measured surface torque against depth while rotating, with the modelled torque."""
+    title = "Surface torque against bit depth"
+    models = [m for m in data.models if math.isfinite(_num(m["measured"].get("torque_Nm")))
+              and math.isfinite(_num(m.get("bit_depth_m")))]
+    states = _state_at(data.states, np.array([_num(m["t"]) for m in models]))
+    # non-rotating samples read zero torque: drawn at 0 they would squash the curve, so only
+    # rotating samples are drawn: a non-zero torque, in a rotating rig state when states exist
+    # (a zero at a state change is the rotary stopping, not the string's torque)
+    rotating = [m for m, s in zip(models, states, strict=True)
+                if _num(m["measured"]["torque_Nm"]) > 0.0
+                and (not data.states or s in ROTATING_STATES)]
+    if not rotating:
+        return Figure(title, None, "No torque figure: the string did not rotate in this "
+                      f"recording ({len(models)} model frames, none in a rotating rig state).")
     models.sort(key=lambda m: _num(m["bit_depth_m"]))
+    rotating.sort(key=lambda m: _num(m["bit_depth_m"]))
     depth = units.depth(np.array([_num(m["bit_depth_m"]) for m in models]))
     figure, axes = _figure()
     axes.plot(units.torque(np.array([_num(m["torque_Nm"].get("rotating")) for m in models])),
-              depth, "-", color="k", lw=1.0, label="rotating (model)")
-    axes.scatter(units.torque(np.array([_num(m["measured"]["torque_Nm"]) for m in models])),
-                 depth, s=5, color="C3", label="measured")
-    _depth_axis(axes, "Surface torque against depth", f"Torque [{units.label('torque')}]",
+              depth, "-", color="k", lw=1.0, label="rotating off bottom (model)")
+    axes.scatter(units.torque(np.array([_num(m["measured"]["torque_Nm"]) for m in rotating])),
+                 units.depth(np.array([_num(m["bit_depth_m"]) for m in rotating])), s=5,
+                 color="C3", label="measured while rotating")
+    _depth_axis(axes, title, f"Torque [{units.label('torque')}]",
                 f"Bit depth [{units.label('depth')} MD]")
     _legend(axes, fontsize=8)
-    return _save(figure, path)
+    caption = (
+        f"Measured surface torque [{units.label('torque')}] against bit depth "
+        f"[{units.label('depth')} MD] of rotating samples only ({len(rotating)} of {len(models)} "
+        "model frames: a non-zero torque in a rotating rig state; the others, not rotating, "
+        "read zero torque and are left out), with the "
+        "modelled off-bottom rotating torque at the monitor's friction factor.")
+    return Figure(title, _save(figure, path), caption)
 
 
-def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
+def _latest_profile(data: ReportData) -> dict[str, Any] | None:
+    """The last friction profile: a ``profile`` message with ``mu`` (it may carry per-bin
+    ``informed``), else the last ``profile`` estimate."""
+    message = next((p for p in reversed(data.profiles) if p.get("mu")), None)
+    if message is not None:
+        return message
+    estimate = next((e for e in reversed(data.estimates) if e.get("kind") == EstimateKind.PROFILE
+                     and e.get("md_m") and e.get("mu_profile")), None)
+    if estimate is None:
+        return None
+    return {"md_m": estimate["md_m"], "mu": estimate["mu_profile"],
+            "mu_std": estimate.get("mu_profile_std")}
+
+
+def _informed(profile: dict[str, Any], n: int) -> tuple[np.ndarray, str | None]:
+    """Which profile points the data informed (all when the message does not say), and the
+    message's reason for the others."""
+    flags = profile.get("informed")
+    if not isinstance(flags, list) or len(flags) != n:
+        return np.ones(n, dtype=bool), None
+    reason = profile.get("informed_reason") or profile.get("reason")
+    return np.array([bool(f) for f in flags]), (str(reason) if reason else None)
+
+
+def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
     """Window estimates of mu against bit depth, and the latest local friction profile."""
+    title = "Friction factor against depth"
     windows = [e for e in data.estimates if e.get("kind") == EstimateKind.WINDOW
                and math.isfinite(_num(e.get("bit_depth_m")))]
-    profile = next((e for e in reversed(data.estimates) if e.get("kind") == EstimateKind.PROFILE
-                    and "md_m" in e and "mu_profile" in e), None)
-    if profile is None:
-        profile = next(({"md_m": p["md_m"], "mu_profile": p["mu"], "mu_profile_std":
-                         p.get("mu_std")} for p in reversed(data.profiles) if "mu" in p), None)
+    profile = _latest_profile(data)
     if not windows and profile is None:
-        return None
+        return Figure(title, None, "No friction figure: no window estimate and no friction "
+                      "profile in the recording (back-calculation off or no steady window).")
     figure, axes = _figure(6.0, 6.0)
+    notes = []
     if profile is not None:
         md = units.depth(np.array(profile["md_m"], dtype=float))
-        mu = np.array([_num(v) for v in profile["mu_profile"]])
-        axes.plot(mu, md, color="k", lw=1.2, label="local friction profile")
-        if profile.get("mu_profile_std"):
-            std = np.array([_num(v) for v in profile["mu_profile_std"]])
-            axes.fill_betweenx(md, mu - std, mu + std, color="k", alpha=0.15, label="± 1 std")
+        mu = np.array([_num(v) for v in profile["mu"]])
+        informed, reason = _informed(profile, md.size)
+        calibrated = bool(profile.get("mu_std"))
+        label = "local friction profile" if calibrated else "well file's friction"
+        shown = np.where(informed, mu, np.nan)
+        axes.plot(shown, md, color="k", lw=1.2, label=label)
+        if not informed.all():
+            axes.plot(np.where(~informed, mu, np.nan), md, color="0.65", lw=1.0, ls=":",
+                      label="not informed by data (prior)")
+            notes.append(f"{int((~informed).sum())} of {informed.size} profile points are not "
+                         "informed by the data and are drawn grey (dotted)"
+                         + (f": {reason}" if reason else ""))
+        if calibrated:
+            std = np.array([_num(v) for v in profile["mu_std"]])
+            axes.fill_betweenx(md, shown - std, shown + std, color="k", alpha=0.15,
+                               label="± 1 sd")
     for i, operation in enumerate(sorted({str(e["operation"]) for e in windows})):
         chosen = [e for e in windows if e["operation"] == operation]
         axes.errorbar([_num(e["mu"]) for e in chosen],
                       units.depth(np.array([_num(e["bit_depth_m"]) for e in chosen])),
                       xerr=[_num(e.get("mu_std")) for e in chosen], fmt="o", ms=4,
                       color=f"C{i}", capsize=2, label=f"window, {operation}")
-    _depth_axis(axes, "Friction factor against depth", "Friction factor mu [-]",
+    shoe = _shoe(data)
+    if shoe is not None:
+        axes.axhline(float(units.depth(np.array([shoe]))[0]), color="0.4", lw=0.8, ls="--",
+                     label="casing shoe")
+    _depth_axis(axes, title, "Friction factor mu [-]",
                 f"Depth [{units.label('depth')} MD] (bit depth for windows)")
     _legend(axes, fontsize=8)
-    return _save(figure, path)
+    caption = (
+        f"Friction factor mu [-] against measured depth [{units.label('depth')} MD]: dots are "
+        "window estimates at the bit depth of their window (bars ± 1 sd), by operation; the "
+        "line is the latest local friction profile along the string (band ± 1 sd)"
+        + ("; dashed: the casing shoe" if shoe is not None else "") + "."
+        + "".join(f" {note[0].upper()}{note[1:]}." for note in notes))
+    return Figure(title, _save(figure, path), caption)
 
 
-def mu_t_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
-    """The mu(T) fits: the fitted points and, where the estimate carries it, the curve."""
+def mu_t_figure(data: ReportData, path: Path, units: UnitSystem = _SI,
+                verdict: dict[str, Any] | None = None) -> Figure:
+    """The mu(T) fit, drawn only when it is identifiable; else the verdict as a note."""
+    title = "Temperature dependence of friction, mu(T)"
+    from tdmon.record.digest import mu_t_verdict
+
+    verdict = verdict or mu_t_verdict(data.estimates, data.wells[0] if data.wells else None)
     fits = [e for e in data.estimates if e.get("kind") == EstimateKind.MU_T]
-    if not fits:
-        return None
+    if verdict["status"] != "fit" or not fits:
+        return Figure(title, None, "No mu(T) figure. " + verdict["words"])
+    last = fits[-1]
+    low, high = (_num(v) for v in last["temperature_C"])
+    middle = _num(last.get("mu_at_temperature_C"))
+    mu_middle, slope = _num(last.get("mu")), _num(last.get("slope_per_K"))
+    interval = [_num(v) for v in last.get("slope_interval_per_K") or [slope, slope]]
+    temperature = np.linspace(low, high, 50)
     figure, axes = _figure(6.0, 4.5)
-    for i, fit in enumerate(fits[-3:]):
-        params = ", ".join(f"{k} = {_num(v):.4g}" for k, v in (fit.get("params") or {}).items())
-        label: str | None = f"{fit.get('model', 'mu(T)')} ({_utc(_num(fit['t']))})" + (
-            f": {params}" if params else "")
-        if fit.get("temperature_C") and fit.get("mu_points"):
-            axes.plot(_temperatures(fit["temperature_C"], units), fit["mu_points"], "o",
-                      color=f"C{i}", label=label)
-            label = None
-        if fit.get("fit_temperature_C") and fit.get("fit_mu"):
-            axes.plot(_temperatures(fit["fit_temperature_C"], units), fit["fit_mu"], "-",
-                      color=f"C{i}", label=label)
-        elif fit.get("temperature_C") and (line := _linear(fit)) is not None:
-            # the law is in degC (its parameters say so): evaluate there, show in the units
-            temperature = np.linspace(min(fit["temperature_C"]), max(fit["temperature_C"]), 50)
-            intercept, slope = line
-            axes.plot(units.temperature(temperature), intercept + slope * temperature, "-",
-                      color=f"C{i}")
+    shown = units.temperature(temperature)
+    axes.plot(shown, mu_middle + slope * (temperature - middle), "-", color="C0",
+              label=f"{last.get('model')}")
+    lines = np.array([mu_middle + s * (temperature - middle) for s in interval])
+    axes.fill_between(shown, lines.min(axis=0), lines.max(axis=0), color="C0", alpha=0.2,
+                      label="95 % interval of the slope")
+    points = [(e, _num(e.get("mu_at_temperature_C"))) for e in fits]
+    axes.errorbar([float(units.temperature(np.array([t]))[0]) for _, t in points],
+                  [_num(e.get("mu")) for e, _ in points],
+                  yerr=[_num(e.get("mu_std")) for e, _ in points], fmt=".", color="0.4",
+                  capsize=2, label="successive updates (mu at the mid temperature)")
     axes.set_xlabel(f"Temperature [{units.label('temperature')}]")
     axes.set_ylabel("Friction factor mu [-]")
-    axes.set_title("Temperature dependence of friction, mu(T)")
+    axes.set_title(title)
     axes.grid(True, alpha=0.3)
     _legend(axes, fontsize=7)
-    return _save(figure, path)
+    caption = (
+        f"Friction factor mu [-] against annulus temperature [{units.label('temperature')}] "
+        "over the range the windows saw: the calibrated law near the middle of the range "
+        "(shaded: its slope's 95 % interval), grey dots the successive updates. "
+        + verdict["words"])
+    return Figure(title, _save(figure, path), caption)
 
 
-def _temperatures(values: Sequence[Any], units: UnitSystem) -> np.ndarray:
-    return units.temperature(np.array([_num(v) for v in values]))
-
-
-def _linear(fit: dict[str, Any]) -> tuple[float, float] | None:
-    # Only the linear family can be drawn without the model layer; the others need
-    # fit_temperature_C/fit_mu in the message (docs/recording.md).
-    params = fit.get("params") or {}
-    if fit.get("model") == "linear" and "mu0" in params and "slope_per_C" in params:
-        return _num(params["mu0"]), _num(params["slope_per_C"])
-    return None
-
-
-def state_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path | None:
+def state_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
     """Rig-state timeline (coloured spans) with the bit depth."""
+    title = "Rig state and bit depth over time"
     if not data.states:
-        return None
+        return Figure(title, None, "No rig-state figure: the recording holds no rig states.")
     states = sorted(data.states, key=lambda s: _num(s["t"]))
     t0 = _num(states[0]["t"])
     times = np.array([_num(s["t"]) for s in states]) - t0
@@ -298,7 +374,9 @@ def state_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Path 
     depth_axes.set_ylabel(f"Bit depth [{units.label('depth')}]")
     depth_axes.set_xlabel("Hours since start")
     depth_axes.grid(True, alpha=0.3)
-    return _save(figure, path)
+    caption = (f"Top: the detected rig state against time [h since {_utc(t0)} UTC]; bottom: "
+               f"bit depth [{units.label('depth')} MD] on the same time axis.")
+    return Figure(title, _save(figure, path), caption)
 
 
 def _figure_pair() -> tuple[Any, tuple[Any, Any]]:
@@ -321,15 +399,6 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
         "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in rows
     )
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
-def _summary_rows(data: ReportData) -> list[tuple[str, str, str, str]]:
-    rows = []
-    windows = [e for e in data.estimates if e.get("kind") == EstimateKind.WINDOW]
-    for operation in sorted({str(e["operation"]) for e in windows}):
-        mu = np.array([_num(e["mu"]) for e in windows if e["operation"] == operation])
-        rows.append((operation, str(len(mu)), f"{np.nanmean(mu):.3f}", f"{np.nanstd(mu):.3f}"))
-    return rows
 
 
 def _loads_rows(data: ReportData, units: UnitSystem) -> list[tuple[str, ...]]:
@@ -363,6 +432,15 @@ def _loads_rows(data: ReportData, units: UnitSystem) -> list[tuple[str, ...]]:
     return rows
 
 
+_MAKERS: Final[tuple[tuple[str, Callable[..., Figure]], ...]] = (
+    ("hookload_vs_depth.png", hookload_figure),
+    ("torque_vs_depth.png", torque_figure),
+    ("friction_vs_depth.png", friction_figure),
+    ("mu_T.png", mu_t_figure),
+    ("rig_state.png", state_figure),
+)
+
+
 def write_report(
     paths: Sequence[str | os.PathLike[str]],
     out_dir: str | os.PathLike[str],
@@ -370,7 +448,8 @@ def write_report(
     title: str | None = None,
     units: UnitSystem | None = None,
 ) -> ReportResult:
-    """Write ``report.html``, the PNG figures and ``estimates.csv`` into ``out_dir``.
+    """Write ``report.html``, the PNG figures, ``estimates.csv`` and ``summary.json`` (the
+    digest, :func:`tdmon.record.digest.digest`) into ``out_dir`` (created when missing).
 
     ``units``: the display units of figures and tables (default SI: kN, kN m, m, degC).
     """
@@ -378,80 +457,165 @@ def write_report(
     if not paths:
         raise RecordError("no recording given for the report")
     data = load(paths)
+    facts = digest(data)
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RecordError(f"cannot create report folder {out}: {exc.strerror or exc}") from exc
-    makers = (
-        ("hookload_vs_depth.png", "Hook load and the broomstick band", hookload_figure),
-        ("torque_vs_depth.png", "Surface torque", torque_figure),
-        ("friction_vs_depth.png", "Friction factor against depth", friction_figure),
-        ("mu_T.png", "mu(T) fit", mu_t_figure),
-        ("rig_state.png", "Rig-state timeline", state_figure),
-    )
-    figures: list[tuple[str, Path]] = []
+    figures: list[Figure] = []
     try:
-        for name, caption, maker in makers:
-            made = maker(data, out / name, units)
-            if made is not None:
-                figures.append((caption, made))
+        for name, maker in _MAKERS:
+            if maker is mu_t_figure:
+                figures.append(mu_t_figure(data, out / name, units, facts["mu_t"]))
+            else:
+                figures.append(maker(data, out / name, units))
         csv_path = out / "estimates.csv"
         windows = write_estimates_csv(data.estimates, csv_path)
-        page = _page(paths, data, figures, windows, title, units)
+        summary = summary_path(out)
+        summary.write_text(json.dumps(facts, indent=2, allow_nan=False) + "\n",
+                           encoding="utf-8")
+        page = _page(paths, data, facts, figures, windows, title, units)
         html_path = out / "report.html"
         html_path.write_text(page, encoding="utf-8")
     except OSError as exc:
         raise RecordError(f"cannot write the report in {out}: {exc.strerror or exc}") from exc
-    return ReportResult(html=html_path, csv=csv_path, figures=[path for _, path in figures])
+    return ReportResult(html=html_path, csv=csv_path, summary=summary,
+                        figures=[f.path for f in figures if f.path is not None])
+
+
+def _e(value: Any) -> str:
+    return html.escape(str(value))
+
+
+def _run_section(paths: Sequence[str | os.PathLike[str]], facts: dict[str, Any],
+                 units: UnitSystem) -> list[str]:
+    well, span, depth = facts["well"], facts["time_range"], facts["depth_range_m"]
+    rows = [("Well", well["name"] or "not recorded (no well file in the daemon file)")]
+    if well["well_file"]:
+        rows.append(("Well file", well["well_file"]))
+    rows.append(("Daemon file", well["daemon_file"] or "not recorded"))
+    rows.append(("Recording", ", ".join(str(p) for p in paths)))
+    if span["first_t"] is not None:
+        rows.append(("Rig time", f"{span['first_utc']} to {span['last_utc']} UTC "
+                                 f"({span['duration_s'] / 60:.1f} min)"))
+    if depth["min"] is not None:
+        low, high = (float(units.depth(np.array([depth[k]]))[0]) for k in ("min", "max"))
+        rows.append(("Bit depth", f"{low:.1f} to {high:.1f} {units.label('depth')} MD"))
+    if well["backcalc_method"]:
+        rows.append(("Friction back-calculation",
+                     _METHOD_WORDS.get(well["backcalc_method"], well["backcalc_method"])
+                     + ", friction per window by a one-dimensional search over mu in [0, 1]"))
+    if well["method"]:
+        rows.append(("Modelled curves (broomstick)",
+                     _METHOD_WORDS.get(well["method"], well["method"])))
+    rows.append(("mu(T) law", well["mu_t_law"] or "none calibrated"))
+    for section in well["sections"]:
+        top, bottom = (float(units.depth(np.array([_num(section[k])]))[0])
+                       for k in ("top_m", "bottom_m"))
+        rows.append((f"Hole section ({section['kind']})",
+                     f"{section.get('name') or section['kind']}: {top:.0f} to {bottom:.0f} "
+                     f"{units.label('depth')} MD"
+                     + (f", friction {section['friction']}" if section.get("friction") else "")))
+    return ["<h2>Well and run</h2>", _table(("", ""), rows)]
+
+
+def _operations_section(facts: dict[str, Any]) -> list[str]:
+    shares = facts["operations"]
+    if not shares:
+        return ["<h2>Operations seen</h2>", "<p>No rig state was recorded.</p>"]
+    words = ", ".join(f"{state.replace('_', ' ')} {100 * share:.0f} %"
+                      for state, share in shares.items())
+    return ["<h2>Operations seen</h2>",
+            f"<p>Share of rig time per rig state: {_e(words)}.</p>"]
+
+
+def _friction_section(facts: dict[str, Any]) -> list[str]:
+    rows = facts["friction"]
+    parts = ["<h2>Friction factor per operation and hole section</h2>"]
+    if not rows:
+        return [*parts, "<p>No friction factor was back-calculated in this recording "
+                "(calibration off, or no steady pick-up, slack-off or rotating window).</p>"]
+    parts.append("<ul>" + "".join(f"<li>{_e(friction_words(r))}</li>" for r in rows) + "</ul>")
+
+    def text(value: float | None, digits: int) -> str:
+        return "-" if value is None else f"{value:.{digits}f}"
+
+    parts.append(_table(
+        ("operation", "hole section", "windows", "median mu", "sd between windows",
+         "typical window sd", "range", "bit depth [m MD]"),
+        [(r["operation"], r["section_words"], r["windows"], text(r["mu_median"], 3),
+          text(r["mu_sd"], 3), text(r["mu_window_sd"], 4),
+          f"{text(r['mu_min'], 3)} - {text(r['mu_max'], 3)}",
+          f"{text(r['bit_depth_min_m'], 0)} - {text(r['bit_depth_max_m'], 0)}") for r in rows]))
+    return parts
+
+
+def _alarm_section(data: ReportData, facts: dict[str, Any]) -> list[str]:
+    rows = facts["alarm_summary"]
+    parts = ["<h2>Alarms</h2>"]
+    if not rows:
+        return [*parts, "<p>No alarm was raised.</p>"]
+    items = []
+    for r in rows:
+        times = (f"at {r['first_utc']} UTC" if r["count"] == 1 else
+                 f"{r['count']} times, first {r['first_utc']}, last {r['last_utc']} UTC")
+        items.append(f"<li><b>{_e(r['severity'])}</b>: {_e(r['meaning'])} ({_e(r['kind'])}), "
+                     f"{_e(times)}; last: &ldquo;{_e(r['last_message'])}&rdquo;</li>")
+    parts.append("<ul>" + "".join(items) + "</ul>")
+    parts.append("<details><summary>Every alarm (up to 200)</summary>" + _table(
+        ("time (UTC)", "severity", "kind", "message"),
+        [(_utc(_num(a.get("t"))) if math.isfinite(_num(a.get("t"))) else "-", a.get("severity"),
+          a.get("kind"), a.get("message")) for a in data.alarms[:200]]) + "</details>")
+    return parts
 
 
 def _page(
     paths: Sequence[str | os.PathLike[str]],
     data: ReportData,
-    figures: Sequence[tuple[str, Path]],
+    facts: dict[str, Any],
+    figures: Sequence[Figure],
     windows: int,
     title: str | None,
     units: UnitSystem,
 ) -> str:
-    heading = html.escape(title or Path(paths[0]).name)
-    times = [_num(m.get("t")) for m in data.models + data.states]
-    times = [t for t in times if math.isfinite(t)]
-    span = f"{_utc(min(times))} to {_utc(max(times))} UTC" if times else "no timed data"
-    severities: dict[str, int] = {}
-    for alarm in data.alarms:
-        severities[str(alarm.get("severity"))] = severities.get(str(alarm.get("severity")), 0) + 1
+    heading = _e(title or facts["well"]["name"] or Path(paths[0]).name)
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
         f"<title>tdmon report: {heading}</title>",
         "<style>body{font-family:sans-serif;max-width:1000px;margin:auto;padding:1em}"
         "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;"
-        "padding:2px 8px;text-align:left}img{max-width:100%}</style></head><body>",
+        "padding:2px 8px;text-align:left}img{max-width:100%}figcaption{font-size:90%;"
+        "color:#333;margin-bottom:1.5em}.note{color:#555;font-style:italic}</style>"
+        "</head><body>",
         f"<h1>tdmon post-well report: {heading}</h1>",
-        f"<p>Recordings: {html.escape(', '.join(str(p) for p in paths))}<br>Data: {span}<br>"
-        f"Generated {_utc(datetime.now(UTC).timestamp())} UTC. Window estimates in "
-        f"<a href='estimates.csv'>estimates.csv</a> ({windows} rows).</p>",
-        "<h2>Messages per topic</h2>",
-        _table(("topic", "messages"), sorted(data.counts.items())),
-        "<h2>Friction per operation (window estimates)</h2>",
-        _table(("operation", "windows", "mean mu", "std mu"), _summary_rows(data)),
+        *_run_section(paths, facts, units),
+        *_operations_section(facts),
+        *_friction_section(facts),
+        "<h2>mu(T) verdict</h2>", f"<p>{_e(facts['mu_t']['words'])}</p>",
+        *_alarm_section(data, facts),
+        f"<h2>Figures (units: {units.name})</h2>",
+    ]
+    for number, figure in enumerate(figures, start=1):
+        if figure.path is None:
+            parts.append(f"<h3>{_e(figure.title)}</h3><p class='note'>{_e(figure.text)}</p>")
+            continue
+        encoded = base64.b64encode(figure.path.read_bytes()).decode()
+        parts.append(f"<figure><h3>{_e(figure.title)}</h3><img alt='{_e(figure.title)}' "
+                     f"src='data:image/png;base64,{encoded}'><figcaption>Figure {number}. "
+                     f"{_e(figure.text)}</figcaption></figure>")
+    parts += [
         f"<h2>Loads per rig state (units: {units.name})</h2>",
         _table(("rig state", "model frames", f"bit depth [{units.label('depth')}]",
                 f"measured hook load [{units.label('force')}]",
                 f"hook load residual [{units.label('force')}]",
                 f"measured torque [{units.label('torque')}]",
                 f"torque residual [{units.label('torque')}]"), _loads_rows(data, units)),
+        "<h2>Recording contents</h2>",
+        f"<p>Window estimates in <a href='estimates.csv'>estimates.csv</a> ({windows} rows); "
+        "these numbers as JSON in <a href='summary.json'>summary.json</a>. Generated "
+        f"{_utc(datetime.now(UTC).timestamp())} UTC.</p>",
+        _table(("topic", "messages"), sorted(data.counts.items())),
+        "</body></html>",
     ]
-    for caption, path in figures:
-        encoded = base64.b64encode(path.read_bytes()).decode()
-        parts.append(f"<h2>{html.escape(caption)}</h2><img alt='{html.escape(caption)}' "
-                     f"src='data:image/png;base64,{encoded}'>")
-    parts.append("<h2>Alarms</h2>")
-    parts.append("<p>" + (", ".join(f"{k}: {v}" for k, v in sorted(severities.items()))
-                          or "none") + "</p>")
-    parts.append(_table(("time (UTC)", "severity", "kind", "message"), [
-        (_utc(_num(a.get("t"))), a.get("severity"), a.get("kind"), a.get("message"))
-        for a in data.alarms[:200]
-    ]))
-    parts.append("</body></html>")
     return "\n".join(parts)

@@ -31,8 +31,6 @@ from __future__ import annotations
 
 import logging
 import math
-import subprocess
-import sys
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -115,9 +113,6 @@ class RerunViews:
         Scalars are sent in columns of up to this many rows (per entity) for speed.
     flush_interval_s
         With a live viewer, pending scalars are sent at least this often [s].
-    disable_analytics
-        With a live viewer, run ``rerun analytics disable`` once (the viewer collects usage
-        data by default; the SDK writing files does not).
     units
         Display units of the scalars, labels and entity names (default:
         :func:`tdmon.display.current`, i.e. what the running command set, else SI).
@@ -131,7 +126,6 @@ class RerunViews:
         recording_id: str | None = None,
         batch_rows: int = 5000,
         flush_interval_s: float = 0.5,
-        disable_analytics: bool = True,
         units: UnitSystem | None = None,
     ) -> None:
         if rrd_path is None and live_port is None:
@@ -171,8 +165,8 @@ class RerunViews:
             except OSError as exc:
                 raise RecordError(f"cannot write {self.rrd_path}: {exc.strerror or exc}") from exc
             sinks.append(rr.FileSink(str(self.rrd_path)))
-        if live_port is not None and disable_analytics:
-            _disable_viewer_analytics()
+        # No `rerun analytics disable` here: that changes the user's own Rerun settings, and
+        # this process only serves data (it starts no viewer, whose analytics the user decides)
         try:
             if live_port is not None:
                 # Never rerun's default 0.0.0.0: a rig network is not a place for an open port.
@@ -570,22 +564,3 @@ def build_rrd(
         for topic, log_time_ns, message in messages:
             views.write(topic, log_time_ns, message)
     return views.stats
-
-
-_analytics_disabled = False
-
-
-def _disable_viewer_analytics() -> None:
-    # The bundled viewer phones home unless told not to; the setting lives in the user's rerun
-    # config, so one call per process is enough. Failure is harmless and only logged.
-    global _analytics_disabled
-    if _analytics_disabled:
-        return
-    _analytics_disabled = True
-    try:
-        subprocess.run(
-            [sys.executable, "-m", "rerun", "analytics", "disable"],
-            check=False, capture_output=True, timeout=30,
-        )
-    except (OSError, subprocess.SubprocessError) as exc:
-        log.warning("could not disable Rerun analytics: %s", exc)

@@ -231,6 +231,20 @@ WELL: Final = _object(
         "string_length_m": {**_NUMBER, "description": "the well file's string tally [m]"},
         "change": {**_TEXT, "description": "start, or why a new well file was taken (a run "
                    "from a rig time, a reload on SIGHUP)"},
+        # which run this is, for reports (optional: older recordings lack them)
+        "daemon_file": {"type": ["string", "null"]},
+        "method": {"type": ["string", "null"], "description": "monitor curves' method"},
+        "backcalc_method": {"type": ["string", "null"],
+                            "description": "back-calculation's method (null: off)"},
+        "mu_t_mode": {"type": "string"},
+        "mu_t_law": {"type": ["string", "null"]},
+        "sections": {"type": "array", "items": {
+            "type": "object",
+            "properties": {"name": _TEXT, "kind": {"enum": ["cased", "open"]},
+                           "top_m": _NUMBER, "bottom_m": _NUMBER,
+                           "friction": {"type": ["string", "null"]}},
+            "required": ["kind", "top_m", "bottom_m"],
+        }},
         "notes": {"type": "array", "items": _TEXT},
     },
     ("t", "md_m", "tvd_m", "north_m", "east_m"),

@@ -137,13 +137,17 @@ def synthetic_messages(duration_s: int = 600, seed: int = 1) -> Iterator[Recorde
                 f"hook load {measured_hookload / 1e3:.0f} kN above the band", measured_hookload,
                 pick_up))
     t_end = T0 + duration_s
-    temperatures = [40.0, 55.0, 70.0, 85.0, 100.0]
+    # the daemon's mu_T estimate (tdmon.calib.mu_calibration): a linear law a + b T fitted
+    # over 40..100 degC, identifiable
     yield RecordedMessage("/tdmon/estimate", T0_NS + duration_s * 10**9, {
         "t": t_end, "kind": EstimateKind.MU_T.value, "operation": Operation.PICK_UP.value,
-        "mu": TRUE_MU, "mu_std": 0.01, "model": "linear",
-        "params": {"mu0": 0.18, "slope_per_C": 0.001},
-        "temperature_C": temperatures,
-        "mu_points": [0.18 + 0.001 * x + rng.gauss(0, 0.005) for x in temperatures]})
+        "mu": 0.18 + 0.001 * 70.0, "mu_std": 0.004, "model": "mu = 0.18 + 0.001 T",
+        "params": {"a": 0.18, "b": 0.001}, "params_std": {"a": 0.01, "b": 0.0002},
+        "mu_at_temperature_C": 70.0, "temperature_C": [40.0, 100.0],
+        "slope_per_K": 0.001, "slope_std_per_K": 0.0002,
+        "slope_interval_per_K": [0.001 - 1.96 * 0.0002, 0.001 + 1.96 * 0.0002],
+        "identifiable": True,
+        "identifiability": "slope 0.001 1/K, 95 % interval 0.000608..0.00139, over 60.0 K"})
     profile = profile_message(t_end, well)
     yield RecordedMessage("/tdmon/estimate", T0_NS + duration_s * 10**9, {
         "t": t_end, "kind": EstimateKind.PROFILE.value, "operation": Operation.PICK_UP.value,

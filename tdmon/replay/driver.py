@@ -363,7 +363,9 @@ async def replay(
 
 def summarize_recording(path: str | Path) -> dict[str, Any]:
     """The replay summary's counts for any flight recording (e.g. a live daemon's): input
-    messages, samples, rejections, estimates and alarms per kind, rig-state shares."""
+    messages, samples, rejections, estimates and alarms per kind, rig-state shares, and the
+    engineer's numbers of :func:`tdmon.record.digest.digest` (docs/recording.md)."""
+    from tdmon.record.digest import summarize
     from tdmon.record.reader import read_messages
 
     summary = SummarySink()
@@ -379,4 +381,6 @@ def summarize_recording(path: str | Path) -> dict[str, Any]:
         "estimates": dict(sorted(summary.estimates.items())),
         "alarms": dict(sorted(summary.alarms.items())),
         "state_shares": dict(sorted(summary.shares().items())),
+        # the engineer's numbers, as in tdmon replay --json
+        **summarize([path], allow_unfinished=True),
     }

@@ -88,6 +88,9 @@ def test_limit_alarms_warn_then_critical(well_open: Any) -> None:
         assert len(tensile) == 1
         assert tensile[0].severity == severity
         assert tensile[0].value == pytest.approx(top_tension)
+        # the top of the string is named as an engineer would: at surface, not "at 0 m"
+        assert tensile[0].message == (
+            f"pick-up tension at surface is {100 * fraction:.0f} % of the tensile limit")
     assert limit_alarms(well_open, loads, "pick_up", 5.0) == []  # no yield strength given
 
 

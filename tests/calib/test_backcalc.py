@@ -49,8 +49,13 @@ def test_slack_off_and_torque_roots(model_open: WellModel) -> None:
 
 def test_not_bracketed_is_a_fit_error_with_the_modelled_range(model_open: WellModel) -> None:
     static = model_open.evaluate("static", 4000.0, 0.0)[0]
-    with pytest.raises(FitError, match="not bracketed"):
+    # the engineer's words, with the modelled range, not the solver's ("root not bracketed")
+    with pytest.raises(FitError, match=r"pick-up hook load .* cannot be matched by any friction "
+                       r"factor from 0 to 1 \(the model gives") as caught:
         back_calculate(model_open, "pick_up", 4000.0, static - 100e3, 5e3)
+    assert "bracket" not in str(caught.value)
+    low = model_open.evaluate("pick_up", 4000.0, 0.0)[0] / 1e3
+    assert f"the model gives {low:.1f} to" in str(caught.value)
     with pytest.raises(FitError, match="not finite"):
         back_calculate(model_open, "pick_up", 4000.0, math.nan, 5e3)
     with pytest.raises(FitError, match="cannot model"):

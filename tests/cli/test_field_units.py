@@ -20,7 +20,7 @@ from rerun.chunk import RrdReader
 from tdmon.cli import main
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import read_messages
-from tdmon.record.synthetic import synthetic_messages
+from tdmon.record.synthetic import T0, T0_NS, synthetic_messages
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "config" / "wells" / "aadnoy-example-7-1.toml"
@@ -207,6 +207,18 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     with McapRecorder(folder) as recorder:
         for item in synthetic_messages(duration_s=300):
             recorder.write(*item)
+        # then a minute rotating off bottom at 3000 m: the report draws rotating torque only
+        for second in range(300, 360):
+            ns, t = T0_NS + second * 10**9, T0 + second
+            recorder.write("/tdmon/state", ns, {"t": t, "state": "rotating_off_bottom",
+                                                "steady": True, "bit_depth_m": 3000.0})
+            recorder.write("/tdmon/model", ns, {
+                "t": t, "bit_depth_m": 3000.0,
+                "hookload_N": {"pick_up": 1.1e6, "slack_off": 0.9e6, "rotating": 1.0e6},
+                "torque_Nm": {"rotating": 9.0e3},
+                "band": {"mu": [0.2], "pick_up_N": [1.1e6], "slack_off_N": [0.9e6]},
+                "measured": {"hookload_N": 1.0e6, "torque_Nm": 9.1e3},
+                "residual": {"hookload_N": 0.0, "torque_Nm": 100.0}})
     [path] = recorder.stats.files
     return Path(path)
 

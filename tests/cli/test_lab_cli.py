@@ -120,12 +120,21 @@ def test_text_is_a_ranked_table_with_intervals_and_verdicts(capsys):
 
 
 def test_png_is_a_png(tmp_path, capsys):
-    target = tmp_path / "figure15.png"
+    target = tmp_path / "new" / "figure15.png"  # the missing folder is created
     assert main(["lab", "fit", str(DATA), "--png", str(target), "--models",
                  "linear,poly-3"]) == 0
     assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert target.stat().st_size > 10_000
-    assert str(target) in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert str(target) in out
+    # the figure comes with the numbers: the rank-1 linear fit's coefficients, as calib has them
+    data = read_tribometer_csv(DATA)
+    [linear] = [f for f in fit_friction_models(data.temperature, data.friction,
+                                               ("linear", "poly-3"), data="raw")
+                if f.model == "linear"]
+    a, b = linear.coefficients["a"], linear.coefficients["b"]
+    row = next(line for line in out.splitlines() if " linear " in line)
+    assert f"a {a:.5g} ± " in row and f"b {b:.5g} ± " in row
 
 
 def _one_line_error(capsys: pytest.CaptureFixture[str], *argv: str) -> str:

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
+from typing import Any
+
+import pytest
 
 from tdmon.cli import main
 from tdmon.record.mcap_recorder import McapRecorder
@@ -20,8 +24,13 @@ def test_report_html_figures_and_csv(tmp_path: Path, stream: list[RecordedMessag
     page = (out / "report.html").read_text()
     assert "Synthetic trip" in page
     figures = sorted(p.name for p in out.glob("*.png"))
+    # the synthetic string never rotates: no torque axes, a note says why instead
     assert figures == ["friction_vs_depth.png", "hookload_vs_depth.png", "mu_T.png",
-                       "rig_state.png", "torque_vs_depth.png"]
+                       "rig_state.png"]
+    assert "No torque figure: the string did not rotate" in page
+    assert page.count("<figcaption>") == len(figures)
+    # the identifiable mu(T) fit is stated with its coefficients
+    assert "mu(T) fitted from 1 updates: mu = 0.18 + 0.001 T (a = 0.18 ± 0.01" in page
     assert page.count("data:image/png;base64,") == len(figures)
     for png in out.glob("*.png"):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -44,3 +53,59 @@ def test_report_of_a_recording_without_model_data(tmp_path: Path) -> None:
     page = (out / "report.html").read_text()
     assert "&lt;b&gt;escaped&lt;/b&gt;" in page
     assert list(out.glob("*.png")) == []
+    # no empty axes: every figure is replaced by its note
+    assert page.count("class='note'") == 5
+    assert "No mu(T) figure. No mu(T) fit: no mu(T) calibration in this recording" in page
+
+
+def _profile_recording(tmp_path: Path, informed: list[bool] | None) -> Path:
+    md = [100.0 * i for i in range(1, 11)]
+    profile: dict[str, object] = {"t": 10.0, "md_m": md, "mu": [0.2 + 0.01 * i for i in range(10)],
+                                  "mu_std": [0.02] * 10}
+    if informed is not None:
+        profile |= {"informed": informed, "variance_ratio": [0.1] * 6 + [0.97] * 4,
+                    "informed_reason": "no window has loaded these bins yet"}
+    with McapRecorder(tmp_path / "rec") as recorder:
+        recorder.write("/tdmon/profile", 10, profile)
+    return Path(recorder.stats.files[0])
+
+
+def test_profile_bins_not_informed_by_data_are_greyed(tmp_path: Path,
+                                                      monkeypatch: Any) -> None:
+    import tdmon.record.report as report
+
+    lines: dict[str, list[float]] = {}
+    save = report._save
+
+    def keep_lines(figure: Any, path: Path) -> Path:
+        for line in figure.axes[0].get_lines():
+            lines[str(line.get_label())] = [float(x) for x in line.get_xdata()]
+        return save(figure, path)
+
+    monkeypatch.setattr(report, "_save", keep_lines)
+    informed = [True] * 6 + [False] * 4
+    out = tmp_path / "informed"
+    report.write_report([_profile_recording(tmp_path / "a", informed)], out)
+    page = (out / "report.html").read_text()
+    assert ("4 of 10 profile points are not informed by the data and are drawn grey (dotted): "
+            "no window has loaded these bins yet") in page
+    solid, grey = lines["local friction profile"], lines["not informed by data (prior)"]
+    assert [math.isnan(x) for x in solid] == [not f for f in informed]
+    assert [math.isnan(x) for x in grey] == informed
+    assert solid[:6] == pytest.approx([0.2 + 0.01 * i for i in range(6)])
+    # a profile message without the fields (older recordings): every point drawn, no note
+    lines.clear()
+    report.write_report([_profile_recording(tmp_path / "b", None)], tmp_path / "plain")
+    assert not any(math.isnan(x) for x in lines["local friction profile"])
+    assert "not informed" not in (tmp_path / "plain" / "report.html").read_text()
+
+
+def test_report_refuses_an_unfinished_recording(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    source = Path(__file__).resolve().parents[2] / "replays" / "trip-in-noisy.mcap"
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(source.read_bytes()[: source.stat().st_size // 2])
+    assert main(["report", str(cut), "--out", str(tmp_path / "report")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tdmon recover" in err[0], err
+    assert not (tmp_path / "report").exists()

@@ -110,7 +110,7 @@ def test_live_viewer_server_binds_loopback_only(tmp_path: Path) -> None:
         tmp_path / "a.rrd",
     )
     assert stats.logged == 1
-    views = RerunViews(live_port=port, disable_analytics=False)
+    views = RerunViews(live_port=port)
     try:
         assert views.grpc_uri is not None and "127.0.0.1" in views.grpc_uri
         with socket.create_connection(("127.0.0.1", port), timeout=5):
@@ -140,3 +140,18 @@ def test_rerun_is_imported_lazily(run_child: Callable[..., dict[str, object]]) -
         "print(json.dumps({'rerun': 'rerun' in sys.modules}))\n"
     )
     assert result == {"rerun": False}
+
+
+def test_live_views_leave_the_users_rerun_settings_alone(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    # `rerun analytics disable` writes <config>/rerun/analytics.json: a live sink must not
+    home, config = tmp_path / "home", tmp_path / "config"
+    home.mkdir()
+    config.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(config))
+    views = RerunViews(tmp_path / "live.rrd", live_port=_free_port())
+    views.close()
+    assert (tmp_path / "live.rrd").stat().st_size > 0
+    assert sorted(p.name for p in config.rglob("*")) == []
+    assert sorted(p.name for p in home.rglob("*")) == []

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from tdmon.daemon.build import WellFile
     from tdmon.daemon.steps.calibrate import CalibrationStep
 
-__all__ = ["MAX_PROFILE_POINTS", "ProfileStep", "profile_step"]
+__all__ = ["MAX_PROFILE_POINTS", "ProfileStep", "profile_step", "run_context"]
 
 
 class ProfileStep:
@@ -149,6 +149,7 @@ def profile_step(config: DaemonConfig, well_file: WellFile, grid: Any,
         **_well_fields(well_file), "change": "start",
         "md_m": grid.md[nodes].tolist(), "tvd_m": grid.tvd[nodes].tolist(),
         "north_m": grid.north[nodes].tolist(), "east_m": grid.east[nodes].tolist(),
+        **run_context(config, well_file, setup, calibration),
     }
     elements = _thin(grid.n_elements)
     return ProfileStep(well_message, grid.element_mid_md[elements], elements,
@@ -161,6 +162,28 @@ def _well_fields(well_file: WellFile) -> dict[str, Any]:
     """What a ``well`` message says about the file: its name, path and string tally [m]."""
     return {"name": well_file.well.name or well_file.path.stem, "file": well_file.path.name,
             "string_length_m": well_file.tally_length}
+
+
+def run_context(config: DaemonConfig, well_file: WellFile, setup: MuTSetup,
+                calibration: CalibrationStep | None) -> dict[str, Any]:
+    """What a report needs to say which run this was: the daemon file, the torque-and-drag methods,
+    the hole sections and the friction law being calibrated (fields of the ``well`` message).
+    """
+    law = setup.law
+    return {
+        "daemon_file": None if config.source_file is None else config.source_file.name,
+        "method": config.monitor.method,
+        "backcalc_method": None if calibration is None else calibration.settings.method,
+        "mu_t_mode": "off" if law is None else setup.mode,
+        "mu_t_law": None if law is None else law.describe(),
+        "sections": [
+            {"name": section.name, "kind": section.kind, "top_m": section.top,
+             "bottom_m": section.bottom,
+             "friction": None if section.friction is None
+             else section.friction.friction_model().describe()}
+            for section in well_file.config.hole
+        ],
+    }
 
 
 def _thin(n: int) -> NDArray[np.int64]:

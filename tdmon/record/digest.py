@@ -1,0 +1,300 @@
+"""The engineer's digest of flight recordings: which well and run, which operations, the
+friction per operation and hole section with its uncertainty, the alarms, the mu(T) verdict.
+
+One function, :func:`digest`, computes these numbers from the recorded messages; the HTML
+report states them in words and the summary JSON (``tdmon report``'s ``summary.json``,
+``tdmon replay --json``) carries them, so both say the same (docs/recording.md, "Summary").
+Everything is SI with the unit in the key; times are Unix seconds with a UTC string beside.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from itertools import pairwise
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+
+from tdmon.record.reader import read_messages, topic_counts
+from tdmon.vocabulary import AlarmKind, EstimateKind, Severity
+
+__all__ = ["ReportData", "digest", "load", "mu_t_verdict", "summarize", "utc"]
+
+_TOPICS: Final = ("/tdmon/model", "/tdmon/estimate", "/tdmon/state", "/tdmon/alarm",
+                  "/tdmon/profile", "/tdmon/well")
+_SEVERITY_ORDER: Final[dict[str, int]] = {Severity.CRITICAL: 0, Severity.WARNING: 1,
+                                           Severity.INFO: 2}
+_SECTION_WORDS: Final = {"cased": "cased hole", "open": "open hole", "all": "whole string"}
+_OPERATION_WORDS: Final = {"pick_up": "pick-up", "slack_off": "slack-off",
+                           "rotating": "rotating off bottom", "on_bottom": "on bottom",
+                           "reaming": "reaming", "back_reaming": "back-reaming"}
+
+#: what each alarm kind means, in a drilling engineer's words
+ALARM_WORDS: Final[dict[str, str]] = {
+    AlarmKind.BAND: "hook load outside the modelled band (a trend, not a spike)",
+    AlarmKind.FRICTION_JUMP: "friction factor jumped above its recent level",
+    AlarmKind.LIMIT_TENSILE: "string tension near or over the tensile limit",
+    AlarmKind.LIMIT_SINUSOIDAL_BUCKLING: "compression near or over sinusoidal buckling",
+    AlarmKind.LIMIT_HELICAL_BUCKLING: "compression near or over helical buckling",
+    AlarmKind.LIMIT_MAKEUP_TORQUE: "torque near or over the connections' make-up torque",
+    AlarmKind.SENSOR_STALE: "a sensor stopped sending",
+    AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE: "hook load reading not physically plausible",
+    AlarmKind.SENSOR_BIT_BELOW_HOLE: "bit depth reading below the hole's total depth",
+    AlarmKind.SENSOR_HOOKLOAD_FROZEN: "hook load reading frozen (unchanged while moving)",
+    AlarmKind.SENSOR_TORQUE_FROZEN: "torque reading frozen while rotating",
+    AlarmKind.WINDOW_REJECTED: "a measurement window could not give a friction factor",
+    AlarmKind.BLOCK_WEIGHT: "block weight estimate disagrees with the configured one",
+    AlarmKind.WEIGHT_CHECK: "string weight in slips-off hangs disagrees with the well file",
+    AlarmKind.RECORDER_FAILED: "the flight recorder failed to write",
+    AlarmKind.RECORDER_RESUMED: "the flight recorder writes again",
+    AlarmKind.RECORDING_RECOVERED: "an unfinished recording was recovered at start-up",
+    AlarmKind.DATA_LOSS: "input messages were lost",
+    AlarmKind.CLOCK_JUMP: "the rig clock jumped; timing re-anchored",
+}
+
+
+@dataclass
+class ReportData:
+    """The messages a report needs, gathered in one pass over the recordings."""
+
+    models: list[dict[str, Any]] = field(default_factory=list)
+    estimates: list[dict[str, Any]] = field(default_factory=list)
+    states: list[dict[str, Any]] = field(default_factory=list)
+    alarms: list[dict[str, Any]] = field(default_factory=list)
+    profiles: list[dict[str, Any]] = field(default_factory=list)
+    wells: list[dict[str, Any]] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
+    recordings: list[str] = field(default_factory=list)
+
+
+def load(paths: Sequence[str | os.PathLike[str]], *, allow_unfinished: bool = False
+         ) -> ReportData:
+    """Read the topics the report uses from finished MCAP files (``allow_unfinished``: an
+    unfinished one too, up to its last flush; else it is refused with a RecordError)."""
+    data = ReportData(recordings=[str(p) for p in paths])
+    buckets = {
+        "/tdmon/model": data.models, "/tdmon/estimate": data.estimates,
+        "/tdmon/state": data.states, "/tdmon/alarm": data.alarms,
+        "/tdmon/profile": data.profiles, "/tdmon/well": data.wells,
+    }
+    for path in paths:
+        for topic, n in topic_counts(path, allow_unfinished=allow_unfinished).items():
+            data.counts[topic] = data.counts.get(topic, 0) + n
+        for topic, _, message in read_messages(path, _TOPICS, allow_unfinished=allow_unfinished):
+            buckets[topic].append(message)
+    return data
+
+
+def utc(t: float | None) -> str | None:
+    """``YYYY-MM-DD HH:MM:SS`` UTC of a Unix time (None when not finite)."""
+    if t is None or not math.isfinite(t):
+        return None
+    return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _num(value: Any) -> float:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    return math.nan
+
+
+def _rounded(value: float, digits: int = 4) -> float | None:
+    return round(value, digits) if math.isfinite(value) else None
+
+
+def digest(data: ReportData) -> dict[str, Any]:
+    """The engineer's numbers of a recording (JSON-ready, SI, no NaN).
+
+    Keys: ``well`` (name, files, methods, hole sections, mu(T) law; from the ``well``
+    message), ``run`` (recordings), ``time_range``, ``depth_range_m`` (bit depth),
+    ``operations`` (share of rig time per rig state), ``friction`` (one row per operation and
+    hole section), ``alarm_summary`` (one row per kind and severity, most important first),
+    ``mu_t`` (the verdict) and ``notes`` (the daemon's notes, e.g. why the mu(T) calibration
+    is off).
+    """
+    well = data.wells[0] if data.wells else {}
+    return {
+        "well": {
+            "name": well.get("name"), "well_file": well.get("file", well.get("well_file")),
+            "daemon_file": well.get("daemon_file"), "method": well.get("method"),
+            "backcalc_method": well.get("backcalc_method"),
+            "mu_t_law": well.get("mu_t_law"), "sections": well.get("sections", []),
+        },
+        "run": {"recordings": list(data.recordings),
+                "messages": int(sum(data.counts.values()))},
+        "time_range": _time_range(data),
+        "depth_range_m": _depth_range(data),
+        "operations": _state_shares(data.states),
+        "friction": friction_rows(data.estimates),
+        "alarm_summary": alarm_rows(data.alarms),
+        "mu_t": mu_t_verdict(data.estimates, well),
+        "notes": [str(n) for n in well.get("notes", [])],
+    }
+
+
+def _time_range(data: ReportData) -> dict[str, Any]:
+    times = np.array([_num(m.get("t")) for m in (*data.states, *data.models)])
+    times = times[np.isfinite(times)]
+    if not times.size:
+        return {"first_t": None, "last_t": None, "first_utc": None, "last_utc": None,
+                "duration_s": None}
+    first, last = float(times.min()), float(times.max())
+    return {"first_t": first, "last_t": last, "first_utc": utc(first), "last_utc": utc(last),
+            "duration_s": round(last - first, 3)}
+
+
+def _depth_range(data: ReportData) -> dict[str, float | None]:
+    depth = np.array([_num(m.get("bit_depth_m")) for m in (*data.states, *data.models)])
+    depth = depth[np.isfinite(depth)]
+    if not depth.size:
+        return {"min": None, "max": None}
+    return {"min": round(float(depth.min()), 2), "max": round(float(depth.max()), 2)}
+
+
+def _state_shares(states: Sequence[dict[str, Any]]) -> dict[str, float]:
+    """Share of rig time in each state, from the rig-time intervals between state messages
+    (a state message is sent on a change and at least every second)."""
+    timed = sorted(((_num(s.get("t")), str(s.get("state"))) for s in states),
+                   key=lambda item: item[0])
+    timed = [item for item in timed if math.isfinite(item[0])]
+    spent: dict[str, float] = {}
+    for (t, state), (t_next, _) in pairwise(timed):
+        spent[state] = spent.get(state, 0.0) + t_next - t
+    total = sum(spent.values())
+    if total <= 0.0:
+        return {}
+    return {state: round(seconds / total, 4)
+            for state, seconds in sorted(spent.items(), key=lambda kv: -kv[1])}
+
+
+def friction_rows(estimates: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Window friction per operation and hole section.
+
+    ``mu_median`` is the median of the windows' friction factors, ``mu_sd`` their spread
+    (sample standard deviation between windows; None for one window), ``mu_window_sd`` the
+    median of the windows' own standard deviations (the measurement's uncertainty), and the
+    bit-depth range the windows cover.
+    """
+    windows = [e for e in estimates if e.get("kind") == EstimateKind.WINDOW
+               and math.isfinite(_num(e.get("mu")))]
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for window in windows:
+        key = (str(window.get("operation")), str(window.get("section", "all")))
+        groups.setdefault(key, []).append(window)
+    rows = []
+    for (operation, section), chosen in sorted(groups.items()):
+        mu = np.array([_num(e["mu"]) for e in chosen])
+        own = np.array([_num(e.get("mu_std")) for e in chosen])
+        depth = np.array([_num(e.get("bit_depth_m")) for e in chosen])
+        own, depth = own[np.isfinite(own)], depth[np.isfinite(depth)]
+        rows.append({
+            "operation": operation, "section": section,
+            "section_words": _SECTION_WORDS.get(section, section),
+            "windows": int(mu.size),
+            "mu_median": _rounded(float(np.median(mu))),
+            "mu_mean": _rounded(float(mu.mean())),
+            "mu_sd": _rounded(float(mu.std(ddof=1))) if mu.size > 1 else None,
+            "mu_window_sd": _rounded(float(np.median(own))) if own.size else None,
+            "mu_min": _rounded(float(mu.min())), "mu_max": _rounded(float(mu.max())),
+            "bit_depth_min_m": _rounded(float(depth.min()), 1) if depth.size else None,
+            "bit_depth_max_m": _rounded(float(depth.max()), 1) if depth.size else None,
+            "low_confidence": int(sum(bool(e.get("low_confidence")) for e in chosen)),
+        })
+    return rows
+
+
+def friction_words(row: dict[str, Any]) -> str:
+    """One sentence for a :func:`friction_rows` row."""
+    operation = _OPERATION_WORDS.get(row["operation"], row["operation"].replace("_", " "))
+    where = row["section_words"]
+    depth = ""
+    if row["bit_depth_min_m"] is not None:
+        depth = (f", bit at {row['bit_depth_min_m']:.0f} m MD" if
+                 row["bit_depth_min_m"] == row["bit_depth_max_m"] else
+                 f", bit from {row['bit_depth_min_m']:.0f} to {row['bit_depth_max_m']:.0f} m MD")
+    n = row["windows"]
+    spread = ("" if row["mu_sd"] is None else
+              f"; the windows scatter by {row['mu_sd']:.3f} (1 sd) between "
+              f"{row['mu_min']:.3f} and {row['mu_max']:.3f}")
+    own = ("" if row["mu_window_sd"] is None else
+           f"; a single window is uncertain by about {row['mu_window_sd']:.4f} (1 sd)")
+    return (f"{operation.capitalize()}, {where}: friction factor {row['mu_median']:.3f} "
+            f"(median of {n} window{'s' if n != 1 else ''}{depth}){spread}{own}.")
+
+
+def alarm_rows(alarms: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per alarm kind and severity: count, first and last time, the last message;
+    critical first, then warnings, then information, more frequent first."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for alarm in alarms:
+        groups.setdefault((str(alarm.get("kind")), str(alarm.get("severity"))), []).append(alarm)
+    rows: list[dict[str, Any]] = []
+    for (kind, severity), chosen in groups.items():
+        times = [t for t in (_num(a.get("t")) for a in chosen) if math.isfinite(t)]
+        first, last = (min(times), max(times)) if times else (None, None)
+        latest = max(chosen, key=lambda a: _num(a.get("t")) if math.isfinite(
+            _num(a.get("t"))) else -math.inf)
+        rows.append({
+            "kind": kind, "severity": severity, "count": len(chosen),
+            "meaning": ALARM_WORDS.get(kind, kind.replace("_", " ")),
+            "first_t": first, "last_t": last, "first_utc": utc(first), "last_utc": utc(last),
+            "last_message": latest.get("message"),
+        })
+    rows.sort(key=lambda r: (_SEVERITY_ORDER.get(r["severity"], 3), -r["count"], r["kind"]))
+    return rows
+
+
+def mu_t_verdict(estimates: Sequence[dict[str, Any]], well: dict[str, Any] | None = None
+                 ) -> dict[str, Any]:
+    """The mu(T) verdict from the last ``mu_T`` estimate: a fit with its coefficients, or why
+    there is none (``status``: ``"fit"``, ``"not_identifiable"`` or ``"none"``)."""
+    fits = [e for e in estimates if e.get("kind") == EstimateKind.MU_T]
+    well = well or {}
+    if not fits:
+        notes = [str(n) for n in well.get("notes", [])]
+        reason = ("; ".join(notes) if notes else
+                  "no mu(T) calibration in this recording (calibration off, no [temperature] "
+                  "table in the well file, or no window reached it)")
+        return {"status": "none", "estimates": 0, "reason": reason, "words": "No mu(T) fit: "
+                + reason + "."}
+    last = fits[-1]
+    params = {k: _num(v) for k, v in (last.get("params") or {}).items()}
+    params_std = {k: _num(v) for k, v in (last.get("params_std") or {}).items()}
+    temperature = [_num(v) for v in (last.get("temperature_C") or [])]
+    verdict: dict[str, Any] = {
+        "status": "fit" if last.get("identifiable") else "not_identifiable",
+        "estimates": len(fits), "t": _num(last.get("t")), "model": last.get("model"),
+        "params": {k: _rounded(v, 6) for k, v in params.items()},
+        "params_std": {k: _rounded(v, 6) for k, v in params_std.items()},
+        "temperature_range_C": [_rounded(v, 2) for v in temperature],
+        "slope_per_K": _rounded(_num(last.get("slope_per_K")), 6),
+        "slope_interval_per_K": [_rounded(_num(v), 6)
+                                 for v in last.get("slope_interval_per_K") or []],
+        "reason": last.get("identifiability"),
+    }
+    coefficients = ", ".join(
+        f"{k} = {v:.4g} ± {params_std.get(k, math.nan):.2g}" for k, v in params.items())
+    if verdict["status"] == "fit":
+        verdict["words"] = (f"mu(T) fitted from {len(fits)} updates: {last.get('model')} "
+                            f"({coefficients}; T in degC); {last.get('identifiability')}.")
+    else:
+        verdict["words"] = (f"mu(T) not identifiable: {last.get('identifiability')} "
+                            f"(last of {len(fits)} updates; its coefficients, not to be used as "
+                            f"a law: {coefficients}).")
+    return verdict
+
+
+def summary_path(out_dir: str | os.PathLike[str]) -> Path:
+    """Where ``tdmon report`` writes the digest: ``summary.json`` beside ``report.html``."""
+    return Path(out_dir) / "summary.json"
+
+
+def summarize(paths: Sequence[str | os.PathLike[str]], *, allow_unfinished: bool = False
+              ) -> dict[str, Any]:
+    """:func:`digest` of recordings read from disk (the summary JSON's engineer's part)."""
+    return digest(load(paths, allow_unfinished=allow_unfinished))
