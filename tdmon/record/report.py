@@ -207,13 +207,27 @@ def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Pa
                     and "md_m" in e and "mu_profile" in e), None)
     if profile is None:
         profile = next(({"md_m": p["md_m"], "mu_profile": p["mu"], "mu_profile_std":
-                         p.get("mu_std")} for p in reversed(data.profiles) if "mu" in p), None)
+                         p.get("mu_std"), "informed": p.get("informed"),
+                         "uninformed_reason": p.get("uninformed_reason")}
+                        for p in reversed(data.profiles) if "mu" in p), None)
     if not windows and profile is None:
         return None
     figure, axes = _figure(6.0, 6.0)
     if profile is not None:
         md = units.depth(np.array(profile["md_m"], dtype=float))
         mu = np.array([_num(v) for v in profile["mu_profile"]])
+        informed = profile.get("informed")
+        if informed is not None and len(informed) == mu.size:
+            # an uninformed bin still holds the prior: drawn faint, not as a result
+            known = np.asarray(informed, dtype=bool)
+            axes.plot(np.where(known, np.nan, mu), md, color="0.6", lw=1.0, ls=":",
+                      label="profile, not informed (prior)")
+            mu = np.where(known, mu, np.nan)
+            from tdmon.calib.profile import describe_information
+
+            figure.text(0.01, 0.005, describe_information(profile["md_m"], informed,
+                                                          profile.get("uninformed_reason")),
+                        fontsize=6, wrap=True, va="bottom")
         axes.plot(mu, md, color="k", lw=1.2, label="local friction profile")
         if profile.get("mu_profile_std"):
             std = np.array([_num(v) for v in profile["mu_profile_std"]])
