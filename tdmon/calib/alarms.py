@@ -312,10 +312,12 @@ _FROZEN_KIND = {"hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
 
 @dataclass(frozen=True)
 class SensorState:
-    """Channels reported stale, the last values and their run lengths, and the sensor alarm
-    kinds whose condition holds (an alarm is raised when its condition starts)."""
+    """Channels reported stale, those named by a gap's alarm and not heard from since, the last
+    values and their run lengths, and the sensor alarm kinds whose condition holds (an alarm is
+    raised when its condition starts)."""
 
     stale: frozenset[str] = frozenset()
+    announced: frozenset[str] = frozenset()
     last: tuple[tuple[str, float], ...] = ()
     runs: tuple[tuple[str, int], ...] = ()
     active: frozenset[AlarmKind] = frozenset()
@@ -323,8 +325,8 @@ class SensorState:
 
 
 def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
-                  stale: tuple[str, ...], moving: bool, settings: SensorSettings
-                  ) -> tuple[SensorState, list[Alarm]]:
+                  stale: tuple[str, ...], moving: bool, settings: SensorSettings,
+                  gap: tuple[tuple[str, float], ...] = ()) -> tuple[SensorState, list[Alarm]]:
     """Stale, implausible and frozen channels; one alarm when a condition starts.
 
     Parameters
@@ -335,10 +337,28 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     stale : channels the aligner reports as too old
     moving : the string is moving (a frozen hook load or depth is then suspicious)
     settings : thresholds
+    gap : channels that went stale in a silence of the whole stream ending at this frame, and
+        when each did [s] (the aligner's ``Frame.gap``): one alarm names them all, stamped when
+        they went stale; they are not reported again until they have been heard from
+
+    Notes
+    -----
+    A stream that stops delivers no frame, so a silence is seen when the data resume; the alarm
+    carries the time the channels went stale, not the time they came back.
     """
     alarms: list[Alarm] = []
     new_stale = frozenset(stale)
-    started = new_stale - state.stale
+    announced = state.announced
+    if gap:
+        since = min(when for _, when in gap)
+        names = [channel for channel, _ in gap]
+        alarms.append(Alarm(since, AlarmKind.SENSOR_STALE, Severity.WARNING,
+                            f"{len(names)} channels went stale together, for {t - since:.0f} s "
+                            f"until data resumed: {', '.join(names[:1] + sorted(names[1:]))}",
+                            t - since))
+        announced = announced | frozenset(names)
+    announced = announced - frozenset(values)  # heard from again
+    started = new_stale - state.stale - announced
     if started:
         for channel in sorted(started):
             alarms.append(Alarm(t, AlarmKind.SENSOR_STALE, Severity.WARNING,
@@ -391,7 +411,7 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
             severity, text, value, limit = texts[condition]
             alarms.append(Alarm(t, condition, severity, text, value, limit))
     # built directly: dataclasses.replace on every frame cost more than the checks
-    new_state = SensorState(stale=new_stale, last=tuple(last.items()),
+    new_state = SensorState(stale=new_stale, announced=announced, last=tuple(last.items()),
                             runs=tuple(runs.items()), active=frozenset(conditions),
                             below_since=below_since)
     return new_state, alarms

@@ -257,6 +257,7 @@ class Aligner:
         pending = self._pending
         assert pending is not None
         self._pending = None
+        previous = self._last_frame_t
         self._last_frame_t = pending.t
         t = pending.t
         values: dict[str, float] = {self.trigger: pending.value}
@@ -275,4 +276,31 @@ class Aligner:
             values[channel] = self._values[channel][index]
             ages[channel] = age
         return Frame(t=t, log_time_ns=pending.log_time_ns, values=values, ages=ages,
-                     stale=tuple(stale))
+                     stale=tuple(stale), gap=self._gap(previous, t))
+
+    def _gap(self, previous: float, t: float) -> tuple[tuple[str, float], ...]:
+        """The channels that went stale in a silence of the hook load from ``previous`` (the
+        last frame) to ``t``, and when each did [s]; () without such a silence.
+
+        A channel counts when it was fresh at ``previous`` and sent nothing until it would have
+        been stale: a dropout of the whole stream is one event, named when it happened, not a
+        stale channel at the frame where the data resume.
+        """
+        timeout = self.stale_timeout
+        if previous == float("-inf") or not t - previous > timeout:
+            return ()  # the first frame (of the stream, or after a re-anchor), or no silence
+        gone = [(self.trigger, previous + timeout)]
+        for channel, times in self._times.items():
+            if channel == self.trigger:
+                continue
+            index = bisect.bisect_right(times, previous + _SAME_TIME) - 1
+            if index < 0 or previous - times[index] > timeout:
+                continue  # nothing held from before, or already stale then (reported then)
+            # follow its samples through the silence: stale where one is followed by none
+            # for longer than the timeout
+            while index + 1 < len(times) and times[index + 1] - times[index] <= timeout:
+                index += 1
+            stale_at = times[index] + timeout
+            if stale_at < t:
+                gone.append((channel, stale_at))
+        return tuple(gone)

@@ -55,7 +55,9 @@ class Frame:
 
     ``values`` holds, per channel, the newest value at or before ``t`` that is not older than
     the stale timeout (SI units); ``ages`` how old each is [s]; ``stale`` the channels seen
-    before but left out as too old. Steps annotate ``state``/``steady`` and ``results``.
+    before but left out as too old. On the first frame after a silence of the hook load longer
+    than the stale timeout, ``gap`` holds the channels that went stale in it (the hook load
+    first) and when each did [s]. Steps annotate ``state``/``steady`` and ``results``.
     """
 
     t: float
@@ -63,6 +65,7 @@ class Frame:
     values: dict[str, float]
     ages: dict[str, float]
     stale: tuple[str, ...] = ()
+    gap: tuple[tuple[str, float], ...] = ()
     state: str = RigState.UNKNOWN
     steady: bool = False
     results: dict[str, dict[str, Any]] = field(default_factory=dict)

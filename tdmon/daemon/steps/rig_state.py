@@ -105,8 +105,9 @@ def rig_state_thresholds(rs: RigStateConfig) -> RigStateThresholds:
     ``in_slips_hookload`` is the in-slips margin over a zero block weight; ``steady_frames``
     the samples a state must have lasted (no settling time). The detector's checks that the
     plain thresholds never had are switched off: no glitch speed, gap, acceleration,
-    hook-load step or settled-hang limit, no standpipe pressure standing in for flow, and weight on bit does not
-    widen "on bottom". What stays different is listed in docs/daemon.md (``[rig_state]``).
+    hook-load step or settled-hang limit, no standpipe pressure standing in for flow, and
+    weight on bit does not widen "on bottom". What stays different is listed in
+    docs/daemon.md (``[rig_state]``).
     """
     return RigStateThresholds(
         block_weight=0.0, in_slips_margin=rs.in_slips_hookload, moving_speed=rs.moving_speed,
