@@ -64,9 +64,8 @@ INFORMED_RATIO = 0.5
 # why a bin is not informed (docs/back-calculation.md, "What the profile knows")
 NO_WINDOW_YET = "no window used yet"
 NOT_REACHED = "no window reached this depth"
-NO_CONTACT = "no side force here (near-vertical hole): its friction does not change the loads"
-NOT_SEPARATED = ("seen only together with the rest of the string: too little bit travel "
-                 "to separate it")
+NO_CONTACT = "near-vertical hole: no side force"
+NOT_SEPARATED = "seen only with the string above it: too little bit travel"
 
 
 @dataclass(frozen=True)
