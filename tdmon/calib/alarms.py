@@ -352,10 +352,10 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     if gap:
         since = min(when for _, when in gap)
         names = [channel for channel, _ in gap]
-        alarms.append(Alarm(since, AlarmKind.SENSOR_STALE, Severity.WARNING,
-                            f"{len(names)} channels went stale together, for {t - since:.0f} s "
-                            f"until data resumed: {', '.join(names[:1] + sorted(names[1:]))}",
-                            t - since))
+        text = (f"{len(names)} channels went stale together, for {t - since:.0f} s until data "
+                f"resumed: {', '.join(names[:1] + sorted(names[1:]))}" if len(names) > 1
+                else f"channel {names[0]} went stale, for {t - since:.0f} s until it resumed")
+        alarms.append(Alarm(since, AlarmKind.SENSOR_STALE, Severity.WARNING, text, t - since))
         announced = announced | frozenset(names)
     announced = announced - frozenset(values)  # heard from again
     started = new_stale - state.stale - announced
