@@ -80,8 +80,8 @@ class RigStateThresholds:
         hook load)`` of the mean of the hang's earlier samples, for ``settle_time`` and
         ``settle_samples``; a sample further off starts the hang again from itself [N]
     hang_tolerance_fraction : see above [-] (4 %: twice the 2 % noise of the noisy synthetic
-        replays; the first sample of a hang being set in the slips lies 4.4-7.3 % off the
-        hang's mean on the Volve F-4 trips, 1408 -> 1346 kN and 1250 -> 1341 kN)
+        replays; the first sample of a hang being set in the slips on the Volve F-4 trip out,
+        1408 -> 1346 kN, lies 4.4 % below the hang's mean)
     """
 
     block_weight: float = 0.0
