@@ -336,3 +336,40 @@ class TestStaleAfterAGap:
     def test_a_channel_still_missing_after_the_gap_is_not_named_twice(self) -> None:
         [alarm] = self._run(resume_missing=("torque",))
         assert "torque" in alarm["message"]
+
+    def test_live_the_alarm_comes_while_the_data_are_missing(self) -> None:
+        # the daemon's housekeeping ticks on wall time: after 5 s without a hook load the
+        # silence is raised once, stamped when the channels went stale; the resume adds none
+        from tdmon.daemon.steps.alarms import AlarmStep
+
+        clock = [0.0]
+        sink = CollectSink()
+        decoder = Decoder("rig", [ChannelSpec(c, c, "N" if c == "hookload" else "m")
+                                  for c in ("hookload", "bit_depth")])
+        pipeline = Pipeline(decoder, Aligner(stale_timeout=5.0), [AlarmStep()], [sink],
+                            monotonic=lambda: clock[0])
+
+        def send(t: float) -> None:
+            clock[0] = t
+            for channel in ("hookload", "bit_depth"):
+                body = json.dumps({"t": 1.7e9 + t, "value": 1e6}).encode()
+                pipeline.process(RawMessage("mqtt", f"rig/{channel}", body, 1.7e9 + t))
+            pipeline.tick()
+
+        for k in range(10):
+            send(float(k))
+        for now in (9.5, 12.0, 14.0):  # silent, not yet stale
+            clock[0] = now
+            pipeline.tick()
+        assert not [m for m in sink["alarm"] if m["kind"] == "sensor_stale"]
+        for now in (14.5, 20.0, 40.0):
+            clock[0] = now
+            pipeline.tick()
+        [alarm] = [m for m in sink["alarm"] if m["kind"] == "sensor_stale"]
+        assert alarm["t"] == pytest.approx(1.7e9 + 14.0)  # last samples at 9 s, + 5 s
+        assert alarm["message"] == ("2 channels went stale together, no data since: hookload, "
+                                    "bit_depth")
+        for k in range(50, 55):
+            send(float(k))
+        pipeline.flush()
+        assert len([m for m in sink["alarm"] if m["kind"] == "sensor_stale"]) == 1

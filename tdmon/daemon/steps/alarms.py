@@ -47,7 +47,7 @@ class AlarmStep:
         rig_state = frame.state
         self.sensor_state, alarms = sensor_alarms(
             self.sensor_state, frame.t, frame.values, frame.stale,
-            rig_state in MOVING_STATES, self.sensors, frame.gap)
+            rig_state in MOVING_STATES, self.sensors, frame.gap, frame.gap_reported)
         for sensor_alarm in alarms:
             emit("alarm", sensor_alarm.to_message())
         if not frame.steady or rig_state not in (RigState.PICK_UP, RigState.SLACK_OFF):
