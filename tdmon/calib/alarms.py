@@ -46,6 +46,7 @@ __all__ = [
     "limit_alarms",
     "profile_anomaly",
     "sensor_alarms",
+    "stale_gap_alarm",
     "update_band_trend",
 ]
 
@@ -314,18 +315,47 @@ _FROZEN_KIND = {"hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
 
 @dataclass(frozen=True)
 class SensorState:
-    """Channels reported stale, the last values and their run lengths, and the sensor alarm
-    kinds whose condition holds (an alarm is raised when its condition starts)."""
+    """Channels reported stale, those named by a gap's alarm and not heard from since, the last
+    values and their run lengths, and the sensor alarm kinds whose condition holds (an alarm is
+    raised when its condition starts)."""
 
     stale: frozenset[str] = frozenset()
+    announced: frozenset[str] = frozenset()
     last: tuple[tuple[str, float], ...] = ()
     runs: tuple[tuple[str, int], ...] = ()
     active: frozenset[AlarmKind] = frozenset()
     below_since: float | None = None
 
 
+def stale_gap_alarm(gap: tuple[tuple[str, float], ...], resumed: float | None = None) -> Alarm:
+    """The one ``sensor_stale`` alarm of a silence of the whole stream.
+
+    Parameters
+    ----------
+    gap : the channels that went stale (the hook load first) and when each did [s]
+    resumed : when the data came back [s] (None: still silent)
+
+    Returns
+    -------
+    Alarm stamped when the first channel went stale; ``value`` how long they stayed stale [s]
+    (None while the silence lasts)
+    """
+    since = min(when for _, when in gap)
+    names = [channel for channel, _ in gap]
+    listed = ", ".join(names[:1] + sorted(names[1:]))
+    if resumed is None:
+        text = (f"{len(names)} channels went stale together, no data since: {listed}"
+                if len(names) > 1 else f"channel {names[0]} went stale, no data since")
+        return Alarm(since, AlarmKind.SENSOR_STALE, Severity.WARNING, text)
+    text = (f"{len(names)} channels went stale together, for {resumed - since:.0f} s until data "
+            f"resumed: {listed}" if len(names) > 1
+            else f"channel {names[0]} went stale, for {resumed - since:.0f} s until it resumed")
+    return Alarm(since, AlarmKind.SENSOR_STALE, Severity.WARNING, text, resumed - since)
+
+
 def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
-                  stale: tuple[str, ...], moving: bool, settings: SensorSettings
+                  stale: tuple[str, ...], moving: bool, settings: SensorSettings,
+                  gap: tuple[tuple[str, float], ...] = (), gap_reported: bool = False
                   ) -> tuple[SensorState, list[Alarm]]:
     """Stale, implausible and frozen channels; one alarm when a condition starts.
 
@@ -337,10 +367,27 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     stale : channels the aligner reports as too old
     moving : the string is moving (a frozen hook load or depth is then suspicious)
     settings : thresholds
+    gap : channels that went stale in a silence of the whole stream ending at this frame, and
+        when each did [s] (the aligner's ``Frame.gap``): one alarm names them all, stamped when
+        they went stale; they are not reported again until they have been heard from
+    gap_reported : the daemon raised the gap's alarm while it lasted (live): only remember
+        its channels
+
+    Notes
+    -----
+    A stream that stops delivers no frame: a replay sees the silence when the data resume, and
+    the alarm carries the time the channels went stale, not the time they came back; a live
+    daemon raises it while the silence lasts (``Aligner.silence``) and passes ``gap_reported``.
     """
     alarms: list[Alarm] = []
     new_stale = frozenset(stale)
-    started = new_stale - state.stale
+    announced = state.announced
+    if gap:
+        if not gap_reported:
+            alarms.append(stale_gap_alarm(gap, t))
+        announced = announced | frozenset(channel for channel, _ in gap)
+    announced = announced - frozenset(values)  # heard from again
+    started = new_stale - state.stale - announced
     if started:
         for channel in sorted(started):
             alarms.append(Alarm(t, AlarmKind.SENSOR_STALE, Severity.WARNING,
@@ -393,7 +440,7 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
             severity, text, value, limit = texts[condition]
             alarms.append(Alarm(t, condition, severity, text, value, limit))
     # built directly: dataclasses.replace on every frame cost more than the checks
-    new_state = SensorState(stale=new_stale, last=tuple(last.items()),
+    new_state = SensorState(stale=new_stale, announced=announced, last=tuple(last.items()),
                             runs=tuple(runs.items()), active=frozenset(conditions),
                             below_since=below_since)
     return new_state, alarms

@@ -23,7 +23,8 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,9 +37,13 @@ from tdmon.errors import FitError, ModelError
 from tdmon.model.torque_drag import WellModel
 
 __all__ = [
+    "INFORMED_RATIO",
+    "BinInformation",
     "FrictionProfile",
     "ProfileGrid",
     "ProfileState",
+    "describe_information",
+    "information",
     "initial_state",
     "measurement_jacobian",
     "predict",
@@ -50,6 +55,17 @@ Array = NDArray[np.float64]
 
 #: the filter's mean is clipped to these [-]: friction cannot be negative
 _MU_BOUNDS = (0.0, 1.5)
+
+#: a bin is *informed* when its variance is below this fraction of the variance it would have
+#: had without any window [-]: the windows then carry at least as much about it as the prior
+#: (a posterior standard deviation at most 71 % of the prior's)
+INFORMED_RATIO = 0.5
+
+# why a bin is not informed (docs/back-calculation.md, "What the profile knows")
+NO_WINDOW_YET = "no window used yet"
+NOT_REACHED = "no window reached this depth"
+NO_CONTACT = "near-vertical hole: no side force"
+NOT_SEPARATED = "seen only with the string above it: too little bit travel"
 
 
 @dataclass(frozen=True)
@@ -75,6 +91,45 @@ class ProfileGrid:
         return np.asarray(0.5 * (self.edges[:-1] + self.edges[1:]))
 
 
+def describe_information(md: Sequence[float], informed: Sequence[bool] | None,
+                         reasons: Sequence[str | None] | None) -> str:
+    """One line for a reader: how many profile points are informed and, by depth range, why the
+    others are not, e.g. ``"12 of 40 points informed; not informed: 2400-3990 m no window
+    reached this depth"`` (empty when ``informed`` is None: the message predates the field).
+
+    Parameters
+    ----------
+    md : MD of the points [m]
+    informed : per point (see :func:`information`)
+    reasons : per point, why it is not informed (None where informed)
+    """
+    if informed is None or len(informed) != len(md):
+        return ""
+    why = list(reasons) if reasons is not None and len(reasons) == len(md) else [None] * len(md)
+    count = sum(bool(x) for x in informed)
+    runs: list[tuple[float, float, str]] = []
+    for depth, known, reason in zip(md, informed, why, strict=True):
+        if known:
+            continue
+        text = reason or "not informed"
+        if runs and runs[-1][2] == text:
+            runs[-1] = (runs[-1][0], float(depth), text)
+        else:
+            runs.append((float(depth), float(depth), text))
+    head = f"{count} of {len(md)} points informed (variance ratio < {INFORMED_RATIO:g})"
+    if not runs:
+        return head
+    parts = [f"{top:.0f}-{bottom:.0f} m {text}" if bottom > top else f"{top:.0f} m {text}"
+             for top, bottom, text in runs[:_MAX_RUNS]]
+    if len(runs) > _MAX_RUNS:
+        parts.append(f"and {len(runs) - _MAX_RUNS} more stretches")
+    return f"{head}; not informed: " + "; ".join(parts)
+
+
+# depth ranges named by describe_information before it stops (one line stays readable)
+_MAX_RUNS = 6
+
+
 def profile_grid(model: WellModel, bin_length: float) -> ProfileGrid:
     """Bins of ``bin_length`` [m] from the top to the bottom of the hole."""
     if not (math.isfinite(bin_length) and bin_length > 0.0):
@@ -98,7 +153,15 @@ class ProfileState(KalmanState):
     updates : windows used so far [-]
     innovation : last measured minus predicted value [N or N m] (0 before the first update)
     innovation_variance : its predicted variance [N^2 or (N m)^2]
+    reference_variance : the variance each bin would have had without any window, the prior
+        plus the drift added since [-^2] (empty: taken as the diagonal of ``covariance``)
+    windows_seen : per bin, the windows used whose measurement depended on it [-]
+    deepest : the deepest bit depth of a window used [m] (-inf before the first)
     """
+
+    reference_variance: Array = field(default_factory=lambda: np.zeros(0))
+    windows_seen: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    deepest: float = -math.inf
 
     @property
     def mu(self) -> Array:
@@ -108,12 +171,79 @@ class ProfileState(KalmanState):
 
 def initial_state(grid: ProfileGrid, mu: float, std: float) -> ProfileState:
     """Prior: ``mu`` [-] in every bin, independent, standard deviation ``std`` [-]."""
-    return ProfileState(np.full(grid.n_bins, float(mu)), np.eye(grid.n_bins) * std**2)
+    return ProfileState(np.full(grid.n_bins, float(mu)), np.eye(grid.n_bins) * std**2,
+                        reference_variance=np.full(grid.n_bins, float(std) ** 2),
+                        windows_seen=np.zeros(grid.n_bins, np.int64))
 
 
 def predict(state: ProfileState, process_std: float) -> ProfileState:
-    """Random-walk drift of every bin between windows: ``P += q^2 I``, ``q`` [-]."""
-    return kalman.predict(state, process_std)
+    """Random-walk drift of every bin between windows: ``P += q^2 I``, ``q`` [-] (the
+    reference variance of :func:`information` drifts with it)."""
+    drifted = kalman.predict(state, process_std)
+    if state.reference_variance.size != state.mean.size:
+        return drifted
+    return replace(drifted, reference_variance=state.reference_variance + process_std**2)
+
+
+@dataclass(frozen=True)
+class BinInformation:
+    """What the windows have taught the profile about each bin.
+
+    Attributes
+    ----------
+    variance_ratio : posterior variance over the variance the bin would have without any
+        window (prior plus drift) [-]: 1 nothing learned, towards 0 well informed
+    informed : ``variance_ratio < threshold``
+    reason : why a bin is not informed (None for an informed bin)
+    """
+
+    variance_ratio: Array
+    informed: NDArray[np.bool_]
+    reason: tuple[str | None, ...]
+
+
+def information(state: ProfileState, edges: Array, threshold: float = INFORMED_RATIO
+                ) -> BinInformation:
+    """Per bin: the variance ratio, whether it is informed, and why not.
+
+    Parameters
+    ----------
+    state : the filter state
+    edges : the bins' edges in MD, top down [m]
+    threshold : a bin with a smaller variance ratio is informed [-]
+
+    Notes
+    -----
+    The ratio compares the posterior variance with the prior's plus the drift added since, so
+    that a bin no window depends on keeps exactly 1 however long the session. A bin is not
+    informed because no window was used yet, because every window's bit stayed above it, because
+    the hole there is vertical (no side force: friction does not change the loads), or because
+    the windows saw it only through the friction of the whole string above the bit (the bit has
+    not travelled far enough for the filter to tell it from its neighbours).
+    """
+    variance = np.diag(state.covariance)
+    reference = (state.reference_variance if state.reference_variance.size == variance.size
+                 else variance)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(reference > 0.0, variance / reference, 1.0)
+    ratio = np.clip(ratio, 0.0, None)
+    informed = ratio < threshold
+    seen = (state.windows_seen if state.windows_seen.size == variance.size
+            else np.zeros(variance.size, np.int64))
+    reasons: list[str | None] = []
+    for k in range(variance.size):
+        if informed[k]:
+            reasons.append(None)
+        elif state.updates == 0:
+            reasons.append(NO_WINDOW_YET)
+        elif seen[k] > 0:
+            reasons.append(NOT_SEPARATED)
+        elif edges[k] >= state.deepest:
+            reasons.append(NOT_REACHED)
+        else:
+            reasons.append(NO_CONTACT)
+    return BinInformation(np.asarray(ratio, dtype=np.float64), np.asarray(informed),
+                          tuple(reasons))
 
 
 def update(state: ProfileState, measured: float, predicted: float, jacobian: Array,
@@ -213,11 +343,13 @@ class FrictionProfile:
         if observed is None:
             return False
         operation, index = observed.operation, observed.quantity_index
+        depends = np.zeros(self.grid.n_bins, dtype=bool)
 
         def linearise(estimate: Array) -> Linearisation:
             predicted, jacobian = measurement_jacobian(
                 self.model, self.grid, estimate, operation, window.bit_depth,
                 quantity_index=index, method=self.method)
+            depends[:] = jacobian != 0.0
             noise = kalman.noise_with_model_error(observed.standard_error,
                                                   self.model_std_fraction, jacobian, estimate)
             return Linearisation(predicted, jacobian, noise)
@@ -231,16 +363,33 @@ class FrictionProfile:
         if result.gated:
             self.gated += 1
         if result.accepted:
-            self.state = result.state
+            state = result.state
+            if state.windows_seen.size == depends.size:
+                # a new array: copies of this object (the estimator's) share the old one
+                state = replace(state, windows_seen=state.windows_seen + depends,
+                                deepest=max(state.deepest, window.bit_depth))
+            self.state = state
         return result.accepted
 
+    def information(self) -> BinInformation:
+        """The information per bin now (:func:`information`)."""
+        return information(self.state, self.grid.edges)
+
     def message_fields(self) -> dict[str, object]:
-        """``estimate`` message fields of kind ``profile`` (finite numbers only)."""
+        """``estimate`` message fields of kind ``profile`` (finite numbers only).
+
+        Per bin: ``md_m``, ``mu_profile``, ``mu_profile_std``, ``variance_ratio``, ``informed``
+        and ``uninformed_reason`` (null for an informed bin), see :func:`information`.
+        """
         std = self.state.std
+        info = self.information()
         return {
             "md_m": [float(x) for x in self.grid.mid_md],
             "mu_profile": [float(x) for x in self.state.mu],
             "mu_profile_std": [float(x) for x in std],
+            "variance_ratio": [float(x) for x in info.variance_ratio],
+            "informed": [bool(x) for x in info.informed],
+            "uninformed_reason": list(info.reason),
             "innovation": float(self.state.innovation),
             "innovation_std": float(math.sqrt(max(self.state.innovation_variance, 0.0))),
         }

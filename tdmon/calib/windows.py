@@ -4,9 +4,10 @@ A window collects consecutive steady samples of one state; it closes when the st
 a sample is not steady, a gap appears, or it has grown to ``max_samples`` or ``max_travel`` (so
 that each window stays local in bit depth for the friction profile). On closing it is checked:
 spikes are dropped (median absolute deviation), a stuck hook load (every sample identical)
-rejects it, a bit depth that does not follow the block flags it low-confidence. The standard
-error of its mean hook load carries a floor from the sensor's noise, so a one-sample window at
-15 s sampling still has an honest uncertainty.
+rejects it, a bit depth that does not follow the block flags it low-confidence, and so does a
+torque that never changes in a rotating window (a window without rotation does not use it).
+The standard error of its mean hook load carries a floor from the sensor's noise, so a
+one-sample window at 15 s sampling still has an honest uncertainty.
 """
 
 from __future__ import annotations
@@ -17,9 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from tdmon.calib.rigstate import Detection, RigSample
-from tdmon.vocabulary import MOVING_STATES, RigState
+from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
-__all__ = ["Window", "WindowAccumulator", "WindowSettings", "add_sample", "close", "summarise"]
+#: states whose windows are estimated from their surface torque (the rotating ones): only they
+#: are flagged for a torque sensor that does not move
+TORQUE_STATES: frozenset[RigState] = ROTATING_STATES
+
+__all__ = ["TORQUE_STATES", "Window", "WindowAccumulator", "WindowSettings", "add_sample",
+           "close", "summarise"]
 
 
 @dataclass(frozen=True)
@@ -155,7 +161,10 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
     torque = torque_se = None
     if torque_values.size == len(kept) and torque_values.size:
         torque, torque_se = _mean_se(torque_values, settings.torque_noise_floor)
-        if torque_values.size >= 3 and float(np.ptp(torque_values)) == 0.0 and torque != 0.0:
+        # only where the window's estimate uses its torque: a pick-up without rotation
+        # rests at the sensor's zero offset and its confidence does not depend on it
+        if (state in TORQUE_STATES and torque_values.size >= 3
+                and float(np.ptp(torque_values)) == 0.0 and torque != 0.0):
             flags.append("torque_stuck")
     rpm_values = [s.rpm for s, _ in kept if s.rpm is not None and math.isfinite(s.rpm)]
     rpm = float(np.mean(rpm_values)) if len(rpm_values) == len(kept) else None

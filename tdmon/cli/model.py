@@ -73,6 +73,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     broom.add_argument("--step", type=quantity_arg("m", "100 ft"), default=30.0,
                        metavar="LENGTH", help="bit-depth step [m], or with a unit, e.g. "
                        "'100 ft' (default 30 m)")
+    broom.add_argument("--start", type=quantity_arg("m", "2000 m"), default=None,
+                       metavar="LENGTH", help="shallowest bit depth [m], or with a unit, e.g. "
+                       "'6500 ft' (default: one step)")
     add_units_option(broom, "the table and the figure")
     out = broom.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print JSON (SI units in the keys)")
@@ -189,7 +192,12 @@ def _run_broomstick(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.well), "--step", "must be positive")
     units = display_units(args)
     deepest = min(well.string.length, well.sections[-1].bottom)
-    bit_depths = np.arange(args.step, deepest + 1e-9, args.step)
+    start = args.step if args.start is None else args.start
+    if not 0.0 < start <= deepest:
+        raise ConfigError(str(args.well), "--start",
+                          f"{start:g} m is not between 0 and the deepest bit depth "
+                          f"({deepest:g} m)")
+    bit_depths = np.arange(start, deepest + 1e-9, args.step)
     if bit_depths.size == 0 or bit_depths[-1] < deepest - 1e-6:
         bit_depths = np.append(bit_depths, deepest)
     result = broomstick(well, bit_depths, mus, method=args.method)

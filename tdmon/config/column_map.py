@@ -10,23 +10,34 @@ turns it into a CSV layout. See docs/replays.md.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Final
 
 from pydantic import Field, field_validator
 
 from tdmon.channels import check_channel
 from tdmon.config.common import StrictModel, load_model, quantity
 
-__all__ = ["ChannelColumn", "ColumnMapConfig", "TimeColumn", "load_column_map_config"]
+__all__ = ["ISO_FORMATS", "ChannelColumn", "ColumnMapConfig", "TimeColumn",
+           "load_column_map_config"]
+
+
+#: names of the ISO 8601 time format a column map accepts (read as ``"iso8601"``)
+ISO_FORMATS: Final = ("iso8601", "iso")
 
 
 class TimeColumn(StrictModel):
-    """The time column: ``format`` is ``"iso8601"``, ``"unix"`` [s], ``"unix_ms"`` [ms] or a
-    ``strptime`` format; ``utc_offset`` is what naive times are ahead of UTC [s]."""
+    """The time column: ``format`` is ``"iso8601"`` (or ``"iso"``), ``"unix"`` [s],
+    ``"unix_ms"`` [ms] or a ``strptime`` format; ``utc_offset`` is what naive times are ahead
+    of UTC [s]."""
 
     column: str = Field(min_length=1)
     format: str = "iso8601"
     utc_offset: Annotated[float, quantity("s")] = 0.0
+
+    @field_validator("format")
+    @classmethod
+    def _iso(cls, value: str) -> str:
+        return "iso8601" if value.strip().lower() in ISO_FORMATS else value
 
 
 class ChannelColumn(StrictModel):

@@ -3,11 +3,13 @@ reader of every TOML file (:func:`load_model`) with its one error mapping."""
 
 from __future__ import annotations
 
+import difflib
 import re
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, Final, TypeVar
+from types import UnionType
+from typing import Annotated, Any, Final, TypeVar, Union, get_args, get_origin
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError, ValidationInfo
 
@@ -174,8 +176,71 @@ def _relevant(errors: list[Any]) -> list[Any]:
     return kept or errors
 
 
-def validation_to_config_error(path: Path | str, error: ValidationError) -> ConfigError:
-    """The first validation problem as a ConfigError naming the file, the key and the reason."""
+def _key_path(loc: tuple[Any, ...]) -> tuple[Any, ...]:
+    return tuple(p for p in loc if not (isinstance(p, str) and _UNION_TAG.fullmatch(p)))
+
+
+def _model_types(kind: Any) -> list[Any]:
+    """The models (and containers) a field's annotation may hold, unwrapped."""
+    origin = get_origin(kind)
+    if origin is Annotated:
+        return _model_types(get_args(kind)[0])
+    if origin in (Union, UnionType):
+        return [t for arg in get_args(kind) for t in _model_types(arg)]
+    return [kind]
+
+
+def _key_names(model: type[BaseModel] | None, path: tuple[Any, ...]) -> set[str]:
+    """The keys the table at ``path`` (keys and list indices) of ``model`` accepts."""
+    kinds: list[Any] = [model] if model is not None else []
+    for part in path:
+        following: list[Any] = []
+        for kind in kinds:
+            origin = get_origin(kind)
+            if isinstance(kind, type) and issubclass(kind, BaseModel):
+                fields = kind.model_fields
+                field = fields.get(part) if isinstance(part, str) else None
+                if field is None and isinstance(part, str):
+                    field = next((f for f in fields.values() if f.alias == part), None)
+                if field is not None:
+                    following += _model_types(field.annotation)
+            elif origin in (list, tuple) and isinstance(part, int):
+                following += [t for arg in get_args(kind) if arg is not Ellipsis
+                              for t in _model_types(arg)]
+            elif origin is dict and isinstance(part, str):
+                following += _model_types(get_args(kind)[1])
+        kinds = following
+    names: set[str] = set()
+    for kind in kinds:
+        if isinstance(kind, type) and issubclass(kind, BaseModel):
+            names |= {f.alias or name for name, f in kind.model_fields.items()}
+    return names
+
+
+def _unknown_key(error: Any, errors: list[Any], model: type[BaseModel] | None
+                 ) -> tuple[str, Any | None]:
+    """The reason for an unknown key, with the close match among the table's keys, and the
+    'missing key' error that match explains (None if none)."""
+    loc = _key_path(error["loc"])
+    name = str(loc[-1])
+    missing = [e for e in errors if e["type"] == "missing"
+               and len(_key_path(e["loc"])) == len(loc) and _key_path(e["loc"])[:-1] == loc[:-1]]
+    candidates = _key_names(model, loc[:-1]) | {str(_key_path(e["loc"])[-1]) for e in missing}
+    match = difflib.get_close_matches(name, sorted(candidates - {name}), n=1, cutoff=0.6)
+    if not match:
+        return f"unknown key '{name}'", None
+    explained = next((e for e in missing if _key_path(e["loc"])[-1] == match[0]), None)
+    return f"unknown key '{name}', did you mean '{match[0]}'?", explained
+
+
+def validation_to_config_error(path: Path | str, error: ValidationError,
+                               model: type[BaseModel] | None = None) -> ConfigError:
+    """The first validation problem as a ConfigError naming the file, the key and the reason.
+
+    An unknown key comes first when it is a misspelling (difflib's close match) of a key of its
+    table, ``model``'s field names: ``unknown key 'colum', did you mean 'column'?``, and the
+    'missing key' error of the key it stands for is not counted as another problem.
+    """
     errors = _relevant(error.errors())
     first = errors[0]
     reason = first["msg"]
@@ -184,7 +249,15 @@ def validation_to_config_error(path: Path | str, error: ValidationError) -> Conf
         reason = "missing key"
     elif first["type"] == "extra_forbidden":
         reason = "unknown key"
-    loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and _UNION_TAG.fullmatch(p)))
+    for candidate in errors:
+        if candidate["type"] != "extra_forbidden":
+            continue
+        text, explained = _unknown_key(candidate, errors, model)
+        if explained is not None or text.endswith("?") or candidate is first:
+            first, reason = candidate, text
+            errors = [e for e in errors if e is not explained]
+            break
+    loc = _key_path(first["loc"])
     cause = first.get("ctx", {}).get("error")
     if isinstance(cause, CrossFieldError):
         loc = (*loc, *cause.key.split("."))
@@ -225,7 +298,7 @@ def validate_model(
     try:
         return model.model_validate(data, context={UNITS_REQUIRED: True, **(context or {})})
     except ValidationError as exc:
-        raise validation_to_config_error(path, exc) from exc
+        raise validation_to_config_error(path, exc, model) from exc
 
 
 def load_model(

@@ -506,7 +506,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
             {**data, "source_file": None},
             context={UNITS_REQUIRED: True, "base_dir": file.parent})
     except ValidationError as exc:
-        raise validation_to_config_error(file, exc) from exc
+        raise validation_to_config_error(file, exc, DaemonConfig) from exc
     except ValueError as exc:  # a validator outside pydantic's wrapping
         raise ConfigError(str(file), "", str(exc)) from exc
     config = config.model_copy(update={"source_file": file.resolve()})

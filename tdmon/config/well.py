@@ -12,14 +12,15 @@ from __future__ import annotations
 import itertools
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Final, Literal, cast
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import BeforeValidator, Field, ValidationInfo, field_validator, model_validator
 
 from tdmon.config.common import (
+    CrossFieldError,
     Density,
     Diameter,
     Dimensionless,
@@ -30,11 +31,12 @@ from tdmon.config.common import (
     StrictModel,
     WeightPerLength,
     load_model,
+    quantity,
 )
 from tdmon.config.thermal import FrictionModelConfig, TemperatureConfig
 from tdmon.errors import ConfigError, ModelError
 from tdmon.model.friction import local_friction
-from tdmon.model.string import DrillString, StringComponent
+from tdmon.model.string import STEEL_DENSITY, DrillString, StringComponent, weight_per_length
 from tdmon.model.survey import Survey, minimum_curvature
 from tdmon.model.temperature import WellboreTemperature
 from tdmon.model.well import (
@@ -45,6 +47,8 @@ from tdmon.model.well import (
     hole_grid,
     section_friction,
 )
+
+_LENGTH = quantity("m")
 
 
 class WellInfo(StrictModel):
@@ -102,11 +106,24 @@ class HoleSectionConfig(StrictModel):
         return self
 
 
+#: ``length = "rest"``: the top component reaches the surface with the bit at the bottom of the
+#: hole (its length is the hole's depth less the other components)
+REST: Final = "rest"
+
+
+def _length_or_rest(value: Any, info: ValidationInfo) -> float | str:
+    if isinstance(value, str) and value.strip().lower() == REST:
+        return REST
+    return cast(float, _LENGTH.func(value, info))  # type: ignore[call-arg]
+
+
 class StringComponentConfig(StrictModel):
     name: str = ""
-    length: Length = Field(gt=0)
-    od: Diameter = Field(gt=0)
-    id: Diameter = Field(ge=0)
+    length: Annotated[float | str, BeforeValidator(_length_or_rest)]
+    # both may be left out when the weight is buoyed (buoyed_weight, or [fluid]
+    # buoyancy_factor with a weight in air) and the torque radius known (tool_joint_od)
+    od: Diameter | None = Field(default=None, gt=0)
+    id: Diameter | None = Field(default=None, ge=0)
     weight: WeightPerLength | None = Field(default=None, gt=0)
     buoyed_weight: WeightPerLength | None = Field(default=None, gt=0)
     tool_joint_od: Diameter | None = Field(default=None, gt=0)
@@ -116,16 +133,35 @@ class StringComponentConfig(StrictModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> StringComponentConfig:
-        if self.id >= self.od:
+        if isinstance(self.length, float) and not self.length > 0:
+            raise CrossFieldError("length", f"must be > 0 m or \"{REST}\", got {self.length:g}")
+        if (self.od is None) != (self.id is None):
+            raise CrossFieldError("od" if self.od is None else "id",
+                                  "missing key (give both od and id, or neither with a buoyed "
+                                  "weight)")
+        if self.od is not None and self.id is not None and self.id >= self.od:
             raise ValueError(f"id ({self.id:g} m) must be smaller than od ({self.od:g} m)")
         if self.weight is not None and self.buoyed_weight is not None:
             raise ValueError("give 'weight' (in air) or 'buoyed_weight', not both")
         return self
 
 
+class StringDefaultsConfig(StrictModel):
+    """``[string_defaults]``: values every ``[[string]]`` component takes unless it gives its
+    own: ``tool_joint_od`` (the torque radius is half of it)."""
+
+    tool_joint_od: Diameter | None = Field(default=None, gt=0)
+
+
 class FluidConfig(StrictModel):
-    density: Density = Field(gt=0)
+    """``[fluid]``: ``density`` buoys weights in air (eq 35, eq 36 with ``inside_density``);
+    ``buoyancy_factor`` replaces eq 35 for every weight in air. ``density`` may be left out when
+    every weight is buoyed; with ``buoyancy_factor`` alone it is ``(1 - factor) x 7850 kg/m3``
+    (eq 35 read backwards)."""
+
+    density: Density | None = Field(default=None, gt=0)
     inside_density: Density | None = Field(default=None, gt=0)
+    buoyancy_factor: Dimensionless | None = Field(default=None, gt=0, le=1)
 
 
 class LimitsConfig(StrictModel):
@@ -140,7 +176,8 @@ class WellConfig(StrictModel):
     survey: SurveyConfig
     hole: list[HoleSectionConfig] = Field(min_length=1)
     string: list[StringComponentConfig] = Field(min_length=1)
-    fluid: FluidConfig
+    string_defaults: StringDefaultsConfig = StringDefaultsConfig()
+    fluid: FluidConfig = FluidConfig()
     limits: LimitsConfig = LimitsConfig()
     temperature: TemperatureConfig | None = None
 
@@ -154,6 +191,32 @@ class WellConfig(StrictModel):
                     f"above the bottom of the one before ({upper.bottom:g} m)"
                 )
         return hole
+
+    @model_validator(mode="after")
+    def _string_complete(self) -> WellConfig:
+        last = len(self.string) - 1
+        for index, item in enumerate(self.string):
+            key = f"string[{index}]"
+            if item.length == REST and index != last:
+                raise CrossFieldError(f"{key}.length", f"only the top (last) component can be "
+                                      f"\"{REST}\": it is the one cut to length")
+            buoyed = item.buoyed_weight is not None or self.fluid.buoyancy_factor is not None
+            if not buoyed and self.fluid.density is None:
+                raise CrossFieldError("fluid.density", f"missing key ({key} has a weight in air "
+                                      "to buoy; or give [fluid] buoyancy_factor)")
+            if item.od is None:
+                if item.weight is None and item.buoyed_weight is None:
+                    raise CrossFieldError(f"{key}.od", "missing key (no weight given: it comes "
+                                          "from od and id)")
+                if item.weight is not None and self.fluid.buoyancy_factor is None:
+                    raise CrossFieldError(f"{key}.od", "missing key (a weight in air is buoyed "
+                                          "with od and id; or give buoyed_weight, or [fluid] "
+                                          "buoyancy_factor)")
+                if item.tool_joint_od is None and self.string_defaults.tool_joint_od is None:
+                    raise CrossFieldError(f"{key}.tool_joint_od", "missing key (without od the "
+                                          "torque radius comes from it; or give it once in "
+                                          "[string_defaults])")
+        return self
 
     @model_validator(mode="after")
     def _resolve_paths(self, info: ValidationInfo) -> WellConfig:
@@ -177,21 +240,7 @@ class WellConfig(StrictModel):
             )
             for section in self.hole
         )
-        components = tuple(
-            StringComponent(
-                name=item.name,
-                length=item.length,
-                outer_diameter=item.od,
-                inner_diameter=item.id,
-                weight_in_air=item.weight,
-                buoyed_weight=item.buoyed_weight,
-                tool_joint_diameter=item.tool_joint_od,
-                yield_strength=item.yield_strength,
-                makeup_torque=item.makeup_torque,
-                youngs_modulus=item.youngs_modulus,
-            )
-            for item in self.string
-        )
+        components = self._components(str(source), sections[-1].bottom)
         if sections[-1].bottom > survey.md[-1] + 1e-6:
             raise ConfigError(
                 str(source),
@@ -203,7 +252,7 @@ class WellConfig(StrictModel):
             survey=survey,
             string=DrillString(components),
             sections=sections,
-            fluid=Fluid(density=self.fluid.density, inside_density=self.fluid.inside_density),
+            fluid=Fluid(density=self._fluid_density(), inside_density=self.fluid.inside_density),
             block_weight=self.well.block_weight,
             element_length=self.well.element_length,
             limits=LimitSettings(
@@ -212,6 +261,49 @@ class WellConfig(StrictModel):
             ),
             name=self.well.name,
         )
+
+    def _components(self, source: str, hole_bottom: float) -> tuple[StringComponent, ...]:
+        """The model's components: "rest" resolved, the string defaults and the buoyancy
+        factor applied."""
+        fixed = sum(item.length for item in self.string if isinstance(item.length, float))
+        factor = self.fluid.buoyancy_factor
+        components = []
+        for index, item in enumerate(self.string):
+            length = item.length
+            if not isinstance(length, float):
+                length = hole_bottom - fixed
+                if not length > 0.0:
+                    raise ConfigError(source, f"string[{index}].length",
+                                      f"\"{REST}\" leaves {length:g} m: the other components "
+                                      f"({fixed:g} m) reach the bottom of the hole "
+                                      f"({hole_bottom:g} m)")
+            buoyed = item.buoyed_weight
+            if buoyed is None and factor is not None:
+                in_air = (item.weight if item.weight is not None
+                          else float(weight_per_length(item.od or 0.0, item.id or 0.0)))
+                buoyed = factor * in_air
+            try:
+                components.append(StringComponent(
+                    name=item.name, length=length,
+                    outer_diameter=math.nan if item.od is None else item.od,
+                    inner_diameter=math.nan if item.id is None else item.id,
+                    weight_in_air=item.weight if buoyed is None else None,
+                    buoyed_weight=buoyed,
+                    tool_joint_diameter=item.tool_joint_od or self.string_defaults.tool_joint_od,
+                    yield_strength=item.yield_strength, makeup_torque=item.makeup_torque,
+                    youngs_modulus=item.youngs_modulus))
+            except ModelError as exc:
+                raise ConfigError(source, f"string[{index}]", str(exc)) from exc
+        return tuple(components)
+
+    def _fluid_density(self) -> float:
+        """[kg/m3]: given, else from the buoyancy factor (eq 35), else NaN (every weight is
+        buoyed; only the limits' pressure terms would need it)."""
+        if self.fluid.density is not None:
+            return self.fluid.density
+        if self.fluid.buoyancy_factor is not None:
+            return (1.0 - self.fluid.buoyancy_factor) * STEEL_DENSITY
+        return math.nan
 
     def element_friction(self, well: Well, source: str | Path = "<well>") -> NDArray[np.float64]:
         """The friction factor of every element of ``hole_grid(well)`` from the sections'

@@ -103,12 +103,17 @@ class Aligner:
         # was refused; cleared whenever a hook load opens a frame
         self._late: deque[Sample] = deque(maxlen=_MAX_LATE)
         self._jumps: list[ClockJump] = []
+        # monotonic arrival of each channel's latest sample, and a silence of the stream
+        # already reported while it lasted (see silence())
+        self._arrived: dict[str, float] = {}
+        self._reported: tuple[tuple[str, float], ...] = ()
 
     def push(self, sample: Sample, now: float) -> list[Frame]:
         """Take one sample (``now`` is monotonic seconds); return the frames it completes."""
         stored = self._store(sample)
         if stored == _DUPLICATE:
             return []
+        self._arrived[sample.channel] = now
         frames: list[Frame] = []
         if sample.channel == self.trigger:
             pending = self._pending
@@ -173,6 +178,7 @@ class Aligner:
         self._frame_offset = None
         self._refused.clear()
         self._late.clear()
+        self._reported = ()
         self._jumps.append(jump)
         # these samples were counted when they arrived; replaying them is not new disorder
         counts = self.duplicates, self.out_of_order
@@ -257,6 +263,7 @@ class Aligner:
         pending = self._pending
         assert pending is not None
         self._pending = None
+        previous = self._last_frame_t
         self._last_frame_t = pending.t
         t = pending.t
         values: dict[str, float] = {self.trigger: pending.value}
@@ -274,5 +281,62 @@ class Aligner:
                 continue
             values[channel] = self._values[channel][index]
             ages[channel] = age
+        reported, self._reported = self._reported, ()
         return Frame(t=t, log_time_ns=pending.log_time_ns, values=values, ages=ages,
-                     stale=tuple(stale))
+                     stale=tuple(stale), gap=reported or self._gap(previous, t),
+                     gap_reported=bool(reported))
+
+    def silence(self, now: float) -> tuple[tuple[str, float], ...]:
+        """Live: the channels gone stale in a silence of the hook load still under way, and when
+        each did [s of rig time]; () when there is none or it was already returned.
+
+        Called by the daemon's housekeeping (``now`` monotonic seconds): when no hook load has
+        arrived for ``stale_timeout`` of wall time, the channels that were fresh at the last
+        frame and have sent nothing for as long are returned once, so that the alarm comes
+        while the data are missing; the first frame after the silence then carries them with
+        ``gap_reported`` set.
+        """
+        timeout = self.stale_timeout
+        arrived = self._arrived.get(self.trigger)
+        last = self._last_frame_t
+        if (self._reported or self._pending is not None or last == float("-inf")
+                or arrived is None or not now - arrived > timeout):
+            return ()
+        gone = [(self.trigger, last + timeout)]
+        for channel, times in self._times.items():
+            if channel == self.trigger or not times:
+                continue
+            if last - times[-1] > timeout:
+                continue  # already stale at the last frame: reported then
+            if now - self._arrived.get(channel, float("-inf")) <= timeout:
+                continue  # still sending
+            gone.append((channel, times[-1] + timeout))
+        self._reported = tuple(gone)
+        return self._reported
+
+    def _gap(self, previous: float, t: float) -> tuple[tuple[str, float], ...]:
+        """The channels that went stale in a silence of the hook load from ``previous`` (the
+        last frame) to ``t``, and when each did [s]; () without such a silence.
+
+        A channel counts when it was fresh at ``previous`` and sent nothing until it would have
+        been stale: a dropout of the whole stream is one event, named when it happened, not a
+        stale channel at the frame where the data resume.
+        """
+        timeout = self.stale_timeout
+        if previous == float("-inf") or not t - previous > timeout:
+            return ()  # the first frame (of the stream, or after a re-anchor), or no silence
+        gone = [(self.trigger, previous + timeout)]
+        for channel, times in self._times.items():
+            if channel == self.trigger:
+                continue
+            index = bisect.bisect_right(times, previous + _SAME_TIME) - 1
+            if index < 0 or previous - times[index] > timeout:
+                continue  # nothing held from before, or already stale then (reported then)
+            # follow its samples through the silence: stale where one is followed by none
+            # for longer than the timeout
+            while index + 1 < len(times) and times[index + 1] - times[index] <= timeout:
+                index += 1
+            stale_at = times[index] + timeout
+            if stale_at < t:
+                gone.append((channel, stale_at))
+        return tuple(gone)

@@ -55,7 +55,10 @@ class Frame:
 
     ``values`` holds, per channel, the newest value at or before ``t`` that is not older than
     the stale timeout (SI units); ``ages`` how old each is [s]; ``stale`` the channels seen
-    before but left out as too old. Steps annotate ``state``/``steady`` and ``results``.
+    before but left out as too old. On the first frame after a silence of the hook load longer
+    than the stale timeout, ``gap`` holds the channels that went stale in it (the hook load
+    first) and when each did [s]; ``gap_reported`` says the daemon already raised its alarm
+    while the silence lasted (live). Steps annotate ``state``/``steady`` and ``results``.
     """
 
     t: float
@@ -63,6 +66,8 @@ class Frame:
     values: dict[str, float]
     ages: dict[str, float]
     stale: tuple[str, ...] = ()
+    gap: tuple[tuple[str, float], ...] = ()
+    gap_reported: bool = False
     state: str = RigState.UNKNOWN
     steady: bool = False
     results: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -231,9 +236,17 @@ class Pipeline:
             jump.t, AlarmKind.CLOCK_JUMP, Severity.WARNING, jump.message, value=jump.seconds))
 
     def tick(self) -> None:
-        """Emit a frame that has waited long enough for its other channels."""
-        for frame in self.aligner.expire(self._monotonic()):
+        """Emit a frame that has waited long enough for its other channels; raise the stale
+        alarm of a silence of the whole stream while it lasts."""
+        now = self._monotonic()
+        for frame in self.aligner.expire(now):
             self._run_steps(frame)
+        silence = getattr(self.aligner, "silence", None)  # not part of FrameSource
+        gone = silence(now) if silence is not None else ()
+        if gone:
+            from tdmon.calib.alarms import stale_gap_alarm
+
+            self._write("/tdmon/alarm", time.time_ns(), stale_gap_alarm(gone).to_message())
 
     def flush(self) -> None:
         """End of input: emit what the aligner holds and let each step finish (idempotent)."""

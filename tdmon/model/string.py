@@ -124,7 +124,9 @@ class StringComponent:
     ----------
     name : label, e.g. ``"5in DP"``
     length : [m]
-    outer_diameter, inner_diameter : tube body [m]
+    outer_diameter, inner_diameter : tube body [m]; both NaN when not known, for a component
+        given by its buoyed weight (its torque radius is then the tool joint's; the steel
+        cross-section and the limits that need it are NaN, i.e. not checked)
     weight_in_air : [N/m], buoyed with the well's fluid; optional
     buoyed_weight : [N/m], used as is; optional. When neither weight is given the weight in air
         comes from eq 41 (`weight_per_length`).
@@ -151,7 +153,12 @@ class StringComponent:
             raise ModelError(
                 f"string component '{self.name}': length must be > 0, got {self.length}"
             )
-        if not (self.outer_diameter > self.inner_diameter >= 0.0):
+        unknown = math.isnan(self.outer_diameter) and math.isnan(self.inner_diameter)
+        if unknown and self.buoyed_weight is None:
+            raise ModelError(
+                f"string component '{self.name}': without its diameters it needs a buoyed weight"
+            )
+        if not unknown and not (self.outer_diameter > self.inner_diameter >= 0.0):
             raise ModelError(
                 f"string component '{self.name}': need outer diameter > inner diameter >= 0, got "
                 f"{self.outer_diameter} and {self.inner_diameter} m"

@@ -244,7 +244,8 @@ def _latest_profile(data: ReportData) -> dict[str, Any] | None:
     if estimate is None:
         return None
     return {"md_m": estimate["md_m"], "mu": estimate["mu_profile"],
-            "mu_std": estimate.get("mu_profile_std")}
+            "mu_std": estimate.get("mu_profile_std"), "informed": estimate.get("informed"),
+            "uninformed_reason": estimate.get("uninformed_reason")}
 
 
 def _informed(profile: dict[str, Any], n: int) -> tuple[np.ndarray, str | None]:
@@ -253,8 +254,10 @@ def _informed(profile: dict[str, Any], n: int) -> tuple[np.ndarray, str | None]:
     flags = profile.get("informed")
     if not isinstance(flags, list) or len(flags) != n:
         return np.ones(n, dtype=bool), None
-    reason = profile.get("informed_reason") or profile.get("reason")
-    return np.array([bool(f) for f in flags]), (str(reason) if reason else None)
+    from tdmon.calib.profile import describe_information
+
+    return np.array([bool(f) for f in flags]), describe_information(
+        profile["md_m"], flags, profile.get("uninformed_reason"))
 
 
 def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
@@ -279,9 +282,8 @@ def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Fi
         if not informed.all():
             axes.plot(np.where(~informed, mu, np.nan), md, color="0.65", lw=1.0, ls=":",
                       label="not informed by data (prior)")
-            notes.append(f"{int((~informed).sum())} of {informed.size} profile points are not "
-                         "informed by the data and are drawn grey (dotted)"
-                         + (f": {reason}" if reason else ""))
+            notes.append("Profile points the data did not inform are drawn grey (dotted): "
+                         + (reason or f"{int((~informed).sum())} of {informed.size}"))
         if calibrated:
             std = np.array([_num(v) for v in profile["mu_std"]])
             axes.fill_betweenx(md, shown - std, shown + std, color="k", alpha=0.15,

@@ -19,7 +19,8 @@ field: klbf, kft lbf, ft, degF), the unit in the entity's name; the messages sta
   (field: ``hookload_klbf``, ``torque_kftlbf``, ``bit_depth_in``).
 * ``friction/<operation>``: window estimates of mu; ``friction_mu_T/<param>``.
 * ``rig_state``: state changes (state timeline view); ``bit_depth_m`` (``bit_depth_ft``).
-* ``profile/friction``, ``profile/temperature_C`` (``_F``): bar charts against MD.
+* ``profile/friction``, ``profile/temperature_C`` (``_F``): bar charts against MD; friction
+  only in the bins the windows informed, ``profile/note`` (text) says why the others are out.
 * ``well/trajectory`` (LineStrips3D, east/north/up in metres whatever the units: a picture),
   ``well/friction`` (the same path coloured by local friction), ``well/string`` and
   ``well/bit`` (string position).
@@ -352,7 +353,8 @@ class RerunViews:
                 self._scalar(f"vs_depth/friction/{operation}", self.names.depth_timeline, index,
                              mu)
         elif kind == EstimateKind.PROFILE and "md_m" in message and "mu_profile" in message:
-            self._friction_profile(t_ns, message["md_m"], message["mu_profile"])
+            self._friction_profile(t_ns, message["md_m"], message["mu_profile"],
+                                   message.get("informed"), message.get("uninformed_reason"))
         elif kind == EstimateKind.MU_T:
             for name, value in (message.get("params") or {}).items():
                 self._scalar(f"friction_mu_T/{name}", TIME, t_ns, _finite(value))
@@ -364,11 +366,22 @@ class RerunViews:
                 self.units.temperature(np.asarray(message["temperature_C"], np.float64)),
                 abscissa=self.units.depth(np.asarray(md, np.float64))))
         if "mu" in message:
-            self._friction_profile(t_ns, md, message["mu"])
+            self._friction_profile(t_ns, md, message["mu"], message.get("informed"),
+                                   message.get("uninformed_reason"))
 
-    def _friction_profile(self, t_ns: int, md: Sequence[float], mu: Sequence[Any]) -> None:
+    def _friction_profile(self, t_ns: int, md: Sequence[float], mu: Sequence[Any],
+                          informed: Sequence[bool] | None = None,
+                          reasons: Sequence[str | None] | None = None) -> None:
         md_array = np.asarray(md, np.float64)
         mu_array = np.asarray([np.nan if v is None else v for v in mu], np.float64)
+        if informed is not None and len(informed) == len(mu_array):
+            # an uninformed bin shows the prior, not the rig: left out of the bars, grey in
+            # 3D, and the note says why
+            from tdmon.calib.profile import describe_information
+
+            mu_array[~np.asarray(informed, dtype=bool)] = np.nan
+            self._log_at(t_ns, "profile/note", self._rr.TextDocument(
+                "Local friction: " + describe_information(md, informed, reasons)))
         self._log_at(t_ns, "profile/friction", self._rr.BarChart(
             np.nan_to_num(mu_array), abscissa=self.units.depth(md_array)))
         if self._well is None or len(md_array) < 2:
@@ -531,7 +544,9 @@ def blueprint(units: UnitSystem | None = None) -> Any:
     well = rrb.Horizontal(
         rrb.Spatial3DView(origin="/well", name="Trajectory, string, local friction"),
         rrb.Vertical(
-            rrb.BarChartView(origin="/profile/friction", name=f"Local friction vs MD [{depth}]"),
+            rrb.BarChartView(origin="/profile/friction",
+                             name=f"Local friction vs MD [{depth}] (informed bins)"),
+            rrb.TextDocumentView(origin="/profile/note", name="What the profile knows"),
             rrb.BarChartView(origin=f"/{names.temperature_profile}",
                              name=f"Temperature [{degrees}] vs MD [{depth}]"),
         ),

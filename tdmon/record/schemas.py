@@ -45,6 +45,8 @@ _COUNT: Final[JsonSchema] = {"type": "integer", "minimum": 0}
 _TEXT: Final[JsonSchema] = {"type": "string"}
 _NUMBERS: Final[JsonSchema] = {"type": "array", "items": {"type": "number"}}
 _OPTIONAL_NUMBERS: Final[JsonSchema] = {"type": "array", "items": {"type": ["number", "null"]}}
+_BOOLEANS: Final[JsonSchema] = {"type": "array", "items": {"type": "boolean"}}
+_OPTIONAL_TEXTS: Final[JsonSchema] = {"type": "array", "items": {"type": ["string", "null"]}}
 
 
 # Optional fields of a payload recorded only in part (tdmon.ingest.types.bounded_payload): a
@@ -181,6 +183,10 @@ ESTIMATE: Final = _object(
         "md_m": _NUMBERS,
         "mu_profile": _NUMBERS,
         "mu_profile_std": _OPTIONAL_NUMBERS,
+        # per bin: posterior over no-window variance, whether below INFORMED_RATIO, and why not
+        "variance_ratio": _NUMBERS,
+        "informed": _BOOLEANS,
+        "uninformed_reason": _OPTIONAL_TEXTS,
         "model": _TEXT,
         "params": {"type": "object", "additionalProperties": {"type": "number"}},
         "temperature_C": _NUMBERS,
@@ -259,6 +265,9 @@ PROFILE: Final = _object(
         "temperature_C": _NUMBERS,
         "mu": _NUMBERS,
         "mu_std": _OPTIONAL_NUMBERS,
+        "variance_ratio": _NUMBERS,
+        "informed": _BOOLEANS,
+        "uninformed_reason": _OPTIONAL_TEXTS,
     },
     ("t", "md_m"),
     anyOf=[{"required": ["temperature_C"]}, {"required": ["mu"]}],

@@ -113,7 +113,8 @@ class CsvLayout:
     ----------
     name : label (``"volve"``, or the map file's name)
     time_column : column holding the sample time
-    time_format : ``"iso8601"``, ``"unix"`` [s], ``"unix_ms"`` [ms] or a ``strptime`` format
+    time_format : ``"iso8601"`` (or ``"iso"``), ``"unix"`` [s], ``"unix_ms"`` [ms] or a
+        ``strptime`` format
     utc_offset : what naive times are ahead of UTC [s]
     channels : mapped columns
     rig_activity_column : column of Volve-style rig activity codes (None: none)
@@ -182,7 +183,7 @@ def _parse_time(text: str, layout: CsvLayout) -> float:
     elif fmt == "unix_ms":
         seconds = float(text) / 1000.0
     else:
-        stamp = (datetime.fromisoformat(text) if fmt == "iso8601"
+        stamp = (datetime.fromisoformat(text) if fmt in ("iso8601", "iso")
                  else datetime.strptime(text, fmt))
         if stamp.tzinfo is None:
             stamp = stamp.replace(tzinfo=UTC) - timedelta(seconds=layout.utc_offset)

@@ -422,3 +422,26 @@ def test_weight_check_needs_three_odd_hangs(model_open: WellModel) -> None:
     assert "85 %" in checks[0]["message"]
     assert "density" not in checks[0]["message"]  # weights given buoyed: no density to infer
     assert calibrate.weight_checks[0].ratio == pytest.approx(1.0)
+
+
+def test_a_gap_is_one_stale_alarm_and_its_channels_are_not_named_again() -> None:
+    s = SensorSettings()
+    state = SensorState()
+    # the whole stream silent from 19 s (stale from 24 s) to 65 s; torque does not come back
+    gap = (("hookload", 24.0), ("bit_depth", 24.0), ("torque", 23.5))
+    state, alarms = sensor_alarms(state, 65.0, {"hookload": 1e6, "bit_depth": 3000.0},
+                                  ("torque",), False, s, gap)
+    [alarm] = alarms
+    assert (alarm.t, alarm.value) == (23.5, 41.5)
+    assert alarm.message == ("3 channels went stale together, for 42 s until data resumed: "
+                             "hookload, bit_depth, torque")
+    state, alarms = sensor_alarms(state, 66.0, {"hookload": 1e6}, ("torque",), False, s)
+    assert alarms == []
+    # torque heard from again, then stale again later: a new event, a new alarm
+    state, alarms = sensor_alarms(state, 67.0, {"hookload": 1e6, "torque": 5e3}, (), False, s)
+    state, alarms = sensor_alarms(state, 80.0, {"hookload": 1e6}, ("torque",), False, s)
+    assert [a.message for a in alarms] == ["channel torque is stale"]
+    # the hook load alone
+    _, [alone] = sensor_alarms(SensorState(), 40.0, {"hookload": 1e6}, (), False, s,
+                               (("hookload", 30.0),))
+    assert alone.message == "channel hookload went stale, for 10 s until it resumed"

@@ -12,8 +12,13 @@ import numpy as np
 import pytest
 
 from tdmon.calib.profile import (
+    NO_CONTACT,
+    NO_WINDOW_YET,
+    NOT_REACHED,
+    NOT_SEPARATED,
     FrictionProfile,
     ProfileState,
+    describe_information,
     initial_state,
     measurement_jacobian,
     predict,
@@ -155,3 +160,47 @@ def test_overpull_window_is_gated_out(model_open: WellModel, trip: Any, windows_
     assert profile.gated == 1
     assert profile.state is before
     assert profile.add_window(last)
+
+
+def test_information_per_bin(model_open: WellModel, trip: Any, windows_of: Any) -> None:
+    # a trip out from 4200 to 3600 m with a 200 m BHA, and drift between windows: bins the bit
+    # never reached, the vertical hole and the bins seen only through the whole string keep a
+    # variance ratio of (about) 1; the bins the BHA swept are informed
+    session = trip(model_open, np.full(model_open.n_elements, 0.25), start=4200.0, end=3600.0)
+    _, windows = windows_of(session)
+    profile = FrictionProfile(model_open, bin_length=100.0, prior_std=0.1, process_std=0.002)
+    fields = profile.message_fields()
+    assert fields["informed"] == [False] * profile.grid.n_bins
+    assert set(fields["uninformed_reason"]) == {NO_WINDOW_YET}  # type: ignore[arg-type]
+    used = sum(profile.add_window(w) for w in windows)
+    assert used >= 20
+    info = profile.information()
+    md, top = profile.grid.mid_md, profile.grid.edges[:-1]
+    # drift raised every variance by used * q^2; a bin no window depends on still has ratio 1
+    assert profile.state.reference_variance == pytest.approx(np.full(md.size,
+                                                                     0.01 + used * 0.002**2))
+    below = top >= 4200.0
+    assert below.any()
+    assert info.variance_ratio[below] == pytest.approx(1.0, abs=1e-12)
+    assert all(info.reason[k] == NOT_REACHED for k in np.flatnonzero(below))
+    vertical = profile.grid.edges[1:] <= 1500.0  # above the kick-off point
+    assert info.variance_ratio[vertical] == pytest.approx(1.0, abs=1e-12)
+    assert all(info.reason[k] == NO_CONTACT for k in np.flatnonzero(vertical))
+    # the stretch the BHA swept: many windows, ratio << 1
+    swept = (md > 3650.0) & (md < 4150.0)
+    assert np.all(profile.state.windows_seen[swept] >= 3)
+    assert np.max(info.variance_ratio[swept]) < 0.3
+    assert info.informed[swept].all()
+    # above the BHA the windows saw the bins only together: seen many times, not informed
+    together = (md > 2100.0) & (md < 3350.0)
+    assert np.all(profile.state.windows_seen[together] == used)
+    assert np.min(info.variance_ratio[together]) > 0.8
+    assert all(info.reason[k] == NOT_SEPARATED for k in np.flatnonzero(together))
+    fields = profile.message_fields()
+    assert fields["variance_ratio"] == pytest.approx(info.variance_ratio.tolist())
+    assert fields["informed"] == info.informed.tolist()
+    text = describe_information(fields["md_m"], fields["informed"],  # type: ignore[arg-type]
+                                fields["uninformed_reason"])  # type: ignore[arg-type]
+    assert text.startswith(f"{int(info.informed.sum())} of {md.size} points informed")
+    assert text.endswith(f"; {md[-1]:.0f} m {NOT_REACHED}")  # the one bin below 4200 m
+    assert f"{md[0]:.0f}-{md[vertical][-1]:.0f} m {NO_CONTACT}" in text

@@ -246,3 +246,58 @@ def test_replay_scenarios_states_match_truth(replayed: Any, scenario: str,
     # every state the scenario visits is recognised somewhere
     for state in set(truth.tolist()):
         assert (result.states[truth == state] == state).mean() >= 0.6, state
+
+
+def _setting_slips() -> list[RigSample]:
+    # Volve F-4 at 5 s sampling: a static hang at 1410 kN (1 kN of noise), then the slips are
+    # set and the hook load falls 1410 -> 1344 -> 1035 kN before the string rests in them
+    loads = [1410e3 + 1e3 * math.sin(k) for k in range(12)] + [1344e3, 1035e3, 420e3, 418e3]
+    return [RigSample(5.0 * k, load, 2390.0, block_position=12.0)
+            for k, load in enumerate(loads)]
+
+
+def test_a_hang_being_set_in_the_slips_is_not_steady() -> None:
+    prior = DetectorState()
+    detections = []
+    for sample in _setting_slips():
+        prior, detection = detect(prior, sample, TH)
+        detections.append(detection)
+    assert [d.state for d in detections[:14]] == ["static"] * 14
+    assert all(d.steady for d in detections[2:12])  # the hang itself settles
+    # 1344 kN is 66 kN below the hang: within the sample-to-sample step (5 % of the load) but
+    # not a settled hang
+    assert not detections[12].steady
+    assert not detections[13].steady
+    windows = _feed(_setting_slips(), WindowSettings(min_samples=3))
+    statics = [w for w in windows if w.state == "static"]
+    assert len(statics) == 1
+    assert statics[0].t_end == 55.0  # the last sample of the hang, nothing of the transient
+    assert statics[0].hookload == pytest.approx(1410e3, abs=1e3)
+
+
+def test_a_hang_drifting_within_the_tolerance_stays_steady() -> None:
+    # 0.5 kN/sample of drift (mud temperature, line stretch) stays inside 20 kN over 5 s
+    samples = [RigSample(5.0 * k, 1410e3 + 500.0 * k, 2390.0) for k in range(20)]
+    prior = DetectorState()
+    flags = []
+    for sample in samples:
+        prior, detection = detect(prior, sample, TH)
+        flags.append(detection.steady)
+    assert all(flags[1:])
+
+
+def test_stuck_torque_flags_only_windows_that_use_torque() -> None:
+    # the torque sensor reads a constant 5.2 kN m: a pick-up without rotation does not use
+    # torque and keeps full confidence; a rotating window does and is flagged
+    pull = [RigSample(float(k), 1.4e6 + 2e3 * math.sin(k), 3000.0 - 0.5 * k,
+                      block_position=1.0 + 0.5 * k, rpm=0.0, torque=5.2e3) for k in range(40)]
+    [window] = [w for w in _feed(pull, WindowSettings(min_samples=3, max_travel=100.0))
+                if w.state == "pick_up"]
+    assert window.torque == pytest.approx(5.2e3)
+    assert "torque_stuck" not in window.flags
+    assert not window.low_confidence
+    spin = [RigSample(float(k), 1.2e6 + 2e3 * math.sin(k), 3000.0, block_position=1.0,
+                      rpm=RPM_100, torque=5.2e3) for k in range(40)]
+    rotating = [w for w in _feed(spin, WindowSettings(min_samples=3))
+                if w.state == "rotating_off_bottom"]
+    assert rotating and all("torque_stuck" in w.flags and w.low_confidence for w in rotating)

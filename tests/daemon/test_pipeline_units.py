@@ -291,3 +291,85 @@ def test_pipeline_records_before_steps_and_survives_a_failing_step() -> None:
     assert sink.order.count("/tdmon/raw") == 11
     status = pipeline.status_message({"mqtt": "connected"}, now=10.0)
     assert status["samples_in"] == 10 and status["rejected"] == 1 and status["lag_s"] == 6.0
+
+
+class TestStaleAfterAGap:
+    """Every channel silent for 45 s (1 Hz, stale timeout 5 s): one ``sensor_stale`` alarm names
+    the channels that went stale, stamped when they went stale, and none when data resumes."""
+
+    CHANNELS = ("hookload", "bit_depth", "torque", "rpm", "flow_in", "spp", "block_position",
+                "hole_depth", "wob")
+
+    def _run(self, resume_missing: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+        from tdmon.daemon.steps.alarms import AlarmStep
+
+        sink = CollectSink()
+        step = AlarmStep()
+        aligner = Aligner(stale_timeout=5.0)
+        times = [float(k) for k in range(20)] + [65.0 + k for k in range(20)]
+        for t in times:
+            for channel in self.CHANNELS:
+                if t >= 65.0 and channel in resume_missing:
+                    continue
+                for frame in aligner.push(s(channel, t, 1e6 if channel == "hookload" else 1.0),
+                                          t):
+                    step.on_frame(frame, self._emit(sink))
+        for frame in aligner.flush():
+            step.on_frame(frame, self._emit(sink))
+        return [m for m in sink["alarm"] if m["kind"] == "sensor_stale"]
+
+    @staticmethod
+    def _emit(sink: CollectSink) -> Emit:
+        def emit(name: str, message: dict[str, Any]) -> None:
+            sink.write(f"/tdmon/{name}", 0, message)
+        return emit
+
+    def test_one_alarm_for_the_gap_when_the_channels_went_stale(self) -> None:
+        [alarm] = self._run()
+        # the last samples before the gap are at 19 s: stale from 24 s, data again at 65 s
+        assert alarm["t"] == 24.0
+        assert alarm["message"] == (
+            "9 channels went stale together, for 41 s until data resumed: hookload, "
+            "bit_depth, block_position, flow_in, hole_depth, rpm, spp, torque, wob")
+        assert alarm["value"] == 41.0
+
+    def test_a_channel_still_missing_after_the_gap_is_not_named_twice(self) -> None:
+        [alarm] = self._run(resume_missing=("torque",))
+        assert "torque" in alarm["message"]
+
+    def test_live_the_alarm_comes_while_the_data_are_missing(self) -> None:
+        # the daemon's housekeeping ticks on wall time: after 5 s without a hook load the
+        # silence is raised once, stamped when the channels went stale; the resume adds none
+        from tdmon.daemon.steps.alarms import AlarmStep
+
+        clock = [0.0]
+        sink = CollectSink()
+        decoder = Decoder("rig", [ChannelSpec(c, c, "N" if c == "hookload" else "m")
+                                  for c in ("hookload", "bit_depth")])
+        pipeline = Pipeline(decoder, Aligner(stale_timeout=5.0), [AlarmStep()], [sink],
+                            monotonic=lambda: clock[0])
+
+        def send(t: float) -> None:
+            clock[0] = t
+            for channel in ("hookload", "bit_depth"):
+                body = json.dumps({"t": 1.7e9 + t, "value": 1e6}).encode()
+                pipeline.process(RawMessage("mqtt", f"rig/{channel}", body, 1.7e9 + t))
+            pipeline.tick()
+
+        for k in range(10):
+            send(float(k))
+        for now in (9.5, 12.0, 14.0):  # silent, not yet stale
+            clock[0] = now
+            pipeline.tick()
+        assert not [m for m in sink["alarm"] if m["kind"] == "sensor_stale"]
+        for now in (14.5, 20.0, 40.0):
+            clock[0] = now
+            pipeline.tick()
+        [alarm] = [m for m in sink["alarm"] if m["kind"] == "sensor_stale"]
+        assert alarm["t"] == pytest.approx(1.7e9 + 14.0)  # last samples at 9 s, + 5 s
+        assert alarm["message"] == ("2 channels went stale together, no data since: hookload, "
+                                    "bit_depth")
+        for k in range(50, 55):
+            send(float(k))
+        pipeline.flush()
+        assert len([m for m in sink["alarm"] if m["kind"] == "sensor_stale"]) == 1

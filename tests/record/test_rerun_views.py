@@ -155,3 +155,24 @@ def test_live_views_leave_the_users_rerun_settings_alone(tmp_path: Path,
     assert (tmp_path / "live.rrd").stat().st_size > 0
     assert sorted(p.name for p in config.rglob("*")) == []
     assert sorted(p.name for p in home.rglob("*")) == []
+
+
+def test_uninformed_profile_bins_are_left_out_and_explained(tmp_path: Path) -> None:
+    # the middle point is informed; the others still hold the prior (0.30, 0.31)
+    message = {"t": 1.0, "md_m": [100.0, 200.0, 300.0], "mu": [0.30, 0.25, 0.31],
+               "mu_std": [0.1, 0.02, 0.1], "variance_ratio": [1.0, 0.04, 1.0],
+               "informed": [False, True, False],
+               "uninformed_reason": ["no side force", None, "no window reached this depth"]}
+    path = tmp_path / "profile.rrd"
+    build_rrd([("/tdmon/profile", 1, message)], path)
+    values: dict[str, object] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        for name in ("BarChart:values", "TextDocument:text"):
+            if name in batch.schema.names:
+                values[chunk.entity_path] = batch.column(name).to_pylist()[0][0]
+    bars = values["/profile/friction"]
+    assert isinstance(bars, dict) and bars["buffer"] == [0.0, 0.25, 0.0]
+    assert values["/profile/note"] == (
+        "Local friction: 1 of 3 points informed (variance ratio < 0.5); not informed: "
+        "100 m no side force; 300 m no window reached this depth")

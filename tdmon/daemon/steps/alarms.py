@@ -2,7 +2,7 @@
 implausible sensors (the window-level alarms come from the estimator, `steps.calibrate`).
 
 Frame fields read: ``values`` (``hookload`` [N] and what the sensor checks look at),
-``frame.stale``, ``frame.state``/``frame.steady`` (from the rig-state step) and
+``frame.stale``, ``frame.gap``, ``frame.state``/``frame.steady`` (from the rig-state step) and
 ``frame.results["model"]`` (the monitor's band).
 """
 
@@ -47,7 +47,7 @@ class AlarmStep:
         rig_state = frame.state
         self.sensor_state, alarms = sensor_alarms(
             self.sensor_state, frame.t, frame.values, frame.stale,
-            rig_state in MOVING_STATES, self.sensors)
+            rig_state in MOVING_STATES, self.sensors, frame.gap, frame.gap_reported)
         for sensor_alarm in alarms:
             emit("alarm", sensor_alarm.to_message())
         if not frame.steady or rig_state not in (RigState.PICK_UP, RigState.SLACK_OFF):

@@ -111,12 +111,19 @@ class ProfileStep:
             bins = profile.grid.element_bin[self.element_index]
             message["mu"] = profile.state.mu[bins].tolist()
             message["mu_std"] = profile.state.std[bins].tolist()
+            # what the windows taught each point's bin (docs/recording.md): views grey out or
+            # leave out the uninformed ones and say why
+            info = profile.information()
+            message["variance_ratio"] = info.variance_ratio[bins].tolist()
+            message["informed"] = info.informed[bins].tolist()
+            message["uninformed_reason"] = [info.reason[k] for k in bins.tolist()]
         elif self.friction is not None:
             message["mu"] = self.friction[self.element_index].tolist()
         if "mu" not in message and "temperature_C" not in message:
             return None
         # a non-finite value would be written as null and break the arrays' number schema
-        if not all(np.isfinite(message[key]).all() for key in ("temperature_C", "mu", "mu_std")
+        if not all(np.isfinite(message[key]).all()
+                   for key in ("temperature_C", "mu", "mu_std", "variance_ratio")
                    if key in message):
             return None
         return message

@@ -104,15 +104,17 @@ def rig_state_thresholds(rs: RigStateConfig) -> RigStateThresholds:
 
     ``in_slips_hookload`` is the in-slips margin over a zero block weight; ``steady_frames``
     the samples a state must have lasted (no settling time). The detector's checks that the
-    plain thresholds never had are switched off: no glitch speed, gap, acceleration or
-    hook-load step limit, no standpipe pressure standing in for flow, and weight on bit does not
-    widen "on bottom". What stays different is listed in docs/daemon.md (``[rig_state]``).
+    plain thresholds never had are switched off: no glitch speed, gap, acceleration,
+    hook-load step or settled-hang limit, no standpipe pressure standing in for flow, and
+    weight on bit does not widen "on bottom". What stays different is listed in
+    docs/daemon.md (``[rig_state]``).
     """
     return RigStateThresholds(
         block_weight=0.0, in_slips_margin=rs.in_slips_hookload, moving_speed=rs.moving_speed,
         rotating_speed=rs.rotating_rpm, circulating_flow=rs.circulating_flow,
         circulating_pressure=math.inf, on_bottom=rs.on_bottom, settle_time=0.0,
         settle_samples=rs.steady_frames, max_acceleration=math.inf,
-        max_hookload_step=math.inf, max_gap=math.inf, max_speed=math.inf,
+        max_hookload_step=math.inf, hang_tolerance=math.inf, max_gap=math.inf,
+        max_speed=math.inf,
         velocity_disagreement=math.inf, drilling_wob=-math.inf,
         on_bottom_with_wob=rs.on_bottom)
