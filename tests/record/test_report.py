@@ -64,7 +64,7 @@ def _profile_recording(tmp_path: Path, informed: list[bool] | None) -> Path:
                                   "mu_std": [0.02] * 10}
     if informed is not None:
         profile |= {"informed": informed, "variance_ratio": [0.1] * 6 + [0.97] * 4,
-                    "informed_reason": "no window has loaded these bins yet"}
+                    "uninformed_reason": [None] * 6 + ["no window reached this depth"] * 4}
     with McapRecorder(tmp_path / "rec") as recorder:
         recorder.write("/tdmon/profile", 10, profile)
     return Path(recorder.stats.files[0])
@@ -87,8 +87,9 @@ def test_profile_bins_not_informed_by_data_are_greyed(tmp_path: Path,
     out = tmp_path / "informed"
     report.write_report([_profile_recording(tmp_path / "a", informed)], out)
     page = (out / "report.html").read_text()
-    assert ("4 of 10 profile points are not informed by the data and are drawn grey (dotted): "
-            "no window has loaded these bins yet") in page
+    assert ("Profile points the data did not inform are drawn grey (dotted): 6 of 10 points "
+            "informed (variance ratio &lt; 0.5); not informed: 700-1000 m no window reached this "
+            "depth") in page
     solid, grey = lines["local friction profile"], lines["not informed by data (prior)"]
     assert [math.isnan(x) for x in solid] == [not f for f in informed]
     assert [math.isnan(x) for x in grey] == informed
