@@ -74,11 +74,12 @@ class Severity(StrEnum):
 
 class EstimateKind(StrEnum):
     """What an ``estimate`` message holds: one window's friction, the friction profile along
-    MD, or the live mu(T) calibration."""
+    MD, the live mu(T) calibration, or friction and weight factor estimated jointly."""
 
     WINDOW = "window"
     PROFILE = "profile"
     MU_T = "mu_T"
+    JOINT = "joint"
 
 
 MOVING_STATES: Final = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.REAMING,
@@ -158,3 +159,4 @@ class AlarmKind(StrEnum):
     RECORDING_RECOVERED = "recording_recovered"
     DATA_LOSS = "data_loss"
     CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)
+    WEIGHT_MISMATCH = "weight_mismatch"  # joint friction/weight estimate (calib/mismatch.py)
