@@ -92,6 +92,11 @@ ESTIMATED_STATES = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.ROT
 MIN_BLOCK_WEIGHT_SAMPLES = 20
 #: the between-window scatter each estimated rig state feeds (named as the joint
 #: estimate's measurement kinds)
+#: the motion whose drag a later hang keeps in part (rotation off bottom releases it)
+_MOTION: dict[str, str] = {
+    RigState.PICK_UP: "pick_up", RigState.BACK_REAMING: "pick_up",
+    RigState.SLACK_OFF: "slack_off", RigState.REAMING: "slack_off",
+    RigState.ROTATING_OFF_BOTTOM: "rotating"}
 _SCATTER_KIND = {RigState.PICK_UP: "pick_up", RigState.SLACK_OFF: "slack_off",
                  RigState.ROTATING_OFF_BOTTOM: "rotating_torque"}
 
@@ -240,6 +245,10 @@ class FrictionEstimator:
         (EstimatorState, outputs)
         """
         windows, outputs = self._update(state.windows, state.samples.block_weight, window)
+        if window.rejected is None and window.state in _MOTION:
+            motion = _MOTION[window.state]
+            if motion != windows.last_motion:
+                windows = replace(windows, last_motion=motion)
         return EstimatorState(state.samples, windows), tuple(outputs)
 
     def _update(self, w: WindowState, block: BlockWeightWindow, window: Window
@@ -364,7 +373,7 @@ class FrictionEstimator:
         taus = {kind: scatter_std(w.scatter.get(kind), s.scatter_prior)
                 for kind in _SCATTER_KIND.values()}
         joint = update_joint(w.joint, self.model, window, block_weight, taus, s,
-                             self.settings.method)
+                             self.settings.method, last_motion=w.last_motion)
         if joint is w.joint:
             return w
         fields = joint_fields(joint, s)

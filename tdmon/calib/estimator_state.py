@@ -117,6 +117,8 @@ class WindowState:
     joint : the joint friction and weight-factor filter (None: not started)
     scatter : per measurement kind, the recent window frictions of the between-window scatter
     mismatch : the weight-mismatch alarm's memory
+    last_motion : ``pick_up``, ``slack_off`` (whose drag a hang keeps in part) or ``rotating``
+        (off bottom: the drag released), the last motion (None: none yet)
     """
 
     profile: FrictionProfile
@@ -133,6 +135,7 @@ class WindowState:
     joint: JointState | None = None
     scatter: Mapping[str, Scatter] = field(default_factory=_empty)
     mismatch: Mismatch = field(default_factory=Mismatch)
+    last_motion: str | None = None
 
     def mu_cased(self, state: str) -> float | None:
         """Cased-hole friction of ``state`` found so far [-] (None: not yet)."""

@@ -78,8 +78,10 @@ class JointSettings:
     scatter_prior : between-window friction scatter until it is estimated [-]
     scatter_windows : recent windows per operation the scatter is estimated from [-]
     weight_model_std : model error of the string weight per window, relative [-]
-    locked_drag_fraction : standard deviation of the drag a hang may keep locked in, relative
-        to the pick-up drag at the current friction [-]
+    released_drag_std : share of the drag a hang after rotation off bottom may still hold,
+        standard deviation [-] (a hang with its last motion unknown holds a share uniform on
+        -1..1; one right after a pull or a run is not used: it holds an unknown share of that
+        motion's drag, which no number of such hangs averages out)
     iterations : linearisations per measurement [-]
     gate : a measurement further than this many predicted standard deviations is left out [-]
     identified_ratio : the weight factor counts as identified when its posterior variance is
@@ -101,7 +103,7 @@ class JointSettings:
     scatter_prior: float = 0.02
     scatter_windows: int = 30
     weight_model_std: float = 0.002
-    locked_drag_fraction: float = 0.3
+    released_drag_std: float = 0.1
     iterations: int = 3
     gate: float = 5.0
     identified_ratio: float = 0.25
@@ -146,9 +148,13 @@ class Measurement(NamedTuple):
     kind: str
 
 
-def measurements(window: Window) -> tuple[Measurement, ...]:
+def measurements(window: Window, last_motion: str | None = None) -> tuple[Measurement, ...]:
     """What one usable window offers the joint estimate (reaming windows: nothing, their
-    friction split by the motion angle is a different load case)."""
+    friction split by the motion angle is a different load case).
+
+    ``last_motion`` is the motion before a hang: ``pick_up`` or ``slack_off`` (the hang keeps
+    an unknown share of its drag and is not used), ``rotating`` (rotation off bottom released
+    the drag: kind ``static_released``) or None (unknown: kind ``static``)."""
     if window.rejected is not None or not (math.isfinite(window.hookload)
                                            and math.isfinite(window.hookload_se)):
         return ()
@@ -156,8 +162,10 @@ def measurements(window: Window) -> tuple[Measurement, ...]:
     if state in (RigState.PICK_UP, RigState.SLACK_OFF):
         return (Measurement(str(state), 0, window.hookload, window.hookload_se, str(state)),)
     if state in (RigState.STATIC, RigState.CIRCULATING):
-        return (Measurement(Operation.STATIC, 0, window.hookload, window.hookload_se,
-                            "static"),)
+        if last_motion in (RigState.PICK_UP, RigState.SLACK_OFF):
+            return ()
+        kind = "static" if last_motion is None else "static_released"
+        return (Measurement(Operation.STATIC, 0, window.hookload, window.hookload_se, kind),)
     if state != RigState.ROTATING_OFF_BOTTOM:
         return ()
     out = [Measurement(Operation.STATIC, 0, window.hookload, window.hookload_se,
@@ -188,9 +196,12 @@ def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float,
         f = value - model_offset
         slope = float(gradient.sum())  # uniform friction: the sum of the per-element gradient
         variance = (m.se**2 + (tau * w * slope) ** 2 + (settings.weight_model_std * w * f) ** 2)
-        if m.kind == "static":
-            pull = model.evaluate(Operation.PICK_UP, bit_depth, mu, method=method)[0]
-            variance += (settings.locked_drag_fraction * w * (pull - value)) ** 2
+        if m.kind in ("static", "static_released"):
+            drag = model.evaluate(Operation.PICK_UP, bit_depth, mu, method=method)[0] - value
+            # the drag share a hang may hold: uniform on -1..1 when the last motion is unknown
+            share = (1.0 / math.sqrt(3.0) if m.kind == "static"
+                     else settings.released_drag_std)
+            variance += (share * w * drag) ** 2
         return _Linear(offset + w * f, np.array([w * slope, f]), max(variance, 1.0), f)
 
     return linearise
@@ -198,7 +209,7 @@ def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float,
 
 def update_joint(state: JointState, model: WellModel, window: Window, block: float,
                  scatter: Mapping[str, float], settings: JointSettings,
-                 method: str = "soft-string") -> JointState:
+                 method: str = "soft-string", *, last_motion: str | None = None) -> JointState:
     """The joint state after one window (``state`` itself when the window offers nothing).
 
     Parameters
@@ -210,8 +221,9 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
     scatter : between-window friction scatter per measurement kind [-] (missing: the prior)
     settings : joint settings
     method : torque-and-drag method
+    last_motion : the motion before this window, for a hang (see `measurements`)
     """
-    offered = measurements(window)
+    offered = measurements(window, last_motion)
     if not offered:
         return state
     depth = window.bit_depth
@@ -286,8 +298,8 @@ def identifiability(state: JointState, settings: JointSettings) -> Identifiabili
         statement = "no window yet: friction and weight factor are the prior"
     elif len(moving) == 1 and not weighing:
         which = next(iter(moving)).replace("_", "-")
-        statement = (f"{which} only: weight and friction not separable, friction given at "
-                     "the prior weight (a hang, rotation off bottom or "
+        statement = (f"{which} only: weight and friction not separable, friction given "
+                     "at the prior weight (rotation off bottom or "
                      f"{'slack-off' if which == 'pick-up' else 'pick-up'} nearby separates them)")
     else:
         statement = (f"weakly identifiable: the weight factor rests mostly on its prior "
@@ -296,14 +308,28 @@ def identifiability(state: JointState, settings: JointSettings) -> Identifiabili
 
 
 def joint_fields(state: JointState, settings: JointSettings) -> dict[str, Any]:
-    """The joint estimate's message fields (``mu``/``mu_std`` and the kind's own)."""
+    """The joint estimate's message fields (``mu``/``mu_std`` and the kind's own).
+
+    ``mu`` is the joint friction when the weight factor is identified, else the friction at
+    the prior weight factor (the Gaussian posterior conditioned on ``w = w_prior``:
+    ``mu + P_mw / P_ww (w_prior - w)``, variance ``P_mm - P_mw^2 / P_ww``), which is what the
+    data say about friction when they cannot say anything about the weight. Both are in the
+    message (``mu_joint``, ``mu_at_prior_weight``).
+    """
+    p = state.covariance
     std = state.std
-    correlation = (float(state.covariance[0, 1] / (std[0] * std[1]))
-                   if std[0] > 0 and std[1] > 0 else 0.0)
+    correlation = float(p[0, 1] / (std[0] * std[1])) if std[0] > 0 and std[1] > 0 else 0.0
+    at_prior = float(state.mean[0] + p[0, 1] / p[1, 1] * (settings.weight_factor
+                                                          - state.mean[1]))
+    at_prior_std = math.sqrt(max(float(p[0, 0] - p[0, 1] ** 2 / p[1, 1]), 0.0))
     verdict = identifiability(state, settings)
-    return {"mu": float(state.mean[0]), "mu_std": float(std[0]),
+    mu, mu_std = ((float(state.mean[0]), float(std[0])) if verdict.identifiable
+                  else (at_prior, at_prior_std))
+    return {"mu": mu, "mu_std": mu_std,
             "weight_factor": float(state.mean[1]), "weight_factor_std": float(std[1]),
             "correlation": correlation, "identifiable": verdict.identifiable,
             "identifiability": verdict.statement,
+            "mu_joint": float(state.mean[0]), "mu_joint_std": float(std[0]),
+            "mu_at_prior_weight": at_prior, "mu_at_prior_weight_std": at_prior_std,
             "weight_variance_ratio": verdict.variance_ratio,
             "windows": dict(verdict.kinds), "gated": state.gated}
