@@ -98,8 +98,8 @@ class JointSettings:
     weight_factor_std: float = 0.05
     mu_drift_per_hour: float = 0.02
     mu_drift_per_100m: float = 0.01
-    weight_drift_per_hour: float = 0.005
-    weight_drift_per_100m: float = 0.004
+    weight_drift_per_hour: float = 0.002
+    weight_drift_per_100m: float = 0.001
     scatter_prior: float = 0.02
     scatter_windows: int = 30
     weight_model_std: float = 0.002
