@@ -242,10 +242,13 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
     gated = state.gated
     for m in offered:
         tau = scatter.get(m.kind, settings.scatter_prior)
+        # a hang's hook load is linear in the state (friction enters only its variance): one
+        # linearisation is exact; pick-up, slack-off and torque are relinearised
+        iterations = 1 if m.operation == Operation.STATIC else settings.iterations
         try:
             result = iterated_update(state, m.value, _linearise(model, m, depth, block, tau,
                                                                 settings, method),
-                                     iterations=settings.iterations, gate=settings.gate,
+                                     iterations=iterations, gate=settings.gate,
                                      bounds=(0.0, 2.0))
         except ModelError:
             continue

@@ -183,3 +183,52 @@ def test_scatter_is_the_spread_of_consecutive_windows() -> None:
     assert 0.018 < tau < 0.04
     assert scatter_std(Scatter((0.2, 0.21), (0.01, 0.01)), 0.02) == 0.02  # prior until 5
     assert math.isfinite(scatter_std(add_window(spread, math.nan, 0.01, 30), 0.02))
+
+
+def _unfilled(well: Well, depth: float, empty: float) -> WellModel:
+    """``well`` with the top ``empty`` metres of pipe run without being filled, bit at
+    ``depth``: that stretch weighs its inside fluid less."""
+    bha, pipe = well.string.components
+    rho = well.fluid.density
+    inside = rho * 9.80665 * math.pi / 4.0 * pipe.inner_diameter**2
+    assert pipe.buoyed_weight is not None
+    filled = replace(pipe, length=depth - bha.length - empty)
+    dry = replace(pipe, name="unfilled pipe", length=empty + 500.0,
+                  buoyed_weight=pipe.buoyed_weight - inside)
+    return WellModel(replace(well, string=DrillString((bha, filled, dry))))
+
+
+def test_unfilled_pipe_is_named_with_its_level(model_open: WellModel) -> None:
+    # the top 400 m run empty: the string hangs lighter by the missing inside fluid
+    # (1200 kg/m3 in a 108 mm bore, 108 N/m over 400 m of vertical pipe: 43 kN)
+    estimator = FrictionEstimator(model_open)
+    state = estimator.initial_state()
+    rng = np.random.default_rng(8)
+    alarms: list[dict[str, Any]] = []
+    joint: list[dict[str, Any]] = []
+    t = 1.6e9
+    for k in range(10):
+        depth = 3600.0 - 28.0 * k
+        truth = _unfilled(model_open.well, depth, 400.0)
+        plan = ["pick_up", "slack_off"] + (["rotating_off_bottom"] if k % 3 == 0 else [])
+        for name in plan:
+            t += 90.0
+            mu = 0.28 + rng.normal(0.0, 0.01)
+            if name == "rotating_off_bottom":
+                hook, torque = truth.evaluate("rotating", depth, mu)
+                window = _window(name, t, depth, hook + rng.normal(0.0, 3e3), 3e3,
+                                 torque + rng.normal(0.0, 200.0), 200.0)
+            else:
+                window = _window(name, t, depth,
+                                 truth.evaluate(name, depth, mu)[0] + rng.normal(0.0, 3e3))
+            state, outputs = estimator.update(state, window)
+            joint += [m for _, m in outputs if m.get("kind") == "joint"]
+            alarms += [m for topic, m in outputs if topic == "alarm"]
+    last = joint[-1]
+    assert last["identifiable"]
+    assert last["mu"] == pytest.approx(0.28, abs=0.02)
+    assert -50e3 < last["weight_difference_N"] < -36e3
+    mismatch = [a for a in alarms if a["kind"] == "weight_mismatch"]
+    assert len(mismatch) == 1
+    level = float(mismatch[0]["message"].split("empty down to about ")[1].split(" m")[0])
+    assert 340.0 <= level <= 460.0
