@@ -159,4 +159,5 @@ class AlarmKind(StrEnum):
     RECORDING_RECOVERED = "recording_recovered"
     DATA_LOSS = "data_loss"
     CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)
+    MODEL_COVERAGE = "model_coverage"  # string shorter than the bit depth, or a new well file
     WEIGHT_MISMATCH = "weight_mismatch"  # joint friction/weight estimate (calib/mismatch.py)

@@ -394,6 +394,28 @@ class DisplayConfig(_Model):
     units: Literal["si", "field"] = "si"
 
 
+class RunConfig(_Model):
+    """``[[runs]]``: from rig time ``start`` on, the string is the one of well file ``well``
+    (a trip that changes the string; docs/configuration.md). The top-level ``well`` is the
+    run before the first start."""
+
+    start: float
+    well: Path
+
+    @field_validator("start", mode="before")
+    @classmethod
+    def _start(cls, value: Any) -> Any:
+        if isinstance(value, datetime):
+            return (value if value.tzinfo else value.replace(tzinfo=UTC)).timestamp()
+        if isinstance(value, str | int | float) and not isinstance(value, bool):
+            seconds = parse_time(value)
+            if isinstance(seconds, str):
+                raise ValueError(seconds.replace("'t'", "start") +
+                                 " (give e.g. \"2024-03-05T12:10:00Z\")")
+            return seconds
+        return value
+
+
 class DaemonConfig(_Model):
     """The whole daemon file."""
 
@@ -410,6 +432,7 @@ class DaemonConfig(_Model):
     monitor: MonitorConfig = Field(default_factory=MonitorConfig)
     calibration: CalibrationConfig = Field(default_factory=CalibrationConfig)
     display: DisplayConfig = Field(default_factory=DisplayConfig)
+    runs: list[RunConfig] = Field(default_factory=list)
     #: the file this was read from (set by load_daemon_config; paths are relative to it)
     source_file: Path | None = Field(default=None, exclude=True)
 
@@ -529,7 +552,25 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
         raise ConfigError(str(file), "calibration.enabled", "calibration needs a well file")
     if config.well is not None and not config.resolve(config.well).exists():
         raise ConfigError(str(file), "well", f"file not found: {config.resolve(config.well)}")
+    _check_runs(config, file)
     return config
+
+
+def _check_runs(config: DaemonConfig, file: Path) -> None:
+    """``[[runs]]`` need the top-level well (the first run), start times in order and their
+    well files present."""
+    previous = -math.inf
+    for index, run in enumerate(config.runs):
+        if config.well is None:
+            raise ConfigError(str(file), "runs", "runs need the top-level 'well' (the well "
+                              "file before the first run's start)")
+        if not run.start > previous:
+            raise ConfigError(str(file), f"runs[{index}].start",
+                              "each run must start after the one before it")
+        previous = run.start
+        if not config.resolve(run.well).exists():
+            raise ConfigError(str(file), f"runs[{index}].well",
+                              f"file not found: {config.resolve(run.well)}")
 
 
 def broker_sections(config: DaemonConfig) -> list[tuple[str, MqttConfig]]:

@@ -36,6 +36,7 @@ __all__ = [
     "PHASE_KINDS",
     "TIMED_PHASE_KINDS",
     "FaultConfig",
+    "ModelErrorConfig",
     "NoiseConfig",
     "PhaseConfig",
     "ScenarioConfig",
@@ -77,7 +78,8 @@ class ScenarioInfo(StrictModel):
     name: str = ""
     well: Path
     seed: int = 0
-    start: float | str = "2024-01-01T00:00:00Z"
+    # validated too when left out: the default is a string the generator cannot use as is
+    start: float | str = Field(default="2024-01-01T00:00:00Z", validate_default=True)
     prefix: str = "sim/rig"
     method: Literal["soft-string", "aadnoy"] = "soft-string"
     bit_depth: Length = Field(gt=0)
@@ -249,6 +251,23 @@ class PhaseConfig(StrictModel):
         return self
 
 
+class ModelErrorConfig(StrictModel):
+    """``[model_error]``: how the rig's truth differs from the scenario's well file, which is
+    then the daemon's (wrong) well file. The truth is simulated with the error, the well file
+    stays as written."""
+
+    density_factor: float = Field(default=1.0, gt=0.5, lt=2.0)
+    fill_level: Length | None = Field(default=None, ge=0)
+    string_extra_length: Length = Field(default=0.0, ge=0)
+    string_component: str | None = None
+
+    @model_validator(mode="after")
+    def _component_with_length(self) -> ModelErrorConfig:
+        if self.string_component is not None and self.string_extra_length <= 0:
+            raise ValueError("string_component needs string_extra_length")
+        return self
+
+
 class ScenarioConfig(StrictModel):
     """The whole scenario file."""
 
@@ -259,6 +278,7 @@ class ScenarioConfig(StrictModel):
     sampling: SamplingConfig = SamplingConfig()
     noise: NoiseTable = NoiseTable()
     fault: list[FaultConfig] = Field(default_factory=list)
+    model_error: ModelErrorConfig = ModelErrorConfig()
     phase: list[PhaseConfig] = Field(min_length=1)
 
 

@@ -46,22 +46,44 @@ class Built:
 
 @dataclass(frozen=True)
 class WellFile:
-    """The daemon's well file, read once: its configuration, the model's ``Well``, the path."""
+    """The daemon's well file, read once: its configuration, the model's ``Well``, the path.
+
+    ``well`` is the file's well with its top string component reaching the bottom of the hole
+    (the model never runs out of string; :mod:`tdmon.daemon.steps.coverage` alarms when the bit
+    goes deeper than the file's own tally, ``tally_length`` [m]); ``digest`` is the SHA-256 of
+    the file's bytes (a reload of an unchanged file changes nothing).
+    """
 
     config: Any  # tdmon.config.well.WellConfig (imported lazily with pydantic's models)
     well: Any  # tdmon.model.well.Well
     path: Path
+    tally_length: float = 0.0
+    digest: str = ""
+
+
+def read_well_path(path: Path) -> WellFile:
+    """Read one well file into a :class:`WellFile` (``ConfigError`` when it is not valid)."""
+    import hashlib
+    from dataclasses import replace
+
+    from tdmon.config.well import load_well as load_well_config
+
+    well_config = load_well_config(path)
+    well = well_config.to_model(path)
+    tally = float(well.string.length)
+    covering = replace(well, string=well.string.reaching(well.hole_bottom))
+    try:
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:  # read a moment ago; gone now: no digest, every reload applies it
+        digest = ""
+    return WellFile(well_config, covering, path, tally, digest)
 
 
 def read_well_file(config: DaemonConfig) -> WellFile | None:
     """Read the configured well file (None when there is none)."""
     if config.well is None:
         return None
-    from tdmon.config.well import load_well as load_well_config
-
-    path = config.resolve(config.well)
-    well_config = load_well_config(path)
-    return WellFile(well_config, well_config.to_model(path), path)
+    return read_well_path(config.resolve(config.well))
 
 
 def load_well(config: DaemonConfig) -> Any:
@@ -101,6 +123,7 @@ async def build_daemon(
     # temperatures and the well/profile messages
     well_file = read_well_file(config)
     well = None if well_file is None else well_file.well
+    model_from_well = model is None
     if model is None:
         model = load_model(config, well)
     extra_steps = list(extra_steps)
@@ -126,6 +149,12 @@ async def build_daemon(
         sources = wiring.sources
 
         steps = default_steps(config, model, rig_state) + list(extra_steps)
+        if well_file is not None:
+            from tdmon.daemon.steps.coverage import coverage_step
+
+            # first: a new well (run or reload) is in place before the monitor's frame
+            steps.insert(0, coverage_step(config, well_file, steps,
+                                          own_model=model_from_well))
         align = config.align
         aligner = Aligner(
             wait_for=align.wait_for,

@@ -1,4 +1,5 @@
-"""Run the daemon for a config file until SIGINT/SIGTERM (what ``tdmon run`` calls)."""
+"""Run the daemon for a config file until SIGINT/SIGTERM (what ``tdmon run`` calls); SIGHUP
+re-reads the well file in use (docs/daemon.md, "Model coverage")."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from tdmon.config.daemon import DaemonConfig
-from tdmon.daemon.build import build_daemon
+from tdmon.daemon.build import Built, build_daemon
 from tdmon.daemon.pipeline import Stats
 
 log = logging.getLogger(__name__)
@@ -28,8 +29,37 @@ async def run_daemon(config: DaemonConfig, stop: asyncio.Event | None = None,
         async with build_daemon(config, **build_options) as built:
             log.info("tdmon daemon running: prefix %s, sources %s", config.prefix,
                      ", ".join(s.name for s in built.daemon.sources))
-            await built.daemon.run(stop)
+            with reload_on_sighup(built):
+                await built.daemon.run(stop)
             return built.stats
+
+
+@contextlib.contextmanager
+def reload_on_sighup(built: Built) -> Iterator[None]:
+    """While inside, SIGHUP asks the coverage step to re-read the well file in use on the next
+    frame (:class:`tdmon.daemon.steps.coverage.CoverageStep`); without a well file it is
+    logged and ignored rather than ending the daemon. Only in the main thread."""
+    from tdmon.daemon.steps.coverage import CoverageStep
+
+    loop = asyncio.get_running_loop()
+    coverage = next((s for s in built.steps if isinstance(s, CoverageStep)), None)
+
+    def handle() -> None:
+        if coverage is None:
+            log.info("SIGHUP received: no well file to reload")
+            return
+        log.info("SIGHUP received: re-reading %s on the next frame", coverage.well_file.path)
+        coverage.request_reload()
+
+    try:
+        loop.add_signal_handler(signal.SIGHUP, handle)
+    except (NotImplementedError, RuntimeError):  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        loop.remove_signal_handler(signal.SIGHUP)
 
 
 @contextlib.contextmanager

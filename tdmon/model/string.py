@@ -9,7 +9,7 @@ as is, as in the thesis's Example 7.1), or neither (computed from its dimensions
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -222,6 +222,16 @@ class DrillString:
     def length(self) -> float:
         """Total length of all components [m]."""
         return float(sum(component.length for component in self.components))
+
+    def reaching(self, depth: float) -> DrillString:
+        """This string, its top component lengthened so that the string is at least ``depth``
+        [m] long (itself when it already is): what the model assumes when the tally is shorter
+        than the bit depth (docs/daemon.md, model coverage)."""
+        short = float(depth) - self.length
+        if not short > 0.0:
+            return self
+        top = self.components[-1]
+        return DrillString((*self.components[:-1], replace(top, length=top.length + short)))
 
     def component_tops(self) -> NDArray[np.float64]:
         """Distance from the bit to the top of each component [m], bit-up order."""

@@ -236,6 +236,11 @@ WELL: Final = _object(
         "tvd_m": {**_NUMBERS, "minItems": 2},
         "north_m": {**_NUMBERS, "minItems": 2},
         "east_m": {**_NUMBERS, "minItems": 2},
+        "file": {**_TEXT, "description": "the well file's name"},
+        "string_length_m": {**_NUMBER, "description": "the well file's string tally [m]"},
+        "change": {**_TEXT, "description": "start, or why a new well file was taken (a run "
+                   "from a rig time, a reload on SIGHUP)"},
+        "notes": {"type": "array", "items": _TEXT},
     },
     ("t", "md_m", "tvd_m", "north_m", "east_m"),
 )

@@ -8,19 +8,24 @@ well under a second, and the recorded noise-free value *is* the model at that bi
 or a calibrator can compare with the model exactly. A broomstick over a depth grid with
 interpolation would only pay off beyond ~10^5 samples and would put an interpolation error
 into the truth. Tight spots add overpull or set-down weight, and a pull from rest a
-break-over peak.
+break-over peak. A pipe run unfilled (the scenario's ``fill_level``) is empty above a fixed MD,
+so its weight per metre depends on the bit depth: the model is rebuilt for each bit depth with
+the string split at the fluid level inside (about 0.3 ms).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
+from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.torque_drag import WellModel
+from tdmon.model.well import Well
 from tdmon.replay.spec import Array, FrictionAnomaly, Scenario
 from tdmon.replay.timeline import Timeline
 from tdmon.vocabulary import (
@@ -31,7 +36,7 @@ from tdmon.vocabulary import (
     RigState,
 )
 
-__all__ = ["MOVING_DOWN", "MOVING_UP", "Loads", "friction_with_anomalies"]
+__all__ = ["MOVING_DOWN", "MOVING_UP", "Loads", "friction_with_anomalies", "unfilled_string"]
 
 MOVING_UP: Final = tuple(sorted(s for s in MOVING_STATES
                                 if OPERATION_FOR_STATE[s] is Operation.PICK_UP))
@@ -52,6 +57,34 @@ def friction_with_anomalies(element_mid_md: Array, base: Array,
     return mu
 
 
+def unfilled_string(well: Well, bit_depth: float, fill_level: float) -> DrillString:
+    """The string of ``well`` with the bit at ``bit_depth`` [m], empty inside above MD
+    ``fill_level`` [m] and full of the well's fluid below (eq 36 with no fluid inside).
+
+    The component the level falls in is cut in two; components above it get the buoyed weight
+    of an empty pipe (their weight in air must be known: :func:`tdmon.replay.scenario`
+    refuses a fluid error on a buoyed weight).
+    """
+    below = bit_depth - fill_level  # distance of the level from the bit along the string
+    if below >= well.string.length:
+        return well.string
+    density = well.fluid.density
+    parts: list[StringComponent] = []
+    bottom = 0.0
+    for component in well.string.components:
+        top = bottom + component.length
+        empty = replace(component, buoyed_weight=component.buoyed_weight_in(density, 0.0))
+        if top <= below:
+            parts.append(component)
+        elif bottom >= below:
+            parts.append(empty)
+        else:
+            parts.append(replace(component, length=below - bottom))
+            parts.append(replace(empty, length=top - below))
+        bottom = top
+    return DrillString(tuple(parts))
+
+
 class Loads:
     """Surface hook load [N] and torque [N m] of any timeline state, from the model."""
 
@@ -63,6 +96,18 @@ class Loads:
         # of the string in the hole
         self.pipe_radius = float(self.model.component_radius[-1])
         self.block_weight = scenario.well.block_weight
+        self._unfilled: tuple[float, WellModel] | None = None
+
+    def model_at(self, bit: float) -> WellModel:
+        """The true model with the bit at ``bit`` [m] (the fill level moves along the string)."""
+        level = self.scenario.mismatch.fill_level
+        if level is None:
+            return self.model
+        if self._unfilled is None or self._unfilled[0] != bit:
+            well = self.model.well
+            model = WellModel(replace(well, string=unfilled_string(well, bit, level)))
+            self._unfilled = (bit, model)
+        return self._unfilled[1]
 
     def at(self, timeline: Timeline, t: Array) -> tuple[Array, Array]:
         """Hook load [N] (break-over included) and surface torque [N m] at times ``t`` [s]."""
@@ -103,7 +148,7 @@ class Loads:
             psi = math.atan2(abs(speed), rpm * self.pipe_radius)
         # in slips aside, every state of a timeline hangs the string from the hook
         operation = OPERATION_FOR_STATE[state]
-        hookload, torque = self.model.evaluate(
+        hookload, torque = self.model_at(bit).evaluate(
             operation, bit, self.mu, method=method, wob=wob,
             bit_torque=wob * self.scenario.rig.bit_torque_factor, psi=psi)
         for spot in self.scenario.tight_spots:
@@ -117,15 +162,16 @@ class Loads:
     def effective_mu(self, operation: Operation, bit: float) -> float:
         """Uniform mu giving the true profile's pick-up/slack-off hook load or rotating torque."""
         method = self.scenario.method
+        model = self.model_at(bit)
         if operation is Operation.ROTATING:
-            _, true_torque = self.model.evaluate(operation, bit, self.mu, method=method)
-            _, unit_torque = self.model.evaluate(operation, bit, 1.0, method=method)
+            _, true_torque = model.evaluate(operation, bit, self.mu, method=method)
+            _, unit_torque = model.evaluate(operation, bit, 1.0, method=method)
             # off-bottom torque is linear in a uniform mu: no axial friction changes the tension
             return true_torque / unit_torque if unit_torque > 0 else math.nan
-        target, _ = self.model.evaluate(operation, bit, self.mu, method=method)
+        target, _ = model.evaluate(operation, bit, self.mu, method=method)
 
         def mismatch(mu: float) -> float:
-            return self.model.evaluate(operation, bit, mu, method=method)[0] - target
+            return model.evaluate(operation, bit, mu, method=method)[0] - target
 
         low, high = mismatch(0.0), mismatch(2.0)
         if low == 0.0:
@@ -134,3 +180,12 @@ class Loads:
             return math.nan
         return float(brentq(mismatch, 0.0, 2.0, xtol=1e-7))
 
+
+    def weight_factor(self, model: WellModel, bit: float) -> float:
+        """True over modelled buoyed string weight at the hook [-]: the static (friction-free)
+        hook loads less the block, the true well's over ``model``'s (the daemon's well file,
+        its top component reaching surface)."""
+        block = self.block_weight
+        true_static, _ = self.model_at(bit).evaluate(Operation.STATIC, bit, 0.0)
+        modelled, _ = model.evaluate(Operation.STATIC, bit, 0.0)
+        return (true_static - block) / (modelled - block)

@@ -10,18 +10,27 @@ for the keys.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tdmon.config.scenario import NoiseConfig, PhaseConfig, ScenarioConfig, load_scenario
+from tdmon.config.scenario import (
+    ModelErrorConfig,
+    NoiseConfig,
+    PhaseConfig,
+    ScenarioConfig,
+    load_scenario,
+)
 from tdmon.config.well import WellConfig, load_well
 from tdmon.errors import ConfigError, ModelError
 from tdmon.model.friction import FrictionModel, local_friction
-from tdmon.model.well import Well, hole_grid
+from tdmon.model.string import DrillString
+from tdmon.model.well import Fluid, Well, hole_grid
 from tdmon.replay.spec import (
     FrictionAnomaly,
+    ModelMismatch,
     NoiseSettings,
     Phase,
     RigSettings,
@@ -65,12 +74,14 @@ def to_scenario(config: ScenarioConfig, source: str | Path = "<scenario>", *,
         if missing:
             raise ConfigError(str(source), f"fault[{index}].channels",
                               f"channel '{missing[0]}' is not sampled")
+    mismatch = _mismatch(config.model_error, well, source)
+    true_well = _true_well(well, mismatch)
     return Scenario(
         name=info.name or Path(source).stem,
         seed=info.seed if seed is None else seed,
         start=float(info.start),
         prefix=info.prefix,
-        well=well,
+        well=true_well,
         friction=mu,
         temperature=temperature,
         mud_temp_in=mud_in,
@@ -89,7 +100,49 @@ def to_scenario(config: ScenarioConfig, source: str | Path = "<scenario>", *,
         noise={c: _noise(config.noise.for_channel(c)) for c in channels},
         faults=tuple(SensorFault(f.kind, tuple(f.channels), f.start, f.duration)
                      for f in config.fault),
+        mismatch=mismatch,
+        model_well=well if mismatch.any else None,
     )
+
+
+def _mismatch(config: ModelErrorConfig, well: Well, source: str | Path) -> ModelMismatch:
+    """The validated ``[model_error]`` against the well file's string and fluid."""
+    components = well.string.components
+    index = 0
+    if config.string_component is not None:
+        names = [c.name for c in components]
+        if config.string_component not in names:
+            raise ConfigError(str(source), "model_error.string_component",
+                              f"the well file has no string component "
+                              f"'{config.string_component}' (it has {', '.join(names)})")
+        index = names.index(config.string_component)
+    if config.density_factor != 1.0 or config.fill_level is not None:
+        fixed = [c.name for c in components if c.buoyed_weight is not None]
+        if fixed:
+            # a buoyed weight does not change with the fluid: the error would not show
+            raise ConfigError(str(source), "model_error",
+                              f"a fluid error needs the weight in air of every string component; "
+                              f"'{fixed[0]}' gives buoyed_weight")
+    return ModelMismatch(density_factor=config.density_factor, fill_level=config.fill_level,
+                         extra_length=config.string_extra_length, extra_component=index)
+
+
+def _true_well(well: Well, mismatch: ModelMismatch) -> Well:
+    """The rig's true well: the well file's with the fluid density scaled and one component
+    longer (the fill level depends on the bit depth: :class:`tdmon.replay.loads.Loads`)."""
+    if not mismatch.any:
+        return well
+    fluid = well.fluid
+    inside = fluid.inside_density
+    true_fluid = Fluid(fluid.density * mismatch.density_factor,
+                       None if inside is None else inside * mismatch.density_factor)
+    components = list(well.string.components)
+    if mismatch.extra_length > 0.0:
+        longer = components[mismatch.extra_component]
+        components[mismatch.extra_component] = replace(
+            longer, length=longer.length + mismatch.extra_length)
+    return replace(well, fluid=true_fluid, string=DrillString(tuple(components)),
+                   name=f"{well.name} (truth)")
 
 
 def _phase(config: PhaseConfig) -> Phase:

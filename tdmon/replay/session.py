@@ -27,6 +27,7 @@ from tdmon.replay.sensors import ChannelSeries, InjectedFault, channel_truth, se
 from tdmon.replay.spec import (
     Array,
     FrictionAnomaly,
+    ModelMismatch,
     NoiseSettings,
     Phase,
     RigSettings,
@@ -35,7 +36,13 @@ from tdmon.replay.spec import (
     TightSpot,
 )
 from tdmon.replay.timeline import STATES, Position, Timeline, build_timeline
-from tdmon.replay.truth import ExpectedAlarm, expected_alarms, state_changes, truth_samples
+from tdmon.replay.truth import (
+    ExpectedAlarm,
+    expected_alarms,
+    state_changes,
+    truth_samples,
+    weight_factors,
+)
 from tdmon.vocabulary import RigState
 
 __all__ = [
@@ -47,6 +54,7 @@ __all__ = [
     "ExpectedAlarm",
     "FrictionAnomaly",
     "InjectedFault",
+    "ModelMismatch",
     "NoiseSettings",
     "Phase",
     "Position",
@@ -78,7 +86,9 @@ class Session:
         ``block_position`` [m], ``hookload`` [N], ``torque`` [N m] (noise-free), ``mu_pick_up``,
         ``mu_slack_off``, ``mu_rotating`` (the uniform friction factor reproducing the true
         pick-up/slack-off hook load and rotating torque at that bit depth; NaN in slips),
-        ``mu_mean`` (length-weighted mean of the profile over the string in the hole) [-]
+        ``mu_mean`` (length-weighted mean of the profile over the string in the hole) [-];
+        with an injected model error also ``weight_factor``: true over modelled buoyed string
+        weight at the hook (:func:`tdmon.replay.truth.weight_factors`; NaN in slips) [-]
     state_changes : (Unix time [s], state) at the start and every change
     profile_md : mid-MD of the hole-grid elements [m]
     profile_mu : true friction factor per element (base plus anomalies) [-]
@@ -165,6 +175,8 @@ def simulate_session(scenario: Scenario) -> Session:
     truth_interval = scenario.sample_interval.get("hookload", 5.0)
     tau = _sample_times(timeline.duration, truth_interval)
     truth = truth_samples(timeline, loads, tau, element_md, element_length)
+    if scenario.model_well is not None:
+        truth["weight_factor"] = weight_factors(loads, scenario.model_well, truth)
     truth_t = scenario.start + tau
     return Session(
         scenario=scenario, timeline=timeline, channels=channels, truth_t=truth_t, truth=truth,

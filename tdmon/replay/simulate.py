@@ -99,6 +99,22 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
          "accept": {"type": "array", "items": _TEXT,
                     "description": "daemon alarm kinds that count as raising it"}},
         ("t", "kind", "severity", "message")),
+    "/truth/model_error": _schema(
+        "truth.model_error",
+        "how the rig's true fluid and string differ from the well file the daemon reads",
+        {"t": _TIME, "well": _TEXT, "density_factor": _NUMBER,
+         "true_density_kg_m3": _NUMBER, "model_density_kg_m3": _NUMBER,
+         "fill_level_m": _OPTIONAL, "string_extra_length_m": _NUMBER,
+         "string_extra_component": _TEXT, "true_string_length_m": _NUMBER,
+         "model_string_length_m": _NUMBER},
+        ("t", "density_factor", "fill_level_m", "string_extra_length_m")),
+    "/truth/weight": _schema(
+        "truth.weight",
+        "weight factor the injected model error implies: true over modelled buoyed string "
+        "weight at the hook (static hook loads less the block), at every true hook-load sample "
+        "time out of slips",
+        {"t": _TIME, "state": _STATES, "bit_depth_m": _NUMBER, "weight_factor": _NUMBER},
+        ("t", "state", "bit_depth_m", "weight_factor")),
     "/truth/fault": _schema(
         "truth.fault", "a sensor fault injected into the data (spike, stuck, dropout)",
         {"t": _TIME, "kind": {"enum": ["spike", "stuck", "dropout"]}, "channel": _TEXT,
@@ -134,6 +150,20 @@ def _finite_or_none(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
+def _model_error(scenario: Scenario) -> dict[str, Any]:
+    """The ``/truth/model_error`` message of a scenario with an injected model error."""
+    paper = scenario.model_well
+    assert paper is not None
+    error = scenario.mismatch
+    return {"t": scenario.start, "well": paper.name, "density_factor": error.density_factor,
+            "true_density_kg_m3": scenario.well.fluid.density,
+            "model_density_kg_m3": paper.fluid.density, "fill_level_m": error.fill_level,
+            "string_extra_length_m": error.extra_length,
+            "string_extra_component": paper.string.components[error.extra_component].name,
+            "true_string_length_m": scenario.well.string.length,
+            "model_string_length_m": paper.string.length}
+
+
 def session_messages(session: Session) -> list[MessageRecord]:
     """Every message of a simulated session, in log-time order (inputs and truth)."""
     scenario = session.scenario
@@ -151,6 +181,8 @@ def session_messages(session: Session) -> list[MessageRecord]:
     if session.profile_temperature is not None:
         profile["temperature_C"] = session.profile_temperature.tolist()
     records.append((_ns(start), "/truth/profile", profile))
+    if scenario.model_well is not None:
+        records.append((_ns(start), "/truth/model_error", _model_error(scenario)))
 
     for name, series in session.channels.items():
         topic = f"{scenario.prefix}/{name}"
@@ -181,6 +213,10 @@ def session_messages(session: Session) -> list[MessageRecord]:
                 "mu_slack_off": _finite_or_none(float(truth["mu_slack_off"][k])),
                 "mu_rotating": _finite_or_none(float(truth["mu_rotating"][k])),
                 "mu_mean": float(truth["mu_mean"][k])}))
+            if "weight_factor" in truth:
+                records.append((_ns(t), "/truth/weight", {
+                    "t": t, "state": state, "bit_depth_m": bit,
+                    "weight_factor": float(truth["weight_factor"][k])}))
     for alarm in session.alarms:
         records.append((_ns(alarm.t), "/truth/alarm", {
             "t": alarm.t, "kind": alarm.kind, "severity": alarm.severity,

@@ -20,6 +20,7 @@ from tdmon.model.well import Well
 __all__ = [
     "Array",
     "FrictionAnomaly",
+    "ModelMismatch",
     "NoiseSettings",
     "Phase",
     "RigSettings",
@@ -140,6 +141,31 @@ class SensorFault:
 
 
 @dataclass(frozen=True)
+class ModelMismatch:
+    """How the rig's true string and fluid differ from the well file the daemon reads.
+
+    Attributes
+    ----------
+    density_factor : true fluid density (inside and outside the pipe) over the well file's [-]
+    fill_level : MD of the fluid level inside the pipe [m]: the pipe is empty above it, full
+        below (the pipe run unfilled); None: full to surface, as the well file assumes
+    extra_length : the true string is this much longer than the well file's tally [m]
+    extra_component : index (from the bit) of the component whose true length is longer
+    """
+
+    density_factor: float = 1.0
+    fill_level: float | None = None
+    extra_length: float = 0.0
+    extra_component: int = 0
+
+    @property
+    def any(self) -> bool:
+        """Whether the truth differs from the well file at all."""
+        return (self.density_factor != 1.0 or self.fill_level is not None
+                or self.extra_length != 0.0)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Everything a session is generated from (SI units; times in s from the start).
 
@@ -162,6 +188,9 @@ class Scenario:
     sample_interval : per channel [s]; a channel left out is not sent
     noise : per channel
     faults : scheduled sensor faults
+    mismatch : injected model errors; ``well`` is then the true well (fluid density and string
+        changed, the fill level applied per bit depth by :class:`tdmon.replay.loads.Loads`)
+    model_well : the well as the daemon's well file describes it (None: ``well``)
     """
 
     name: str
@@ -184,3 +213,5 @@ class Scenario:
     sample_interval: Mapping[str, float] = field(default_factory=dict)
     noise: Mapping[str, NoiseSettings] = field(default_factory=dict)
     faults: tuple[SensorFault, ...] = ()
+    mismatch: ModelMismatch = field(default_factory=ModelMismatch)
+    model_well: Well | None = None

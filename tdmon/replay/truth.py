@@ -7,18 +7,21 @@ should raise.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.model.torque_drag import WellModel
+from tdmon.model.well import Well
 from tdmon.replay.loads import MOVING_DOWN, MOVING_UP, Loads
 from tdmon.replay.spec import Array, Scenario
 from tdmon.replay.timeline import Timeline
 from tdmon.vocabulary import AlarmKind, Operation, RigState, Severity
 
-__all__ = ["ExpectedAlarm", "expected_alarms", "state_changes", "truth_samples"]
+__all__ = ["ExpectedAlarm", "expected_alarms", "state_changes", "truth_samples",
+           "weight_factors"]
 
 # A tight spot or a local friction change shows as a window's friction jumping above the recent
 # ones, or as the load trending out of the modelled band.
@@ -123,3 +126,26 @@ def truth_samples(timeline: Timeline, loads: Loads, tau: Array, element_md: Arra
             "block_position": where.block_position, "hookload": hookload, "torque": torque,
             **mus}
 
+
+
+def weight_factors(loads: Loads, model_well: Well, truth: dict[str, NDArray[np.generic]]) -> Array:
+    """The weight factor an injected model error implies at every truth sample [-]: true over
+    modelled buoyed string weight at the hook (:meth:`Loads.weight_factor`), the model being
+    ``model_well`` (the daemon's well file) with its top component reaching surface when its
+    tally is shorter than the bit depth; NaN in slips."""
+    bit = np.asarray(truth["bit_depth"], dtype=np.float64)
+    state = truth["state"]
+    paper = WellModel(model_well)
+    factors = np.full(bit.size, np.nan)
+    cache: dict[float, float] = {}
+    for k in range(bit.size):
+        if state[k] == RigState.IN_SLIPS:
+            continue
+        depth = float(bit[k])
+        if depth not in cache:
+            model = paper
+            if depth > model_well.string.length:
+                model = WellModel(replace(model_well, string=model_well.string.reaching(depth)))
+            cache[depth] = loads.weight_factor(model, depth)
+        factors[k] = cache[depth]
+    return factors

@@ -98,9 +98,10 @@ def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
 
 def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     scenarios = sorted((REPO / "replays" / "scenarios").glob("*.toml"))
-    assert len(scenarios) == 4
+    assert len(scenarios) == 7
     prefixes = {load_scenario(path).scenario.prefix for path in scenarios}
-    assert prefixes == {"sim/trip-out", "sim/trip-in", "sim/faults", "sim/drill"}
+    assert prefixes == {"sim/trip-out", "sim/trip-in", "sim/faults", "sim/drill",
+                        "sim/model-error"}
     for path in sorted((REPO / "replays" / "expectations").glob("*.toml")):
         expectations = load_expectations(path)
         assert expectations.replay_path.exists(), path
@@ -109,7 +110,8 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
             assert all(isinstance(state, RigState) for state in expectations.states.required)
     for path in sorted((REPO / "config" / "daemon").glob("*.toml")):
         assert load_daemon_config(path).prefix in {"rig/F4", "sim/trip-out", "sim/trip-in",
-                                                    "sim/faults", "sim/drill"}, path
+                                                    "sim/faults", "sim/drill",
+                                                    "sim/model-error"}, path
 
 
 def test_scenario_words() -> None:

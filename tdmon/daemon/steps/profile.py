@@ -25,12 +25,14 @@ class ProfileStep:
     """Step: the well's trajectory and its profiles along MD for the 3D and profile views.
 
     On the first frame it emits ``well`` (the hole grid's nodes: ``md_m``, ``tvd_m``,
-    ``north_m``, ``east_m``), a ``profile`` (``temperature_C`` of the annulus when the well file
-    has a temperature model, and the friction: the calibration's local profile when one runs,
-    else the well file's friction); the ``well`` message's ``notes`` say why the mu(T)
-    calibration is off when it is. Afterwards a ``profile`` follows whenever the calibration's
-    friction profile has changed, at most every ``interval`` seconds of rig time, and once
-    more at the end.
+    ``north_m``, ``east_m``; the well file's ``name``, ``file`` and ``string_length_m``, its
+    tally; ``change`` = ``"start"``) and a ``profile`` (``temperature_C`` of the annulus when
+    the well file has a temperature model, and the friction: the calibration's local profile
+    when one runs, else the well file's friction); the ``well`` message's ``notes`` say why
+    the mu(T) calibration is off when it is. A new run's well file or a reload sends ``well``
+    again, ``change`` saying which (:meth:`new_well`). Afterwards a ``profile`` follows
+    whenever the calibration's friction profile has changed, at most every ``interval``
+    seconds of rig time, and once more at the end.
     Both are stamped with the frame's time, not the wall clock, so that a replay keeps one time
     axis and gives the same messages at any speed.
 
@@ -63,12 +65,23 @@ class ProfileStep:
         self.interval = interval
         self.mu_t_note = mu_t_note
         self._started = False
+        self._new_well = False
         self._sent_updates = 0
         self._sent_t = -math.inf
         self._last_t: float | None = None
 
+    def new_well(self, well_file: WellFile, change: str) -> None:
+        """Send the ``well`` message of ``well_file`` on the next frame: a new run's well file
+        or a reload (:mod:`tdmon.daemon.steps.coverage`), said in ``change``. The hole, and so
+        the trajectory, is the same."""
+        self.well_message = {**self.well_message, **_well_fields(well_file), "change": change}
+        self._new_well = True
+
     def on_frame(self, frame: Frame, emit: Emit) -> None:
         self._last_t = frame.t
+        if self._new_well and self._started:
+            self._new_well = False
+            emit("well", {"t": frame.t, **self.well_message, "notes": []})
         if not self._started:
             self._started = True
             # the note rides on the start-up message rather than an alarm: nothing is wrong
@@ -133,7 +146,7 @@ def profile_step(config: DaemonConfig, well_file: WellFile, grid: Any,
         setup = replace(setup, note=None)  # no calibration: nothing to explain
     nodes = _thin(grid.md.size)
     well_message = {
-        "name": well_file.well.name or well_file.path.stem,
+        **_well_fields(well_file), "change": "start",
         "md_m": grid.md[nodes].tolist(), "tvd_m": grid.tvd[nodes].tolist(),
         "north_m": grid.north[nodes].tolist(), "east_m": grid.east[nodes].tolist(),
     }
@@ -142,6 +155,12 @@ def profile_step(config: DaemonConfig, well_file: WellFile, grid: Any,
                        temperature=setup.temperature, friction=setup.friction,
                        calibration=calibration, interval=config.calibration.profile_interval,
                        mu_t_note=setup.note)
+
+
+def _well_fields(well_file: WellFile) -> dict[str, Any]:
+    """What a ``well`` message says about the file: its name, path and string tally [m]."""
+    return {"name": well_file.well.name or well_file.path.stem, "file": well_file.path.name,
+            "string_length_m": well_file.tally_length}
 
 
 def _thin(n: int) -> NDArray[np.int64]:
