@@ -109,7 +109,7 @@ class JointSettings:
     identified_ratio: float = 0.25
     horizon: float = 3600.0
     horizon_depth: float = 300.0
-    mismatch_tolerance: float = 0.02
+    mismatch_tolerance: float = 0.01
     mismatch_windows: int = 3
 
 

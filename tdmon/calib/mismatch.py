@@ -23,7 +23,7 @@ import numpy as np
 
 from tdmon.calib.alarms import Alarm
 from tdmon.errors import ModelError
-from tdmon.model.string import GRAVITY
+from tdmon.model.string import GRAVITY, StringComponent
 from tdmon.model.torque_drag import WellModel
 from tdmon.vocabulary import AlarmKind, Operation, Severity
 
@@ -49,6 +49,20 @@ def weight_difference(model: WellModel, bit_depth: float, weight_factor: float) 
     return (weight_factor - 1.0) * static
 
 
+def _inside_weight(component: StringComponent, outside: float, inside: float) -> float:
+    """Weight of the fluid inside one metre of the component [N/m], as the model counts it.
+
+    The model's buoyed weight with a different inside fluid (eq 36) scales the weight in air,
+    tool joints included, so the fluid inside weighs a little more there than ``rho g A_i``;
+    the level is found with the model's own figure. A component given by its buoyed weight
+    ignores the fluids: ``rho g A_i`` then."""
+    counted = (component.buoyed_weight_in(outside, inside)
+               - component.buoyed_weight_in(outside, 0.0))
+    if counted > 0.0:
+        return counted
+    return inside * GRAVITY * math.pi / 4.0 * component.inner_diameter**2
+
+
 def empty_length(model: WellModel, bit_depth: float, deficit: float) -> float | None:
     """MD from surface down to which the pipe must be empty to weigh ``deficit`` [N] less.
 
@@ -67,10 +81,11 @@ def empty_length(model: WellModel, bit_depth: float, deficit: float) -> float | 
     tvd = model.grid.tvd[: md.size]
     mid = 0.5 * (md[:-1] + md[1:])
     tops = model.well.string.component_tops()
-    inner = np.array([c.inner_diameter for c in model.well.string.components])
+    inside = np.array([_inside_weight(c, fluid.density, rho)
+                       for c in model.well.string.components])
     # component at each element: distance above the bit against the tops, bit up
-    index = np.clip(np.searchsorted(tops, bit_depth - mid), 0, inner.size - 1)
-    weight = rho * GRAVITY * math.pi / 4.0 * inner[index] ** 2 * np.diff(tvd)
+    index = np.clip(np.searchsorted(tops, bit_depth - mid), 0, inside.size - 1)
+    weight = inside[index] * np.diff(tvd)
     cumulative = np.concatenate([[0.0], np.cumsum(weight)])
     if cumulative[-1] < deficit:
         return None

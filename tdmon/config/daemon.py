@@ -375,7 +375,7 @@ class CalibrationConfig(_Model):
     # relative weight difference the weight-mismatch alarm reports
     weight_factor: float = Field(default=1.0, gt=0.5, lt=1.5)
     weight_factor_std: float = Field(default=0.05, gt=0, le=0.5)
-    weight_mismatch_tolerance: float = Field(default=0.02, gt=0, lt=0.5)
+    weight_mismatch_tolerance: float = Field(default=0.01, gt=0, lt=0.5)
 
     @model_validator(mode="after")
     def _scale_needs_lab_fit(self) -> CalibrationConfig:
