@@ -232,3 +232,42 @@ def test_unfilled_pipe_is_named_with_its_level(model_open: WellModel) -> None:
     assert len(mismatch) == 1
     level = float(mismatch[0]["message"].split("empty down to about ")[1].split(" m")[0])
     assert 340.0 <= level <= 460.0
+
+
+def test_mismatch_names_only_possible_causes() -> None:
+    from dataclasses import replace as change
+
+    from tdmon.calib.mismatch import Mismatch, empty_length, mismatch_alarm, mud_density_for
+    from tdmon.model.well import Fluid
+
+    well = load_well_model("config/wells/volve-f4.toml")  # weights in air, 1080 kg/m3
+    model = WellModel(well)
+    air = WellModel(change(well, fluid=Fluid(0.0)))
+    static = model.evaluate("static", 2400.0, 0.0)[0] - well.block_weight
+    # an independent computation: the same well in a heavier mud weighs this much less
+    heavier = WellModel(change(well, fluid=Fluid(1150.0)))
+    difference = heavier.evaluate("static", 2400.0, 0.0)[0] - well.block_weight - static
+    assert mud_density_for(model, air, 2400.0, difference) == pytest.approx(1150.0, rel=1e-3)
+    # 12 % lighter would need mud 40 % heavier: no density is named, the fill level is
+    assert mud_density_for(model, air, 2400.0, -0.12 * static) is None
+    level = empty_length(model, 2400.0, 0.12 * static)
+    assert level is not None and 0.0 < level < 2400.0
+    assert empty_length(model, 2400.0, 2.0 * static) is None  # more than all the fluid inside
+    memory = Mismatch()
+    alarms = []
+    for k in range(4):
+        memory, alarm = mismatch_alarm(memory, model, air, float(k), 2400.0, 0.88, 0.01, 0.2,
+                                       True, tolerance=0.01, windows=3)
+        alarms += [alarm] if alarm is not None else []
+    assert len(alarms) == 1 and alarms[0].t == 2.0  # the third in a row, once
+    text = alarms[0].message
+    assert "12.0 %" in text and "lighter" in text and "kg/m3" not in text
+    assert f"empty down to about {level:.0f} m" in text
+    # heavier, not identified: nothing; identified: mud lighter or heavier pipe
+    memory, alarm = mismatch_alarm(Mismatch(), model, air, 0.0, 2400.0, 1.03, 0.005, 0.2,
+                                   False, tolerance=0.01, windows=1)
+    assert alarm is None
+    memory, alarm = mismatch_alarm(Mismatch(), model, air, 0.0, 2400.0, 1.03, 0.005, 0.2,
+                                   True, tolerance=0.01, windows=1)
+    assert alarm is not None and "heavier than modelled" in alarm.message
+    assert "rather than 1080" in alarm.message and "mass per metre" in alarm.message
