@@ -353,6 +353,13 @@ class FrictionEstimator:
         return scatter_std(w.scatter.get(_SCATTER_KIND.get(window.state, "")),
                            self.settings.joint.scatter_prior)
 
+    def _single_frictions(self, w: WindowState) -> dict[str, float]:
+        """Median single-window friction at the modelled weight of each operation's recent
+        windows [-]: pick-up and slack-off far apart at the same depth is a weight error."""
+        recent = 8
+        return {kind: float(np.median(scatter.mu[-recent:]))
+                for kind, scatter in w.scatter.items() if scatter.mu}
+
     def _add_scatter(self, w: WindowState, window: Window,
                      estimate: FrictionEstimate) -> WindowState:
         kind = _SCATTER_KIND.get(window.state)
@@ -388,7 +395,7 @@ class FrictionEstimator:
             "mu": fields.pop("mu"), "mu_std": fields.pop("mu_std"),
             "bit_depth_m": window.bit_depth, **fields,
             "weight_difference_N": difference if math.isfinite(difference) else None,
-            "scatter": taus}))
+            "scatter": taus, "mu_single": self._single_frictions(w)}))
         mismatch, alarm = mismatch_alarm(
             w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
             float(joint.mean[1]), float(joint.std[1]), float(joint.mean[0]),

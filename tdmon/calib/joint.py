@@ -120,13 +120,14 @@ class JointState(KalmanState):
     Attributes
     ----------
     t, bit_depth : time [s] and bit depth [m] of the last window used (None before)
-    recent : ``(t, bit depth, kind)`` of the measurements used within the horizon
+    recent : ``(t, bit depth, kind, residual)`` of the measurements used within the horizon,
+        the residual being measured minus predicted before the update [N or N m]
     gated : measurements left out by the gate [-]
     """
 
     t: float | None = None
     bit_depth: float | None = None
-    recent: tuple[tuple[float, float, str], ...] = ()
+    recent: tuple[tuple[float, float, str, float], ...] = ()
     gated: int = 0
 
 
@@ -254,7 +255,7 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
             continue
         if result.accepted:
             state = result.state
-            recent.append((window.t_end, depth, m.kind))
+            recent.append((window.t_end, depth, m.kind, result.state.innovation))
         elif result.gated:
             gated += 1
     recent = [r for r in recent if window.t_end - r[0] <= settings.horizon
@@ -289,7 +290,7 @@ def identifiability(state: JointState, settings: JointSettings) -> Identifiabili
     the friction is then the one at the prior weight.
     """
     kinds: dict[str, int] = {}
-    for _, _, kind in state.recent:
+    for _, _, kind, _ in state.recent:
         kinds[kind] = kinds.get(kind, 0) + 1
     ratio = float(state.covariance[1, 1]) / settings.weight_factor_std**2
     frozen = MappingProxyType(kinds)
@@ -335,4 +336,14 @@ def joint_fields(state: JointState, settings: JointSettings) -> dict[str, Any]:
             "mu_joint": float(state.mean[0]), "mu_joint_std": float(std[0]),
             "mu_at_prior_weight": at_prior, "mu_at_prior_weight_std": at_prior_std,
             "weight_variance_ratio": verdict.variance_ratio,
-            "windows": dict(verdict.kinds), "gated": state.gated}
+            "windows": dict(verdict.kinds), "residuals": residuals(state), "gated": state.gated}
+
+
+def residuals(state: JointState) -> dict[str, float]:
+    """Mean residual per measurement kind within the horizon [N, or N m for torque]: each
+    measurement against the joint estimate before it. Pick-up above and slack-off below zero
+    (or the reverse) at once is the signature of a weight error read as friction."""
+    sums: dict[str, list[float]] = {}
+    for _, _, kind, residual in state.recent:
+        sums.setdefault(kind, []).append(residual)
+    return {kind: float(np.mean(values)) for kind, values in sums.items()}
