@@ -271,3 +271,32 @@ def test_mismatch_names_only_possible_causes() -> None:
                                    True, tolerance=0.01, windows=1)
     assert alarm is not None and "heavier than modelled" in alarm.message
     assert "rather than 1080" in alarm.message and "mass per metre" in alarm.message
+
+
+def test_the_weight_prior_comes_from_the_daemon_file(tmp_path: Any) -> None:
+    from pathlib import Path
+
+    from tdmon.config.daemon import load_daemon_config
+    from tdmon.daemon.steps.calibrate import CalibrationStep
+    from tdmon.daemon.steps.compose import calibration_steps_for
+    from tdmon.errors import ConfigError
+
+    shipped = Path("config/daemon/replay-rig-f4.toml").resolve()
+    text = shipped.read_text().replace('well = "../wells/volve-f4.toml"',
+                                       f'well = "{(shipped.parent / "../wells/volve-f4.toml")}"')
+    text = text.replace('path = "../../replays/volve-f4-trip-out.mcap"',
+                        f'path = "{Path("replays/volve-f4-trip-out.mcap").resolve()}"')
+    good = tmp_path / "daemon.toml"
+    good.write_text(text.replace("[calibration]\n", "[calibration]\nweight_factor = 0.97\n"
+                                 "weight_factor_std = 0.02\nweight_mismatch_tolerance = 0.03\n"))
+    _, steps = calibration_steps_for(load_daemon_config(good))
+    step = next(s for s in steps if isinstance(s, CalibrationStep))
+    joint = step.settings.joint
+    assert (joint.weight_factor, joint.weight_factor_std, joint.mismatch_tolerance) == (
+        0.97, 0.02, 0.03)
+    assert step.state.windows.joint is not None
+    assert step.state.windows.joint.mean[1] == 0.97
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("[calibration]\n", "[calibration]\nweight_factor_std = 0\n"))
+    with pytest.raises(ConfigError, match="weight_factor_std"):
+        load_daemon_config(bad)
