@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         "run", help="run the live daemon",
         description="Subscribe to the rig's channels (MQTT and/or Zenoh, or replay a "
                     "recording), model and record, publish results on <prefix>/tdmon/<name>. "
-                    "Ctrl-C or SIGTERM flushes everything and exits 0.")
+                    "Ctrl-C or SIGTERM flushes everything and exits 0; SIGHUP re-reads the "
+                    "well file in use (docs/daemon.md, Model coverage).")
     run.add_argument("--config", required=True, type=Path, help="daemon TOML file")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])

@@ -231,3 +231,106 @@ def test_the_model_well_reaches_the_hole_bottom() -> None:
     # only the top component is longer: by the hole's depth less the tally
     assert [c.length for c in components] == pytest.approx([120.0, 150.0,
                                                             3330.0 + bottom - TALLY])
+
+
+VOLVE_HEADER = ("time_utc,hole_depth_m,bit_depth_m,hookload_kN,surface_torque_kNm,surface_rpm,"
+                "bit_rpm,flow_in_Lpm,flow_out_Lpm,spp_bar,wob_kN,rop_mph,rig_activity_code,"
+                "block_pos_comp_m,block_pos_uncomp_m,rig_heave_m,bit_depth_5s_m")
+
+
+def _volve_rows(first: int, last: int) -> str:
+    """Rows in the layout of the Volve F-4 logs: a pull of 0.5 m per 15 s row from 2500 m."""
+    rows = [VOLVE_HEADER]
+    for i in range(first, last):
+        minute, second = divmod(15 * i, 60)
+        hour, minute = divmod(minute, 60)
+        rows.append(f"2016-10-04T{17 + hour:02d}:{minute:02d}:{second:02d}Z,3510,"
+                    f"{2500 - 0.5 * i:.1f},{1600 + i % 5},0.0052,0.23,0.23,0,36,-0.4,5.4,0,7,"
+                    f"{12 + 0.5 * (i % 20):.1f},12.8,-0.08,2500")
+    return "\n".join(rows) + "\n"
+
+
+def _wait_for(path: Path, text: str, timeout: float = 30) -> None:
+    import time
+
+    deadline = time.monotonic() + timeout
+    while text not in path.read_text():
+        assert time.monotonic() < deadline, f"'{text}' never appeared: {path.read_text()}"
+        time.sleep(0.05)
+
+
+def test_sighup_reloads_the_well_file_of_a_running_daemon(
+        tmp_path: Path, free_tcp_port: Any) -> None:
+    """``tdmon run`` over Zenoh: half a trip, the well file edited (string 2574 m -> 2400 m),
+    SIGHUP, the other half; the recording holds both wells on /tdmon/well."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    volve = (ROOT / "config" / "wells" / "volve-f4.toml").read_text()
+    survey = ROOT / "data" / "volve-f4" / "trajectory.csv"
+    assert 'file = "../../data/volve-f4/trajectory.csv"' in volve
+    assert 'length = "2574 m"' in volve
+    well = tmp_path / "volve.toml"
+    well.write_text(volve.replace('file = "../../data/volve-f4/trajectory.csv"',
+                                  f'file = "{survey}"'))
+    port = free_tcp_port()
+    config = tmp_path / "daemon.toml"
+    config.write_text(f"""
+prefix = "rig/F4"
+well = "{well}"
+[sources.zenoh]
+listen = ["tcp/127.0.0.1:{port}"]
+[channels.hookload]
+unit = "kN"
+[rig_state]
+in_slips_hookload = "800 kN"
+[align]
+stale_timeout = "30 s"            # rows 15 s apart
+[recorder]
+enabled = true
+output = "{tmp_path / 'rec'}"
+""")
+    parts = []
+    for name, rows in (("first", (0, 50)), ("second", (50, 100))):
+        part = tmp_path / f"{name}.csv"
+        part.write_text(_volve_rows(*rows))
+        parts.append(part)
+    tdmon = [sys.executable, "-m", "tdmon"]
+    log = tmp_path / "daemon.log"
+    with log.open("w") as err:
+        daemon = subprocess.Popen([*tdmon, "run", "--config", str(config)], stderr=err,
+                                  stdout=subprocess.DEVNULL)
+        try:
+            _wait_for(log, "daemon running")
+            for number, part in enumerate(parts):
+                published = subprocess.run([*tdmon, "publish", str(part), "--config",
+                                            str(config)], capture_output=True, text=True,
+                                           timeout=60)
+                assert published.returncode == 0, published.stderr
+                if number == 0:
+                    time.sleep(0.5)
+                    well.write_text(well.read_text().replace('length = "2574 m"',
+                                                             'length = "2400 m"'))
+                    daemon.send_signal(signal.SIGHUP)
+                    _wait_for(log, "SIGHUP received")
+            _wait_for(log, "reload (SIGHUP): well file")
+            daemon.send_signal(signal.SIGINT)
+            assert daemon.wait(30) == 0, log.read_text()
+        finally:
+            if daemon.poll() is None:
+                daemon.kill()
+    assert "Traceback" not in log.read_text()
+    [recording] = sorted((tmp_path / "rec").glob("*.mcap"))
+    messages = list(read_messages(recording, ["/tdmon/well", "/tdmon/alarm"]))
+    first, second = _of(messages, "/tdmon/well")
+    assert first["change"] == "start" and first["string_length_m"] == pytest.approx(2574.0)
+    assert second["change"] == "reload (SIGHUP)"
+    assert second["string_length_m"] == pytest.approx(2400.0)
+    assert second["file"] == "volve.toml" and second["md_m"] == first["md_m"]
+    # the second half starts at 2475 m, 75 m below the new tally
+    coverage = [a for a in _of(messages, "/tdmon/alarm") if a["kind"] == "model_coverage"]
+    assert [a["severity"] for a in coverage] == ["info", "critical"]
+    assert coverage[1]["message"].startswith("string tally 75.0 m shorter than bit depth "
+                                             "2475.0 m")
