@@ -398,7 +398,7 @@ class FrictionEstimator:
             "scatter": taus, "mu_single": self._single_frictions(w)}))
         mismatch, alarm = mismatch_alarm(
             w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
-            float(joint.mean[1]), float(joint.std[1]), float(joint.mean[0]),
+            float(joint.mean[1]), float(fields["weight_factor_std"]), float(joint.mean[0]),
             bool(fields["identifiable"]), tolerance=s.mismatch_tolerance,
             windows=s.mismatch_windows)
         if alarm is not None:

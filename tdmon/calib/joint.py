@@ -88,6 +88,9 @@ class JointSettings:
         below this fraction of the prior's [-]
     horizon, horizon_depth : windows this recent [s] and this near [m] are listed as the set
         the estimate rests on
+    spread_mu : model error of a weight error that is not spread evenly along the string (an
+        unfilled top weighs on the hook but presses on no wall), relative to ``mu |w - 1|``
+        [-]: added to the published friction's standard deviation
     mismatch_tolerance : relative weight difference the mismatch alarm reports [-]
     mismatch_windows : consecutive estimates beyond it that raise the alarm [-]
     """
@@ -109,6 +112,7 @@ class JointSettings:
     identified_ratio: float = 0.25
     horizon: float = 3600.0
     horizon_depth: float = 300.0
+    spread_mu: float = 0.6
     mismatch_tolerance: float = 0.01
     mismatch_windows: int = 3
 
@@ -323,17 +327,23 @@ def joint_fields(state: JointState, settings: JointSettings) -> dict[str, Any]:
     p = state.covariance
     std = state.std
     correlation = float(p[0, 1] / (std[0] * std[1])) if std[0] > 0 and std[1] > 0 else 0.0
+    # where along the string the weight error sits is unknown: spread evenly (a mud density)
+    # the friction is the joint one; all in the vertical top (a fill level) it is mu w
+    departure = abs(float(state.mean[1]) - 1.0)
+    mu_joint_std = math.hypot(float(std[0]), settings.spread_mu * float(state.mean[0])
+                              * departure)
+    weight_std = float(std[1])
     at_prior = float(state.mean[0] + p[0, 1] / p[1, 1] * (settings.weight_factor
                                                           - state.mean[1]))
     at_prior_std = math.sqrt(max(float(p[0, 0] - p[0, 1] ** 2 / p[1, 1]), 0.0))
     verdict = identifiability(state, settings)
-    mu, mu_std = ((float(state.mean[0]), float(std[0])) if verdict.identifiable
+    mu, mu_std = ((float(state.mean[0]), mu_joint_std) if verdict.identifiable
                   else (at_prior, at_prior_std))
     return {"mu": mu, "mu_std": mu_std,
-            "weight_factor": float(state.mean[1]), "weight_factor_std": float(std[1]),
+            "weight_factor": float(state.mean[1]), "weight_factor_std": weight_std,
             "correlation": correlation, "identifiable": verdict.identifiable,
             "identifiability": verdict.statement,
-            "mu_joint": float(state.mean[0]), "mu_joint_std": float(std[0]),
+            "mu_joint": float(state.mean[0]), "mu_joint_std": mu_joint_std,
             "mu_at_prior_weight": at_prior, "mu_at_prior_weight_std": at_prior_std,
             "weight_variance_ratio": verdict.variance_ratio,
             "windows": dict(verdict.kinds), "residuals": residuals(state), "gated": state.gated}
