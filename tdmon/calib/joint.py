@@ -17,8 +17,10 @@ cased/open split).
 
 What each window says (``H = [dh/dmu, dh/dw]``):
 
-- static or circulating hang: ``[0, F_static]``, weight alone (with the drag the last motion
-  may have locked in as model error);
+- static or circulating hang after rotation off bottom (drag released) or with the last motion
+  unknown: ``[0, F_static]``, weight alone (with the drag it may hold as model error); a hang
+  right after a pull or a run is not used: it holds an unknown share of that motion's drag,
+  the same from hang to hang, which no number of hangs averages out;
 - rotating off bottom: its hook load ``[0, F_static]`` (rotation frees the axial friction) and
   its torque ``[w dT/dmu, T]``, i.e. ``mu w``;
 - pick-up ``[w dF_pu/dmu > 0, F_pu]`` and slack-off ``[w dF_so/dmu < 0, F_so]``: each alone is
