@@ -13,6 +13,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.daemon.steps.coverage import SHORT_TOLERANCE
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Well
 from tdmon.replay.loads import MOVING_DOWN, MOVING_UP, Loads
@@ -34,7 +35,8 @@ class ExpectedAlarm:
     """An alarm the daemon should raise: ``kind`` at about ``t`` [Unix s], with context.
 
     ``kind`` names the event (``overpull``, ``set_down``, ``friction_anomaly``,
-    ``stuck_sensor``, ``data_gap``); ``accept`` lists the daemon's alarm kinds
+    ``stuck_sensor``, ``data_gap``, ``string_short``: the bit deeper than the daemon's well
+    file's string is long); ``accept`` lists the daemon's alarm kinds
     (:mod:`tdmon.calib.alarms`) that count as raising it.
     """
 
@@ -93,6 +95,17 @@ def expected_alarms(scenario: Scenario, truth_t: Array,
                 f"{fault.duration:.0f} s", channel=channels[0] if len(channels) == 1 else None,
                 accept=tuple(f"sensor_{c}_frozen" for c in channels) if fault.kind == "stuck"
                 else (AlarmKind.SENSOR_STALE,)))
+    paper = scenario.model_well
+    if paper is not None:
+        # the daemon's well file has a shorter string than the bit depth: coverage alarm
+        short = np.flatnonzero(bit > paper.string.length + SHORT_TOLERANCE)
+        if short.size:
+            k = int(short[0])
+            alarms.append(ExpectedAlarm(
+                float(truth_t[k]), "string_short", Severity.CRITICAL,
+                f"string tally {float(bit[k]) - paper.string.length:.1f} m shorter than bit "
+                f"depth {float(bit[k]):.1f} m", md=float(bit[k]),
+                accept=(AlarmKind.MODEL_COVERAGE,)))
     return sorted(alarms, key=lambda alarm: alarm.t)
 
 
