@@ -74,11 +74,12 @@ class Severity(StrEnum):
 
 class EstimateKind(StrEnum):
     """What an ``estimate`` message holds: one window's friction, the friction profile along
-    MD, or the live mu(T) calibration."""
+    MD, the live mu(T) calibration, or friction and weight factor estimated jointly."""
 
     WINDOW = "window"
     PROFILE = "profile"
     MU_T = "mu_T"
+    JOINT = "joint"
 
 
 MOVING_STATES: Final = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.REAMING,
@@ -159,3 +160,4 @@ class AlarmKind(StrEnum):
     DATA_LOSS = "data_loss"
     CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)
     MODEL_COVERAGE = "model_coverage"  # string shorter than the bit depth, or a new well file
+    WEIGHT_MISMATCH = "weight_mismatch"  # joint friction/weight estimate (calib/mismatch.py)

@@ -63,12 +63,12 @@ def test_schema_enums_are_the_vocabulary() -> None:
     topics = schemas.TOPIC_SCHEMAS
     assert topics["/tdmon/state"]["properties"]["state"]["enum"] == [s.value for s in RigState]
     assert topics["/tdmon/estimate"]["properties"]["kind"]["enum"] == ["window", "profile",
-                                                                       "mu_T"]
+                                                                       "mu_T", "joint"]
     assert topics["/tdmon/alarm"]["properties"]["severity"]["enum"] == ["info", "warning",
                                                                         "critical"]
     alarm_kinds = topics["/tdmon/alarm"]["properties"]["kind"]["enum"]
     assert alarm_kinds == [k.value for k in AlarmKind]
-    assert len(alarm_kinds) == len(set(alarm_kinds)) == 20
+    assert len(alarm_kinds) == len(set(alarm_kinds)) == 21
     # plain strings: the schema is serialised into every MCAP file
     assert all(type(k) is str for k in alarm_kinds)
     assert schemas.RIG_STATES == ("in_slips", "pick_up", "slack_off", "rotating_off_bottom",

@@ -51,9 +51,12 @@ from tdmon.calib.estimator_state import (
     count,
     put,
 )
+from tdmon.calib.joint import initial_joint, joint_fields, update_joint
+from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.calib.scatter import Scatter, add_window, scatter_std
 from tdmon.calib.weightcheck import block_weight_alarm, weight_check
 from tdmon.calib.windows import Window, add_sample, close
 from tdmon.errors import FitError, ModelError
@@ -61,6 +64,7 @@ from tdmon.model.friction import FrictionModel
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Fluid
 from tdmon.vocabulary import (
+    OPERATION_FOR_STATE,
     REAMING_AXIAL_OPERATION,
     AlarmKind,
     EstimateKind,
@@ -86,6 +90,15 @@ ESTIMATED_STATES = frozenset({RigState.PICK_UP, RigState.SLACK_OFF, RigState.ROT
                               RigState.REAMING, RigState.BACK_REAMING})
 #: steady in-slips samples before the learnt block weight is used and compared [-]
 MIN_BLOCK_WEIGHT_SAMPLES = 20
+#: the between-window scatter each estimated rig state feeds (named as the joint
+#: estimate's measurement kinds)
+#: the motion whose drag a later hang keeps in part (rotation off bottom releases it)
+_MOTION: dict[str, str] = {
+    RigState.PICK_UP: "pick_up", RigState.BACK_REAMING: "pick_up",
+    RigState.SLACK_OFF: "slack_off", RigState.REAMING: "slack_off",
+    RigState.ROTATING_OFF_BOTTOM: "rotating"}
+_SCATTER_KIND = {RigState.PICK_UP: "pick_up", RigState.SLACK_OFF: "slack_off",
+                 RigState.ROTATING_OFF_BOTTOM: "rotating_torque"}
 
 
 def _alarm(alarm: Alarm) -> Output:
@@ -153,7 +166,8 @@ class FrictionEstimator:
             mu_t = MuTCalibrator(self.model, temperature, friction_law, mode=s.mu_t_mode,
                                  method=s.method, mask=mu_t_mask, base_mu=mu_t_base,
                                  prior_std=mu_t_prior_std)
-        return EstimatorState(SampleState(), WindowState(profile, mu_t))
+        return EstimatorState(SampleState(), WindowState(profile, mu_t,
+                                                         joint=initial_joint(s.joint)))
 
     def learnt_block_weight(self, state: EstimatorState) -> float | None:
         """The block weight the rig-state detector should use [N] (None: keep its own)."""
@@ -231,6 +245,10 @@ class FrictionEstimator:
         (EstimatorState, outputs)
         """
         windows, outputs = self._update(state.windows, state.samples.block_weight, window)
+        if window.rejected is None and window.state in _MOTION:
+            motion = _MOTION[window.state]
+            if motion != windows.last_motion:
+                windows = replace(windows, last_motion=motion)
         return EstimatorState(state.samples, windows), tuple(outputs)
 
     def _update(self, w: WindowState, block: BlockWeightWindow, window: Window
@@ -245,16 +263,19 @@ class FrictionEstimator:
         if window.state in WEIGHT_CHECK_STATES:
             w = self._weight_check(w, block, window, out)
         if window.state not in ESTIMATED_STATES:
-            return w, out
+            return self._joint(w, block, window, out), out
         try:
             estimate = self._solve(window, w.mu_cased(window.state))
         except FitError as exc:
             out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                     f"{window.state} window rejected: {exc}")))
             return replace(w, rejected=count(w.rejected, "not_bracketed")), out
-        out.append(Output("estimate", self._window_message(window, estimate, block)))
+        out.append(Output("estimate", self._window_message(window, estimate, block,
+                                                           self._scatter_of(w, window))))
         if window.state in REAMING_AXIAL_OPERATION:
             return w, out  # combined motion: not a reference for the cased value, profile or mu(T)
+        w = self._add_scatter(w, window, estimate)
+        w = self._joint(w, block, window, out)
         w = self._cased_or_pending(w, block, window, estimate, out)
         w = self._jump(w, window, estimate, out)
         w = self._limits(w, window, estimate, out)
@@ -301,25 +322,88 @@ class FrictionEstimator:
             except FitError:
                 w = replace(w, rejected=count(w.rejected, "not_bracketed"))
                 continue
-            out.append(Output("estimate", {**self._window_message(window, estimate, block),
-                                           "revised": True, "mu_cased": mu_cased}))
+            message = self._window_message(window, estimate, block, self._scatter_of(w, window))
+            out.append(Output("estimate", {**message, "revised": True, "mu_cased": mu_cased}))
         return w
 
     def _window_message(self, window: Window, estimate: FrictionEstimate,
-                        block: BlockWeightWindow) -> dict[str, Any]:
+                        block: BlockWeightWindow, scatter: float) -> dict[str, Any]:
+        """The window's estimate; its ``mu_std`` is the measurement's and the between-window
+        scatter's together (the spread of the window's friction about the trip's)."""
         operation = (window.state if window.state in REAMING_AXIAL_OPERATION
                      else estimate.operation)
         message: dict[str, Any] = {
             "t": window.t_end, "kind": EstimateKind.WINDOW, "operation": operation,
-            "mu": estimate.mu, "mu_std": estimate.mu_std, "bit_depth_m": window.bit_depth,
+            "mu": estimate.mu, "mu_std": math.hypot(estimate.mu_std, scatter),
+            "bit_depth_m": window.bit_depth,
             "section": estimate.section, "samples": window.n, "t_start": window.t_start,
             "low_confidence": bool(window.low_confidence), "flags": list(window.flags),
             "measured": estimate.measured, "measured_se": estimate.measured_se,
             "quantity": estimate.quantity,
+            "mu_std_measurement": estimate.mu_std, "scatter_std": scatter,
         }
         if block.estimate is not None:
             message["block_weight_N"] = block.estimate.value
         return message
+
+    # -- friction and weight together ----------------------------------------------------
+
+    def _scatter_of(self, w: WindowState, window: Window) -> float:
+        """Between-window friction scatter of the window's operation so far [-]."""
+        return scatter_std(w.scatter.get(_SCATTER_KIND.get(window.state, "")),
+                           self.settings.joint.scatter_prior)
+
+    def _single_frictions(self, w: WindowState) -> dict[str, float]:
+        """Median single-window friction at the modelled weight of each operation's recent
+        windows [-]: pick-up and slack-off far apart at the same depth is a weight error."""
+        recent = 8
+        return {kind: float(np.median(scatter.mu[-recent:]))
+                for kind, scatter in w.scatter.items() if scatter.mu}
+
+    def _add_scatter(self, w: WindowState, window: Window,
+                     estimate: FrictionEstimate) -> WindowState:
+        kind = _SCATTER_KIND.get(window.state)
+        if kind is None:
+            return w
+        scatter = add_window(w.scatter.get(kind, Scatter()), estimate.mu, estimate.mu_std,
+                             self.settings.joint.scatter_windows)
+        return replace(w, scatter=put(w.scatter, kind, scatter))
+
+    def _joint(self, w: WindowState, block: BlockWeightWindow, window: Window,
+               out: list[Output]) -> WindowState:
+        """Friction and weight factor from the recent windows; the weight-mismatch alarm."""
+        if w.joint is None:
+            return w
+        s = self.settings.joint
+        block_weight = (block.estimate.value if block.estimate is not None
+                        else self.model.well.block_weight)
+        taus = {kind: scatter_std(w.scatter.get(kind), s.scatter_prior)
+                for kind in _SCATTER_KIND.values()}
+        joint = update_joint(w.joint, self.model, window, block_weight, taus, s,
+                             self.settings.method, last_motion=w.last_motion)
+        if joint is w.joint:
+            return w
+        fields = joint_fields(joint, s)
+        try:
+            difference = weight_difference(self.model, window.bit_depth,
+                                           fields["weight_factor"])
+        except ModelError:
+            difference = math.nan
+        operation = OPERATION_FOR_STATE.get(window.state, window.state)
+        out.append(Output("estimate", {
+            "t": window.t_end, "kind": EstimateKind.JOINT, "operation": str(operation),
+            "mu": fields.pop("mu"), "mu_std": fields.pop("mu_std"),
+            "bit_depth_m": window.bit_depth, **fields,
+            "weight_difference_N": difference if math.isfinite(difference) else None,
+            "scatter": taus, "mu_single": self._single_frictions(w)}))
+        mismatch, alarm = mismatch_alarm(
+            w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
+            float(joint.mean[1]), float(fields["weight_factor_std"]), float(joint.mean[0]),
+            bool(fields["identifiable"]), tolerance=s.mismatch_tolerance,
+            windows=s.mismatch_windows)
+        if alarm is not None:
+            out.append(_alarm(alarm))
+        return replace(w, joint=joint, mismatch=mismatch)
 
     # -- alarms ---------------------------------------------------------------------------
 

@@ -15,8 +15,11 @@ from typing import Any, NamedTuple
 from tdmon.calib.alarms import JumpSettings
 from tdmon.calib.blockweight import BlockWeightWindow, BuoyancyCheck
 from tdmon.calib.cased import CasedFriction
+from tdmon.calib.joint import JointSettings, JointState
+from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
+from tdmon.calib.scatter import Scatter
 from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings
 
 __all__ = [
@@ -52,6 +55,7 @@ class CalibrationSettings:
     jump : friction-jump settings
     learn_block_weight : feed the in-slips block weight back into the rig-state threshold
     block_weight_tolerance : relative deviation from the configured block weight reported [-]
+    joint : the joint friction and weight-factor estimate (its prior, drift, mismatch alarm)
     """
 
     windows: WindowSettings = field(default_factory=WindowSettings)
@@ -67,6 +71,7 @@ class CalibrationSettings:
     jump: JumpSettings = field(default_factory=JumpSettings)
     learn_block_weight: bool = True
     block_weight_tolerance: float = 0.05
+    joint: JointSettings = field(default_factory=JointSettings)
 
 
 class Output(NamedTuple):
@@ -109,6 +114,11 @@ class WindowState:
     weight_off : consecutive static hangs whose weight is off [-]
     weight_checks : the recent weight checks, oldest first
     rejected : windows rejected or not solved, per reason [-]
+    joint : the joint friction and weight-factor filter (None: not started)
+    scatter : per measurement kind, the recent window frictions of the between-window scatter
+    mismatch : the weight-mismatch alarm's memory
+    last_motion : ``pick_up``, ``slack_off`` (whose drag a hang keeps in part) or ``rotating``
+        (off bottom: the drag released), the last motion (None: none yet)
     """
 
     profile: FrictionProfile
@@ -122,6 +132,10 @@ class WindowState:
     weight_off: int = 0
     weight_checks: tuple[BuoyancyCheck, ...] = ()
     rejected: Mapping[str, int] = field(default_factory=_empty)
+    joint: JointState | None = None
+    scatter: Mapping[str, Scatter] = field(default_factory=_empty)
+    mismatch: Mismatch = field(default_factory=Mismatch)
+    last_motion: str | None = None
 
     def mu_cased(self, state: str) -> float | None:
         """Cased-hole friction of ``state`` found so far [-] (None: not yet)."""

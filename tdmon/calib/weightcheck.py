@@ -4,7 +4,10 @@ model's string weight.
 Static hangs keep part of the last pull's or run's drag locked in, so one odd hang is not news:
 the weight check alarms when :data:`ODD_HANGS` hangs in a row are off by more than the
 tolerance, once, and again only after the weights have agreed in between
-(docs/back-calculation.md, "Block weight and weight check").
+(docs/back-calculation.md, "Block weight and weight check"). The alarm speaks in kN and % of
+the string's weight; what the difference means (fluid inside, mud density, mass per metre) is
+the joint estimate's weight-mismatch alarm (`tdmon.calib.mismatch`), which separates it from
+friction first.
 """
 
 from __future__ import annotations
@@ -70,11 +73,11 @@ def weight_check(model: WellModel, air_model: WellModel, window: Window, block_w
     odd = odd + 1 if abs(check.ratio - 1.0) > tolerance else 0
     if odd != ODD_HANGS or not math.isfinite(check.ratio):
         return check, odd, None
-    buoyed_given = abs(in_air - modelled) < 1e-6 * max(abs(modelled), 1.0)
-    density = ("" if buoyed_given or not math.isfinite(check.fluid_density)
-               else f" (implied fluid density {check.fluid_density:.0f} kg/m3)")
+    difference = check.measured_weight - check.modelled_weight
+    word = "lighter" if difference < 0 else "heavier"
     return check, odd, Alarm(
         window.t_end, AlarmKind.WEIGHT_CHECK, Severity.INFO,
-        f"{window.state} string weight at {window.bit_depth:.0f} m is "
-        f"{100 * check.ratio:.0f} % of the model's for three hangs in a row{density}",
+        f"{window.state} string at {window.bit_depth:.0f} m hangs {abs(difference) / 1e3:.0f} kN "
+        f"({100 * abs(check.ratio - 1.0):.1f} %) {word} than modelled for three hangs in a row "
+        "(a hang after a pull or a run keeps some drag locked in)",
         check.measured_weight, check.modelled_weight)

@@ -370,6 +370,12 @@ class CalibrationConfig(_Model):
     # /tdmon/profile is sent again when the friction profile changed, at most this often
     # (rig time, so that replays give the same messages at any speed)
     profile_interval: Seconds = Field(default=30.0, gt=0)
+    # joint friction and weight-factor estimate (docs/back-calculation.md, "Friction and weight
+    # together"): the prior of the factor on the modelled buoyed string weight, and the
+    # relative weight difference the weight-mismatch alarm reports
+    weight_factor: float = Field(default=1.0, gt=0.5, lt=1.5)
+    weight_factor_std: float = Field(default=0.05, gt=0, le=0.5)
+    weight_mismatch_tolerance: float = Field(default=0.01, gt=0, lt=0.5)
 
     @model_validator(mode="after")
     def _scale_needs_lab_fit(self) -> CalibrationConfig:

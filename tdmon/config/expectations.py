@@ -25,6 +25,7 @@ __all__ = [
     "ForbiddenAlarms",
     "FrictionExpectation",
     "InputExpectation",
+    "JointExpectation",
     "StatesExpectation",
     "load_expectations",
 ]
@@ -57,12 +58,31 @@ class FrictionExpectation(StrictModel):
     truth_abs: float | None = Field(default=None, gt=0)
     min_windows: int = Field(default=1, ge=1)
     include_revised: bool = True
+    # at least this share of the windows lies within 2 of its mu_std of the windows' median
+    # (the published uncertainty is honest about the scatter)
+    within_2_std: float | None = Field(default=None, gt=0, le=1)
 
     @model_validator(mode="after")
     def _something(self) -> FrictionExpectation:
-        if self.min is None and self.max is None and self.truth_abs is None:
-            raise ValueError("give min, max or truth_abs")
+        if (self.min is None and self.max is None and self.truth_abs is None
+                and self.within_2_std is None):
+            raise ValueError("give min, max, truth_abs or within_2_std")
         return self
+
+
+class JointExpectation(StrictModel):
+    # the joint friction and weight-factor estimates (kind "joint") from `after` [s from the
+    # replay's first message] on: medians in ranges and/or against /truth/friction and
+    # /truth/weight, and the identifiability verdict of the last one
+    after: Duration = Field(default=0.0, ge=0)
+    min_estimates: int = Field(default=1, ge=1)
+    mu: tuple[float, float] | None = None
+    mu_truth_abs: float | None = Field(default=None, gt=0)
+    weight_factor: tuple[float, float] | None = None
+    weight_truth_rel: float | None = Field(default=None, gt=0)
+    weight_difference_kN: tuple[float, float] | None = None
+    identifiable: bool | None = None
+    identifiability: str | None = None  # the last verdict starts with this
 
 
 class AlarmExpectation(StrictModel):
@@ -98,6 +118,7 @@ class Expectations(StrictModel):
     input: InputExpectation = Field(default_factory=InputExpectation)
     states: StatesExpectation | None = None
     friction: list[FrictionExpectation] = Field(default_factory=list)
+    joint: list[JointExpectation] = Field(default_factory=list)
     estimates: EstimatesExpectation = Field(default_factory=EstimatesExpectation)
     alarm: list[AlarmExpectation] = Field(default_factory=list)
     forbidden: ForbiddenAlarms = Field(default_factory=ForbiddenAlarms)

@@ -191,6 +191,15 @@ ESTIMATE: Final = _object(
         "params": {"type": "object", "additionalProperties": {"type": "number"}},
         "temperature_C": _NUMBERS,
         "mu_points": _NUMBERS,
+        # the joint friction and weight-factor estimate (kind "joint", docs/back-calculation.md)
+        "weight_factor": _NUMBER,
+        "weight_factor_std": _NUMBER,
+        "correlation": _NUMBER,
+        "identifiable": {"type": "boolean"},
+        "identifiability": _TEXT,
+        # a window's friction spread: the measurement's and the between-window scatter
+        "mu_std_measurement": _OPTIONAL_NUMBER,
+        "scatter_std": _OPTIONAL_NUMBER,
     },
     ("t", "kind", "operation", "mu", "mu_std"),
 )

@@ -9,7 +9,14 @@ daemon configuration and states, all optional:
   after each reference change; ``required`` states that must be reported at least once;
 * ``[[friction]]``: back-calculated window friction of one ``operation`` (optionally within
   ``depth`` = [top, bottom] m, ``section``) between ``min`` and ``max`` (median of the windows),
-  and/or within ``truth_abs`` of ``/truth/friction`` at the window's end (median abs error);
+  and/or within ``truth_abs`` of ``/truth/friction`` at the window's end (median abs error),
+  and/or at least a share ``within_2_std`` of the windows within two of their ``mu_std`` of
+  the median;
+* ``[[joint]]``: the joint friction and weight-factor estimates (kind ``joint``) from ``after``
+  [s] on: median ``mu`` in [low, high] and/or within ``mu_truth_abs`` of ``/truth/friction``
+  (pick-up value), median ``weight_factor`` in [low, high] and/or within ``weight_truth_rel``
+  (relative) of ``/truth/weight``, median ``weight_difference_kN`` in [low, high], and the
+  last estimate's ``identifiable`` and ``identifiability`` (its verdict starts with it);
 * ``[[alarm]]``: an alarm that must be raised: ``event`` names a ``/truth/alarm`` kind (its
   ``nth`` occurrence, with its ``accept`` list and time), and/or ``kinds`` lists daemon kinds
   (with ``at`` [s from the replay's first message] when there is no event); ``window`` =
@@ -45,6 +52,7 @@ from tdmon.config.expectations import (
     Expectations,
     ForbiddenAlarms,
     FrictionExpectation,
+    JointExpectation,
     StatesExpectation,
 )
 from tdmon.vocabulary import EstimateKind, Operation, RigState
@@ -128,6 +136,7 @@ class _Recorded:
     truth_states: list[tuple[float, str]] = field(default_factory=list)
     truth_friction: list[dict[str, Any]] = field(default_factory=list)
     truth_alarms: list[dict[str, Any]] = field(default_factory=list)
+    truth_weight: list[tuple[float, float]] = field(default_factory=list)
     activities: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -146,7 +155,8 @@ def _read(replay: Path, recording: Path) -> _Recorded:
 
     data = _Recorded()
     for item in read_messages(replay, ["/truth/state", "/truth/friction", "/truth/alarm",
-                                        "/reference/rig_activity", "/tdmon/raw"]):
+                                        "/truth/weight", "/reference/rig_activity",
+                                        "/tdmon/raw"]):
         message = item.message
         if item.topic == "/tdmon/raw":
             data.start = min(data.start, float(message.get("receive_time", math.inf)))
@@ -156,6 +166,8 @@ def _read(replay: Path, recording: Path) -> _Recorded:
             data.truth_friction.append(message)
         elif item.topic == "/truth/alarm":
             data.truth_alarms.append(message)
+        elif item.topic == "/truth/weight":
+            data.truth_weight.append((float(message["t"]), float(message["weight_factor"])))
         else:
             data.activities.append((float(message["t"]), str(message["activity"])))
     recorded_nulls = 0
@@ -272,6 +284,14 @@ def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
             parts.append(f"median off by {off:.3f}")
     measured = f"median {median:.3f} of {len(windows)} windows (range {min(mus):.3f}-" \
                f"{max(mus):.3f})"
+    if spec.within_2_std is not None:
+        inside = sum(abs(float(e["mu"]) - median) <= 2.0 * float(e.get("mu_std") or 0.0)
+                     for e in windows) / len(windows)
+        measured += f", {100 * inside:.0f} % within 2 sigma of the median"
+        expected.append(f">= {100 * spec.within_2_std:.0f} % within 2 sigma")
+        if inside < spec.within_2_std:
+            passed = False
+            parts.append("uncertainty too small for the scatter")
     if spec.truth_abs is not None:
         truth_key = _TRUTH_FRICTION.get(spec.operation)
         truth_t = [float(m["t"]) for m in data.truth_friction]
@@ -294,6 +314,86 @@ def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
                 passed = False
                 parts.append(f"error {error - spec.truth_abs:.3f} over")
     return Check(name, passed, measured, " and ".join(expected), "; ".join(parts))
+
+
+def _truth_at(series: Sequence[tuple[float, float]], t: float) -> float | None:
+    """The truth series' value nearest after ``t`` (None: no series)."""
+    if not series:
+        return None
+    index = min(bisect.bisect_left([s[0] for s in series], t), len(series) - 1)
+    return series[index][1]
+
+
+def _joint(spec: JointExpectation, data: _Recorded) -> Check:
+    estimates = [e for e in data.estimates if e.get("kind") == EstimateKind.JOINT
+                 and float(e["t"]) >= data.start + spec.after]
+    name = "joint estimate" + (f" after {spec.after:.0f} s" if spec.after else "")
+    if len(estimates) < spec.min_estimates:
+        return Check(name, False, f"{len(estimates)} estimates", f">= {spec.min_estimates}")
+    mus = [float(e["mu"]) for e in estimates]
+    factors = [float(e["weight_factor"]) for e in estimates]
+    last = estimates[-1]
+    measured = [f"mu {statistics.median(mus):.3f}, weight factor "
+                f"{statistics.median(factors):.4f} (median of {len(estimates)})"]
+    expected: list[str] = []
+    problems: list[str] = []
+
+    def within(label: str, value: float, bounds: tuple[float, float]) -> None:
+        expected.append(f"{label} in [{bounds[0]:g}, {bounds[1]:g}]")
+        if not bounds[0] <= value <= bounds[1]:
+            problems.append(f"{label} {value:.4g} outside")
+
+    if spec.mu is not None:
+        within("mu", statistics.median(mus), spec.mu)
+    if spec.weight_factor is not None:
+        within("weight factor", statistics.median(factors), spec.weight_factor)
+    if spec.weight_difference_kN is not None:
+        differences = [float(e["weight_difference_N"]) / 1e3 for e in estimates
+                       if e.get("weight_difference_N") is not None]
+        if differences:
+            within("weight difference [kN]", statistics.median(differences),
+                   spec.weight_difference_kN)
+        else:
+            problems.append("no weight difference")
+    truth_mu: list[Any] = [m.get("mu_pick_up") for m in data.truth_friction]
+    truth_t = [float(m["t"]) for m in data.truth_friction]
+    if spec.mu_truth_abs is not None:
+        errors = []
+        for e in estimates:
+            if truth_t:
+                index = min(bisect.bisect_left(truth_t, float(e["t"])), len(truth_t) - 1)
+                if truth_mu[index] is not None:
+                    errors.append(abs(float(e["mu"]) - float(truth_mu[index])))
+        expected.append(f"median |mu - truth| <= {spec.mu_truth_abs}")
+        if not errors:
+            problems.append("no friction truth")
+        else:
+            measured.append(f"median |mu - truth| {statistics.median(errors):.4f}")
+            if statistics.median(errors) > spec.mu_truth_abs:
+                problems.append("friction off the truth")
+    if spec.weight_truth_rel is not None:
+        ratios = []
+        for e in estimates:
+            truth = _truth_at(data.truth_weight, float(e["t"]))
+            if truth is not None:
+                ratios.append(abs(float(e["weight_factor"]) / truth - 1.0))
+        expected.append(f"median |w / truth - 1| <= {spec.weight_truth_rel}")
+        if not ratios:
+            problems.append("no weight truth")
+        else:
+            measured.append(f"median |w / truth - 1| {statistics.median(ratios):.4f}")
+            if statistics.median(ratios) > spec.weight_truth_rel:
+                problems.append("weight factor off the truth")
+    if spec.identifiable is not None:
+        expected.append(f"identifiable {spec.identifiable}")
+        if bool(last.get("identifiable")) != spec.identifiable:
+            problems.append(f"last verdict: {last.get('identifiability')}")
+    if spec.identifiability is not None:
+        expected.append(f"verdict '{spec.identifiability}...'")
+        if not str(last.get("identifiability", "")).startswith(spec.identifiability):
+            problems.append(f"last verdict: {last.get('identifiability')}")
+    return Check(name, not problems, "; ".join(measured), " and ".join(expected),
+                 "; ".join(problems))
 
 
 def _alarm(spec: AlarmExpectation, data: _Recorded, used: set[int]) -> Check:
@@ -376,6 +476,7 @@ def check_replay(expectations: Expectations, recording: str | os.PathLike[str], 
     if expectations.states is not None:
         checks.extend(_state_agreement(expectations.states, data))
     checks.extend(_friction(f, data) for f in expectations.friction)
+    checks.extend(_joint(j, data) for j in expectations.joint)
     kinds = Counter(str(e.get("kind")) for e in data.estimates)
     for kind, minimum in expectations.estimates.minimum.items():
         checks.append(Check(f"{kind} estimates", kinds[kind] >= minimum, str(kinds[kind]),

@@ -210,8 +210,13 @@ def test_daemon_steps_emit_valid_estimates(model_cased: WellModel, trip: Any,
     _check(messages)
     estimates = [m for n, m in messages if n == "estimate"]
     kinds = {m["kind"] for m in estimates}
-    assert kinds == {"window", "profile", "mu_T"}
+    assert kinds == {"window", "profile", "mu_T", "joint"}
     windows = [m for m in estimates if m["kind"] == "window"]
+    joint = [m for m in estimates if m["kind"] == "joint"]
+    # the model's weight is right and the bit ends inside casing (mu 0.2): the joint estimate
+    # finds both, from hangs, rotation and pick-up
+    assert joint[-1]["identifiable"] and joint[-1]["identifiability"] == "identifiable"
+    assert abs(joint[-1]["mu"] - 0.2) < 0.02 and abs(joint[-1]["weight_factor"] - 1.0) < 0.01
     # tripping out from below the shoe: open hole is solved again once cased friction is known
     opened = [m for m in windows if m["section"] == "open" and m["operation"] == "pick_up"]
     cased = [m for m in windows if m["section"] == "cased" and m["operation"] == "pick_up"]
@@ -419,8 +424,9 @@ def test_weight_check_needs_three_odd_hangs(model_open: WellModel) -> None:
         calibrate.on_window(window, lambda n, m: messages.append((n, m)))
     checks = [m for n, m in messages if n == "alarm" and m["kind"] == "weight_check"]
     assert len(checks) == 1 and checks[0]["t"] == 65.0
-    assert "85 %" in checks[0]["message"]
-    assert "density" not in checks[0]["message"]  # weights given buoyed: no density to infer
+    lighter = 0.15 * (static - 400e3) / 1e3
+    assert f"{lighter:.0f} kN (15.0 %) lighter" in checks[0]["message"]
+    assert "density" not in checks[0]["message"]  # kN and %, never a density
     assert calibrate.weight_checks[0].ratio == pytest.approx(1.0)
 
 

@@ -116,7 +116,7 @@ def test_weight_check_fires_on_the_third_odd_hang(model_open: WellModel) -> None
         alarms += _of(outputs, "alarm", "weight_check")
     # third odd hang in a row (k = 3), not the fourth; again after the weights agreed (k = 8)
     assert [a["t"] for a in alarms] == [310.0, 810.0]
-    assert "85 %" in alarms[0]["message"]
+    assert "(15.0 %) lighter" in alarms[0]["message"]
     ratios = [c.ratio for c in state.windows.weight_checks]
     assert ratios == pytest.approx(list(factors))
     assert alarms[0]["value"] == pytest.approx(state.windows.weight_checks[3].measured_weight)

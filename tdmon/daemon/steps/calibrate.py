@@ -17,6 +17,8 @@ from numpy.typing import NDArray
 
 from tdmon.calib.blockweight import BlockWeightWindow, BuoyancyCheck
 from tdmon.calib.estimator import CalibrationSettings, EstimatorState, FrictionEstimator, Output
+from tdmon.calib.joint import initial_joint
+from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.windows import Window
@@ -88,12 +90,15 @@ class CalibrationStep:
     def use_model(self, model: WellModel) -> None:
         """Go on with a new string or fluid on the same hole grid (a new run's well file,
         :mod:`tdmon.daemon.steps.coverage`): the friction profile and mu(T) keep what they
-        have learnt, later windows are solved with ``model``."""
+        have learnt, later windows are solved with ``model``. The joint weight factor starts
+        again from its prior: it measured the old string's weight against its model."""
         self.estimator = FrictionEstimator(model, self.estimator.settings)
         windows = self.state.windows
         windows.profile.model = model
         if windows.mu_t is not None:
             windows.mu_t.model = model
+        self.state = replace(self.state, windows=replace(
+            windows, joint=initial_joint(self.estimator.settings.joint), mismatch=Mismatch()))
 
     # -- what the estimator holds, for the profile step and for tests ---------------------
 

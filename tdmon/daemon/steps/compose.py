@@ -45,6 +45,7 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     well file has a temperature model, and the well/profile step last."""
     # imported here: a daemon without the calibration does not load the estimator's modules
     from tdmon.calib.estimator import CalibrationSettings
+    from tdmon.calib.joint import JointSettings
     from tdmon.daemon.steps.alarms import AlarmStep
     from tdmon.daemon.steps.calibrate import CalibrationStep
     from tdmon.daemon.steps.mu_t import mu_t_setup
@@ -62,7 +63,10 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     rig_state = RigStateStep(calibration_thresholds(config, well.block_weight))
     model = WellModel(well)
     setup = mu_t_setup(config, well_file, model.grid)
-    settings = CalibrationSettings(mu_t_mode=setup.mode)
+    cal = config.calibration
+    settings = CalibrationSettings(mu_t_mode=setup.mode, joint=JointSettings(
+        weight_factor=cal.weight_factor, weight_factor_std=cal.weight_factor_std,
+        mismatch_tolerance=cal.weight_mismatch_tolerance))
     try:
         calibration = CalibrationStep(
             model, rig_state, settings, temperature=setup.temperature if setup.law else None,
