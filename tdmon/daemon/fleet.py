@@ -20,6 +20,7 @@ supervision, backpressure, acknowledgements and shutdown are the single-rig daem
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
@@ -229,6 +230,11 @@ class FleetPipeline:
             self.refused.add(prefix)
             return None
         self.rigs[prefix] = built
+        # What a rig keeps for its life (well model, filters, recorder) goes to the permanent
+        # generation: a full collection then scans only what came after. Without it, building
+        # rigs grows the tracked heap until full collections take 0.15-0.25 s each (measured
+        # with 50 rigs), a stall every rig's messages wait through.
+        gc.freeze()
         log.info("rig %s: monitoring (%d rig%s)", prefix, len(self.rigs),
                  "" if len(self.rigs) == 1 else "s")
         return built.pipeline

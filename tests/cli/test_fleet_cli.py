@@ -112,7 +112,7 @@ def _wait(predicate: Callable[[], bool], timeout: float, what: str,
     while not predicate():
         for process in processes:
             if process.poll() is not None:
-                raise AssertionError(f"{process.args} ended ({process.returncode}) while "
+                raise AssertionError(f"{process.args!r} ended ({process.returncode}) while "
                                      f"waiting for {what}: {process.stderr.read()[-2000:]}"
                                      if process.stderr else what)
         if time.monotonic() > deadline:

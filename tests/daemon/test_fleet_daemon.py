@@ -99,7 +99,7 @@ def _sequence(t0: float, offset: float) -> list[tuple[float, float, float, float
             for i in range(STEPS)]
 
 
-def _check_rig(models: list[dict[str, Any]], sequence: list[tuple[float, ...]],
+def _check_rig(models: list[dict[str, Any]], sequence: list[tuple[float, float, float, float]],
                mu: float) -> None:
     well = load_well_model(WELL_FILE)
     by_t = {round(m["t"], 6): m for m in models}
@@ -156,7 +156,8 @@ def _three_rigs(tmp_path: Path, sources: dict[str, Any], publish: dict[str, Any]
 
 
 def _check_three_rigs(fleet: FleetPipeline, results: dict[str, list[dict[str, Any]]],
-                      sequences: dict[str, list[tuple[float, ...]]], tmp_path: Path) -> None:
+                      sequences: dict[str, list[tuple[float, float, float, float]]],
+                      tmp_path: Path) -> None:
     assert sorted(fleet.rigs) == sorted(RIGS)
     assert fleet.rigs["rig/C"].config.well == tmp_path / "wells" / "C.toml"
     for prefix, (mu, _) in RIGS.items():
