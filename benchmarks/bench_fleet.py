@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import socket
 import statistics
 import sys
@@ -232,6 +233,7 @@ def run(transport: str, rigs: int, seconds: float, warmup: float,
                  json.dumps({"t": t, "value": values(0, 0)[channel], "unit": unit}).encode())
         time.sleep(0.5)
     published: dict[tuple[str, float], float] = {}
+    load_before = os.getloadavg()[0]  # the machine is shared: say how busy it was
     rss: list[float] = [daemon.rss_mb()]
     start = time.time()
     next_rss = time.monotonic() + 2.0
@@ -285,6 +287,7 @@ def run(transport: str, rigs: int, seconds: float, warmup: float,
                        "p99": round(p99, 1), "max": round(latencies[-1], 1)},
         "rss_mb": {"start": round(rss[0], 1), "max": round(max(rss), 1),
                    "end": round(rss[-1], 1)},
+        "load_average_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "recording_folders": (sum(1 for _ in (folder / "recordings").iterdir())
                               if record else 0),
     }

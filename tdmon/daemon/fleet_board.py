@@ -158,9 +158,19 @@ def row_cells(board: FleetBoard, rig: RigView, now: float) -> tuple[str, ...]:
     alarm_cell = "-" if not alarms else f"{len(alarms)}: " + ", ".join(
         f"{a.get('kind')}{'!' if a.get('severity') == Severity.CRITICAL.value else ''}"
         for a in alarms)
-    lag = "-" if rig.lag_s is None else f"{rig.lag_s:.1f} s"
-    seen = f"{max(0.0, now - rig.received):.0f} s ago"
+    lag = "-" if rig.lag_s is None else duration_text(rig.lag_s)
+    seen = duration_text(max(0.0, now - rig.received), decimals=0) + " ago"
     return (rig.prefix, state, depth, friction, alarm_cell, lag, seen)
+
+
+def duration_text(seconds: float, decimals: int = 1) -> str:
+    """``seconds`` in the unit that keeps it short: s, min, h or d (a replayed session's lag
+    is the age of its data)."""
+    for limit, unit, size in ((120.0, "s", 1.0), (7200.0, "min", 60.0),
+                              (172_800.0, "h", 3600.0)):
+        if seconds < limit:
+            return f"{seconds / size:.{decimals}f} {unit}"
+    return f"{seconds / 86_400.0:.{decimals}f} d"
 
 
 def render_table(board: FleetBoard, now: float, width: int | None = None) -> str:

@@ -21,7 +21,7 @@ import zenoh
 from rerun.chunk import RrdReader
 
 from tdmon.cli import main
-from tdmon.daemon.fleet_board import FleetBoard, render_table, split_key
+from tdmon.daemon.fleet_board import FleetBoard, duration_text, render_table, split_key
 from tdmon.ingest.publish import recording_messages
 from tdmon.vocabulary import RigState
 
@@ -41,6 +41,11 @@ def test_keys_name_the_rig_and_the_result() -> None:
     assert split_key("ops/north/rig7/tdmon/alarm") == ("ops/north/rig7", "alarm")
     assert split_key("rig/A/hookload") is None
     assert split_key("tdmon/state") is None
+
+
+def test_durations_read_in_a_short_unit() -> None:
+    assert [duration_text(s) for s in (0.5, 119.0, 150.0, 7300.0, 86_086_629.8)] == [
+        "0.5 s", "119.0 s", "2.5 min", "2.0 h", "996.4 d"]
 
 
 def test_the_board_keeps_state_friction_and_open_alarms() -> None:
@@ -76,6 +81,7 @@ def test_the_board_keeps_state_friction_and_open_alarms() -> None:
     assert table[0].split()[:2] == ["RIG", "STATE"]
     assert "reaming (steady)" in table[1] and "2,500.0 m" in table[1]
     assert "0.270 ± 0.010 reaming" in table[1] and "1: sensor_stale!" in table[1]
+    assert table[1].endswith("0.5 s  3 s ago")  # the lag, then when the last result came
     assert "silent" in render_table(board, now=70.0).splitlines()[1]  # 13 s without results
 
 
@@ -193,6 +199,7 @@ def test_operations_centre_router_and_three_rig_daemons(
                 process.kill()
                 process.wait()
     last = out.strip().split("\n\n")[-1].splitlines()
+    print("\n".join(last))  # with -s: the table docs/fleet.md shows
     assert last[0].startswith("tdmon fleet") and last[0].endswith("3 rigs")
     rows = {line.split()[0]: line for line in last[2:]}
     assert sorted(rows) == rigs
