@@ -92,6 +92,18 @@ def test_fleet_needs_somewhere_to_listen_or_connect(capsys: pytest.CaptureFixtur
     assert "not a Zenoh endpoint" in capsys.readouterr().err
 
 
+def test_once_prints_one_plain_table(capsys: pytest.CaptureFixture[str],
+                                     free_tcp_port: Callable[[], int]) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    assert main(["fleet", "--listen", endpoint, "--once", "--duration", "0.3 s"]) == 0
+    captured = capsys.readouterr()
+    blocks = captured.out.strip().split("\n\n")
+    assert len(blocks) == 1 and "\x1b" not in captured.out  # not a terminal: plain text
+    lines = blocks[0].splitlines()
+    assert lines[0].endswith("0 rigs") and lines[2] == "(no rig yet)"
+    assert f"router on {endpoint}, watching rig/*/tdmon/**" in captured.err
+
+
 def _rig_config(folder: Path, prefix: str, router: str) -> Path:
     """The bundled drill replay's daemon file, as a rig's daemon: a Zenoh client of the
     operations centre's router, publishing its results there."""
