@@ -416,6 +416,39 @@ class RunConfig(_Model):
         return value
 
 
+#: The sections a rig of a fleet daemon may set for itself (``[[rigs]]``); the keys it sets
+#: replace the file's, the others are the file's (docs/daemon.md, "Many rigs").
+RIG_SECTIONS = ("channels", "align", "rig_state", "monitor", "calibration")
+
+
+class RigConfig(_Model):
+    """``[[rigs]]``: one rig of a fleet daemon, its prefix, well file and own settings."""
+
+    prefix: str = Field(min_length=1)
+    well: Path | None = None  # default: the file's `well`
+    channels: dict[str, ChannelConfig] | None = None
+    align: AlignConfig | None = None
+    rig_state: RigStateConfig | None = None
+    monitor: MonitorConfig | None = None
+    calibration: CalibrationConfig | None = None
+
+    @field_validator("prefix")
+    @classmethod
+    def _prefix(cls, value: str) -> str:
+        return validate_prefix(value)
+
+
+class FleetConfig(_Model):
+    """``[fleet]``: rigs found by their topics. Every ``<prefix>/<name>/...`` is rig
+    ``<prefix>/<name>`` from its first message on; its well file is ``<wells>/<name>.toml``
+    (else the file's ``well``)."""
+
+    discover: bool = True
+    wells: Path | None = None  # folder of well files named after the rigs
+    # a bound on the rigs found (a stray publisher must not grow the daemon without limit)
+    max_rigs: int = Field(default=200, ge=1)
+
+
 class DaemonConfig(_Model):
     """The whole daemon file."""
 
@@ -433,6 +466,9 @@ class DaemonConfig(_Model):
     calibration: CalibrationConfig = Field(default_factory=CalibrationConfig)
     display: DisplayConfig = Field(default_factory=DisplayConfig)
     runs: list[RunConfig] = Field(default_factory=list)
+    # many rigs in one daemon (docs/daemon.md, "Many rigs"): listed, and/or found by topic
+    rigs: list[RigConfig] = Field(default_factory=list)
+    fleet: FleetConfig | None = None
     #: the file this was read from (set by load_daemon_config; paths are relative to it)
     source_file: Path | None = Field(default=None, exclude=True)
 
@@ -484,6 +520,36 @@ class DaemonConfig(_Model):
             margin = None if cfg is None else cfg.beyond_well
             margins[name] = DEFAULT_BEYOND_WELL if margin is None else margin
         return margins
+
+    @property
+    def is_fleet(self) -> bool:
+        """True when the file serves many rigs (``[[rigs]]`` or ``[fleet]``), each under
+        ``prefix``; False for the single rig ``prefix``."""
+        return bool(self.rigs) or (self.fleet is not None and self.fleet.discover)
+
+    def for_rig(self, prefix: str, rig: RigConfig | None = None,
+                well: Path | None = None) -> DaemonConfig:
+        """The single-rig configuration of rig ``prefix``: the file's sections with the keys
+        ``rig`` sets replaced, its well file (``well``, else the rig's, else the file's)."""
+        update: dict[str, Any] = {"prefix": prefix, "rigs": [], "fleet": None}
+        if rig is not None:
+            for name in RIG_SECTIONS:
+                own = getattr(rig, name)
+                if own is None:
+                    continue
+                if name == "channels":
+                    update[name] = {**self.channels, **own}
+                    continue
+                base = getattr(self, name)
+                merged = base.model_copy(update={key: getattr(own, key)
+                                                 for key in own.model_fields_set})
+                # the section's own checks across its keys, on the merged values
+                update[name] = type(base).model_validate(merged.model_dump())
+            if rig.well is not None:
+                update["well"] = rig.well
+        if well is not None:
+            update["well"] = well
+        return self.model_copy(update=update)
 
     def resolve(self, path: Path) -> Path:
         """A path from the file, made absolute relative to the file's folder."""
@@ -553,6 +619,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
     if config.well is not None and not config.resolve(config.well).exists():
         raise ConfigError(str(file), "well", f"file not found: {config.resolve(config.well)}")
     _check_runs(config, file)
+    _check_rigs(config, file)
     return config
 
 
@@ -571,6 +638,49 @@ def _check_runs(config: DaemonConfig, file: Path) -> None:
         if not config.resolve(run.well).exists():
             raise ConfigError(str(file), f"runs[{index}].well",
                               f"file not found: {config.resolve(run.well)}")
+
+
+def _check_rigs(config: DaemonConfig, file: Path) -> None:
+    """The ``[[rigs]]`` and ``[fleet]`` keys: each rig under ``prefix`` and listed once, its
+    well file there, its settings valid once merged with the file's."""
+    if not config.is_fleet:
+        return
+    if config.rerun.mode != "off":
+        raise ConfigError(str(file), "rerun.mode", "a daemon of many rigs has no Rerun views; "
+                          "set mode = 'off' and watch the fleet with 'tdmon fleet --rerun'")
+    if config.sources.wits0 is not None:
+        raise ConfigError(str(file), "sources.wits0", "a WITS0 feed is one rig's: give it a "
+                          "daemon file of its own (without [[rigs]] and [fleet])")
+    if config.fleet is not None and config.fleet.wells is not None \
+            and not config.resolve(config.fleet.wells).is_dir():
+        raise ConfigError(str(file), "fleet.wells",
+                          f"no such folder: {config.resolve(config.fleet.wells)}")
+    seen: set[str] = set()
+    for index, rig in enumerate(config.rigs):
+        key = f"rigs[{index}]"
+        if not rig.prefix.startswith(config.prefix + "/"):
+            raise ConfigError(str(file), f"{key}.prefix", f"'{rig.prefix}' is not under the "
+                              f"file's prefix '{config.prefix}/': give e.g. "
+                              f"'{config.prefix}/{rig.prefix.rsplit('/', 1)[-1]}'")
+        if rig.prefix in seen:
+            raise ConfigError(str(file), f"{key}.prefix", f"rig '{rig.prefix}' is listed twice")
+        if any(rig.prefix.startswith(other + "/") or other.startswith(rig.prefix + "/")
+               for other in seen):
+            raise ConfigError(str(file), f"{key}.prefix",
+                              f"'{rig.prefix}' nests with another rig's prefix")
+        seen.add(rig.prefix)
+        if "/tdmon/" in rig.prefix + "/":
+            raise ConfigError(str(file), f"{key}.prefix", "'tdmon' is where results go")
+        try:
+            rig_config = config.for_rig(rig.prefix, rig)
+        except ValidationError as exc:
+            error = validation_to_config_error(file, exc)
+            raise ConfigError(str(file), f"{key}.{error.key}".rstrip("."), error.reason) from exc
+        if rig.well is not None and not rig_config.resolve(rig.well).exists():
+            raise ConfigError(str(file), f"{key}.well",
+                              f"file not found: {rig_config.resolve(rig.well)}")
+        if rig_config.calibration.enabled and rig_config.well is None:
+            raise ConfigError(str(file), f"{key}.well", "calibration needs a well file")
 
 
 def broker_sections(config: DaemonConfig) -> list[tuple[str, MqttConfig]]:

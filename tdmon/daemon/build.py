@@ -101,6 +101,60 @@ def load_model(config: DaemonConfig, well: Any = None) -> LoadModel | None:
     return grid_model_for_well(config, well)
 
 
+def assemble_pipeline(config: DaemonConfig, well: Any, steps: Sequence[Step],
+                      sinks: Sequence[Sink], stats: Stats) -> Pipeline:
+    """The pipeline of one rig: its decoder (channel map, sample checks against ``well``),
+    aligner and clock guard from ``config``, then ``steps``, writing to ``sinks``."""
+    align = config.align
+    aligner = Aligner(
+        wait_for=align.wait_for,
+        expected=list(config.channels),
+        stale_timeout=align.stale_timeout,
+        max_wait=align.max_wait,
+        jump_samples=align.clock_jump_samples,
+        jump_spread=align.clock_jump_spread,
+        jump_min=align.future_tolerance,
+    )
+    checks = SampleChecks(
+        earliest_t=align.earliest_time,
+        well_depth=None if well is None else well.hole_bottom,
+        depth_margins=config.depth_margins())
+    decoder = Decoder(config.prefix, config.channel_specs(),
+                      max_payload_bytes=config.queues.max_payload_bytes, checks=checks)
+    clock = ClockGuard(ClockSettings(align.future_tolerance, align.clock_jump_samples,
+                                     align.clock_jump_spread))
+    return Pipeline(decoder, aligner, steps, sinks, stats, clock=clock)
+
+
+def rig_steps(config: DaemonConfig, well_file: WellFile | None, model: LoadModel | None,
+              rig_state: Step | None = None, extra_steps: Sequence[Step] = (), *,
+              own_model: bool = True) -> list[Step]:
+    """A rig's steps: the model-coverage step first when there is a well file (a new well, by
+    run or reload, is in place before the monitor's frame), rig state and monitor, the
+    calibration's steps when it is on (around ``extra_steps``), else the profile step.
+    ``own_model``: the monitor's model is the well file's (not a caller's), so a new well
+    file replaces it."""
+    extra_steps = list(extra_steps)
+    if config.calibration.enabled and rig_state is None:
+        assert well_file is not None  # the config needs a well file for calibration
+        rig_state, calibration_steps = calibration_steps_for(config, well_file.well, well_file)
+        extra_steps = calibration_steps[:-1] + extra_steps + calibration_steps[-1:]
+    elif well_file is not None:
+        from tdmon.daemon.steps.calibrate import CalibrationStep
+        from tdmon.model.well import hole_grid
+
+        # a caller composing its own calibration still gets its profile reported
+        calibration = next((s for s in extra_steps if isinstance(s, CalibrationStep)), None)
+        extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well),
+                                        calibration=calibration))
+    steps = default_steps(config, model, rig_state) + extra_steps
+    if well_file is not None:
+        from tdmon.daemon.steps.coverage import coverage_step
+
+        steps.insert(0, coverage_step(config, well_file, steps, own_model=own_model))
+    return steps
+
+
 @contextlib.asynccontextmanager
 async def build_daemon(
     config: DaemonConfig,
@@ -118,7 +172,6 @@ async def build_daemon(
     rig-state step; ``extra_steps`` run after the monitor (back-calculation, alarms);
     ``extra_sinks`` receive everything (the recorder is added first when enabled).
     """
-    needs_calibration = config.calibration.enabled and rig_state is None
     # the well file is read once, for the monitor's grid, the back-calculation, the
     # temperatures and the well/profile messages
     well_file = read_well_file(config)
@@ -126,19 +179,8 @@ async def build_daemon(
     model_from_well = model is None
     if model is None:
         model = load_model(config, well)
-    extra_steps = list(extra_steps)
-    if needs_calibration:
-        assert well_file is not None  # the config needs a well file for calibration
-        rig_state, calibration_steps = calibration_steps_for(config, well, well_file)
-        extra_steps = calibration_steps[:-1] + extra_steps + calibration_steps[-1:]
-    elif well_file is not None:
-        from tdmon.daemon.steps.calibrate import CalibrationStep
-        from tdmon.model.well import hole_grid
-
-        # a caller composing its own calibration still gets its profile reported
-        calibration = next((s for s in extra_steps if isinstance(s, CalibrationStep)), None)
-        extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well),
-                                        calibration=calibration))
+    steps = rig_steps(config, well_file, model, rig_state, extra_steps,
+                      own_model=model_from_well)
     stats = Stats()
     wiring = Wiring(config, stats)
     try:
@@ -148,32 +190,7 @@ async def build_daemon(
         await wire(PUBLISHERS, wiring)
         sources = wiring.sources
 
-        steps = default_steps(config, model, rig_state) + list(extra_steps)
-        if well_file is not None:
-            from tdmon.daemon.steps.coverage import coverage_step
-
-            # first: a new well (run or reload) is in place before the monitor's frame
-            steps.insert(0, coverage_step(config, well_file, steps,
-                                          own_model=model_from_well))
-        align = config.align
-        aligner = Aligner(
-            wait_for=align.wait_for,
-            expected=list(config.channels),
-            stale_timeout=align.stale_timeout,
-            max_wait=align.max_wait,
-            jump_samples=align.clock_jump_samples,
-            jump_spread=align.clock_jump_spread,
-            jump_min=align.future_tolerance,
-        )
-        checks = SampleChecks(
-            earliest_t=align.earliest_time,
-            well_depth=None if well is None else well.hole_bottom,
-            depth_margins=config.depth_margins())
-        decoder = Decoder(config.prefix, config.channel_specs(),
-                          max_payload_bytes=config.queues.max_payload_bytes, checks=checks)
-        clock = ClockGuard(ClockSettings(align.future_tolerance, align.clock_jump_samples,
-                                         align.clock_jump_spread))
-        pipeline = Pipeline(decoder, aligner, steps, wiring.sinks, stats, clock=clock)
+        pipeline = assemble_pipeline(config, well, steps, wiring.sinks, stats)
         wiring.pipeline = pipeline
         if stop_when_sources_done is None:
             stop_when_sources_done = bool(sources) and all(s.finite for s in sources)

@@ -275,7 +275,7 @@ class Daemon:
                 self.emit_status()
 
     def emit_status(self) -> None:
-        self.pipeline.emit("status", self.pipeline.status_message(self.connections))
+        self.pipeline.emit_status(self.connections)
 
     async def _shutdown(
         self,

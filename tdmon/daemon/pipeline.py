@@ -276,6 +276,10 @@ class Pipeline:
         self._write(f"/tdmon/{name}", time.time_ns() if log_time_ns is None else log_time_ns,
                     message)
 
+    def emit_status(self, connections: dict[str, str]) -> None:
+        """Send the ``status`` message (a fleet's pipeline sends one per rig)."""
+        self.emit("status", self.status_message(connections))
+
     def status_message(self, connections: dict[str, str], now: float | None = None
                        ) -> dict[str, Any]:
         """The periodic ``status`` message (docs/architecture.md)."""

@@ -26,7 +26,13 @@ async def run_daemon(config: DaemonConfig, stop: asyncio.Event | None = None,
     """
     stop = stop or asyncio.Event()
     with stop_on_signals(stop):
-        async with build_daemon(config, **build_options) as built:
+        if config.is_fleet:
+            from tdmon.daemon.fleet import build_fleet
+
+            building = build_fleet(config, **build_options)
+        else:
+            building = build_daemon(config, **build_options)
+        async with building as built:
             log.info("tdmon daemon running: prefix %s, sources %s", config.prefix,
                      ", ".join(s.name for s in built.daemon.sources))
             with reload_on_sighup(built):

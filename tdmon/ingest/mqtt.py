@@ -367,12 +367,17 @@ class MqttPublisher:
         name = topic.rsplit("/", 1)[-1]
         if name not in self.names:
             return
+        self.enqueue(f"{self.prefix}/tdmon/{name}", message)
+
+    def enqueue(self, topic: str, message: dict[str, Any]) -> None:
+        """Queue ``message`` for the full MQTT ``topic`` (a fleet daemon's rigs share one
+        publisher, each on its own prefix)."""
         if len(self._queue) >= self._queue_size:
             self._queue.popleft()
             self.dropped += 1
             if self._on_drop is not None:
                 self._on_drop(1)
-        self._queue.append((f"{self.prefix}/tdmon/{name}", json.dumps(message).encode()))
+        self._queue.append((topic, json.dumps(message).encode()))
         self._idle.clear()
         self._wake.set()
 

@@ -111,7 +111,8 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     for path in sorted((REPO / "config" / "daemon").glob("*.toml")):
         assert load_daemon_config(path).prefix in {"rig/F4", "sim/trip-out", "sim/trip-in",
                                                     "sim/faults", "sim/drill",
-                                                    "sim/model-error"}, path
+                                                    "sim/model-error",
+                                                    "rig"}, path  # rig: fleet-zenoh.toml's root
 
 
 def test_scenario_words() -> None:

@@ -114,6 +114,9 @@ class FakePipeline:
     def status_message(self, connections: dict[str, str]) -> dict[str, Any]:
         return {}
 
+    def emit_status(self, connections: dict[str, str]) -> None:
+        pass
+
     def flush(self) -> None:
         pass
 
