@@ -15,12 +15,36 @@ import re
 from datetime import UTC, datetime
 from functools import lru_cache
 
-import pint
+from typing import TYPE_CHECKING
 
-ureg: pint.UnitRegistry = pint.UnitRegistry()
-ureg.define("ppg = pound / gallon")
-ureg.define("sg = 1000 * kilogram / meter ** 3")
-ureg.define("gpm = gallon / minute")
+if TYPE_CHECKING:
+    import pint
+
+_EXTRA_UNITS = ("ppg = pound / gallon", "sg = 1000 * kilogram / meter ** 3",
+                "gpm = gallon / minute")
+
+
+@lru_cache(maxsize=1)
+def registry() -> pint.UnitRegistry:
+    """The one pint registry, built on the first unit conversion.
+
+    Parsing pint's definition files takes about 0.4 s, so the parsed definitions are kept in
+    the user's cache folder (``~/.cache/tdmon/pint`` on Linux; pint rebuilds them when its
+    files change). A cache folder that cannot be written only costs the parse.
+    """
+    import pint
+    import platformdirs
+
+    folder = platformdirs.user_cache_path("tdmon", appauthor=False) / "pint"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        ureg = pint.UnitRegistry(cache_folder=folder)
+    except OSError:
+        ureg = pint.UnitRegistry()
+    for definition in _EXTRA_UNITS:
+        ureg.define(definition)
+    return ureg
+
 
 _ABSOLUTE_TEMPERATURES = {"degC", "degF", "degR", "K", "kelvin", "celsius", "fahrenheit",
                           "degree_Celsius", "degree_Fahrenheit"}
@@ -74,6 +98,9 @@ def conversion(unit: str, target: str) -> tuple[float, float]:
         unit = _OFFSET_IN_COMPOUND.sub(lambda m: "delta_" + m.group(1), unit)
     if target not in _ABSOLUTE_TEMPERATURES:
         target = _OFFSET_IN_COMPOUND.sub(lambda m: "delta_" + m.group(1), target)
+    import pint
+
+    ureg = registry()
     try:
         if unit in _ABSOLUTE_TEMPERATURES:
             zero = ureg.Quantity(0.0, unit).to(target).magnitude
