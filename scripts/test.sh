@@ -15,9 +15,6 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[test]"
 
-# small-matrix linear algebra: BLAS threads only contend on 2 cores (see tdmon/cli/__init__.py)
-export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}" OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
-
 .venv/bin/ruff check tdmon tests benchmarks
 .venv/bin/mypy
 .venv/bin/python -m pytest "$@"

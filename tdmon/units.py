@@ -14,7 +14,6 @@ import math
 import re
 from datetime import UTC, datetime
 from functools import lru_cache
-
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:

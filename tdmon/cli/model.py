@@ -10,13 +10,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from tdmon.cli.arguments import add_units_option, display_units, quantity_arg
 from tdmon.errors import ConfigError, TdmonError
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
     from tdmon.display import UnitSystem
     from tdmon.model.broomstick import Broomstick
     from tdmon.model.well import Well
@@ -181,6 +181,8 @@ def _run_loads(args: argparse.Namespace) -> int:
 
 
 def _run_broomstick(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from tdmon.model.broomstick import broomstick
 
     well, file_friction = _load(args.well)
@@ -211,6 +213,8 @@ def _run_broomstick(args: argparse.Namespace) -> int:
 
 
 def _broomstick_document(well: Well, result: Broomstick, method: str) -> dict[str, Any]:
+    import numpy as np
+
     return {
         "well": well.name,
         "method": method,
@@ -223,6 +227,8 @@ def _broomstick_document(well: Well, result: Broomstick, method: str) -> dict[st
 
 
 def _columns(result: Broomstick) -> tuple[list[str], list[np.ndarray[Any, Any]]]:
+    import numpy as np
+
     names = ["bit_depth_m"]
     columns = [result.bit_depth]
     for key, table, unit in (
@@ -237,6 +243,8 @@ def _columns(result: Broomstick) -> tuple[list[str], list[np.ndarray[Any, Any]]]
 
 
 def _write_csv(path: Path, result: Broomstick) -> None:
+    import numpy as np
+
     names, columns = _columns(result)
     try:
         with path.open("w", newline="") as handle:
@@ -248,6 +256,8 @@ def _write_csv(path: Path, result: Broomstick) -> None:
 
 
 def _print_broomstick(result: Broomstick, units: UnitSystem) -> None:
+    import numpy as np
+
     mus = np.asarray(result.mu)
     header = f"{'bit depth ' + units.label('depth'):>12}" + "".join(
         f"{'PU ' + label:>10}{'SO ' + label:>10}{'T ' + label:>9}"
