@@ -35,6 +35,7 @@ def registry() -> pint.UnitRegistry:
     import platformdirs
 
     folder = platformdirs.user_cache_path("tdmon", appauthor=False) / "pint"
+    ureg: pint.UnitRegistry
     try:
         folder.mkdir(parents=True, exist_ok=True)
         ureg = pint.UnitRegistry(cache_folder=folder)
