@@ -81,11 +81,31 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      "against depth")
     broom.set_defaults(func=_run_broomstick)
 
+    warmup = commands.add_parser(
+        "warmup",
+        help="compile the model's kernels into numba's cache (the set-up scripts run it)",
+        description=(
+            "Compile every numba kernel of the torque-and-drag model and store it in numba's "
+            "cache, so that the first real command loads it instead of compiling it (about "
+            "10 s). scripts/demo.sh and scripts/test.sh run it after installing; run it again "
+            "after changing tdmon/model/_kernels.py or upgrading numba."
+        ),
+    )
+    warmup.set_defaults(func=_run_warmup)
+
     try:  # the temperature commands land with the temperature models' command line
         temperature = importlib.import_module("tdmon.cli.temperature")
     except ModuleNotFoundError:
         return
     temperature.register_model_commands(commands)
+
+
+def _run_warmup(args: argparse.Namespace) -> int:
+    from tdmon.model.warmup import cache_folder, compile_kernels
+
+    seconds = compile_kernels()
+    print(f"model kernels ready in {seconds:.1f} s (numba cache: {cache_folder()})")
+    return 0
 
 
 def _add_common(parser: argparse.ArgumentParser) -> None:
