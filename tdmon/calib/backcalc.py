@@ -22,7 +22,6 @@ from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from tdmon import vocabulary
 from tdmon.calib.windows import Window
@@ -205,6 +204,9 @@ def back_calculate(
     if f_low == 0.0 or f_high == 0.0:
         mu = low if f_low == 0.0 else high
     else:
+        # here, not at import: scipy.optimize is 20 MB and 0.2 s an idle daemon need not pay
+        from scipy.optimize import brentq
+
         try:
             mu = float(brentq(lambda m: modelled(m) - measured, low, high, xtol=xtol))
         except (RuntimeError, ValueError) as exc:
