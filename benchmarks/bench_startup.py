@@ -19,7 +19,8 @@ Parts (docs/benchmarks.md, "Start-up"):
   the first ``tdmon replay`` of ``replays/trip-out-tight-spot.mcap``, against the same
   commands in another fresh copy without the warm-up (``--skip-cold`` leaves these out);
 - in this process: ``WellModel.evaluate`` on 201 and 6000 elements, the fixed cost per call
-  (the 201-element time less 201 times the per-element slope), and 8 friction cases marched
+  (the 201-element time less 201 times the per-element slope, and directly: the bit in the
+  first element, one piece marched), and 8 friction cases marched
   together (``evaluate_cases``) against one ``evaluate`` per case.
 """
 
@@ -167,6 +168,10 @@ def _fixed_cost() -> dict[str, float]:
         model.evaluate("pick_up", TOTAL_DEPTH, mu)
         per_call[n] = _per_call(lambda m=model: m.evaluate("pick_up", TOTAL_DEPTH, 0.25), number)
         figures[f"evaluate_{n}_us"] = per_call[n] * 1e6
+        # the bit in the first element: one piece marched, the rest is the call's fixed cost
+        shallow = 0.5 * float(model.node_md[0] + model.node_md[1])
+        figures[f"evaluate_one_element_{n}_us"] = _per_call(
+            lambda m=model, d=shallow: m.evaluate("pick_up", d, 0.25), number) * 1e6
         figures[f"evaluate_array_{n}_us"] = _per_call(
             lambda m=model, f=mu: m.evaluate("pick_up", TOTAL_DEPTH, f), number) * 1e6
         cases = np.ascontiguousarray(np.linspace(0.1, 0.4, 8)[:, None] * np.ones(n))
@@ -195,8 +200,13 @@ def main() -> int:
                         help="seconds the idle daemon runs before its memory is read")
     parser.add_argument("--skip-cold", action="store_true",
                         help="leave out the fresh-copy compile runs (about a minute)")
+    parser.add_argument("--model-only", action="store_true",
+                        help="only the in-process model timings (a few seconds)")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
+    if args.model_only:
+        print(json.dumps({"model": _fixed_cost()}, indent=2))
+        return 0
     trees = {"this": ROOT}
     if args.baseline is not None:
         trees["baseline"] = args.baseline.resolve()

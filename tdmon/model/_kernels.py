@@ -218,6 +218,16 @@ def _pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
 
 
 @njit(cache=True)
+def all_finite_non_negative(values):
+    """Whether every value of a 1-D array is finite and >= 0 (friction checks: one compiled
+    pass instead of two numpy reductions, each of which costs about 1 us on a short array)."""
+    for v in values:  # noqa: SIM110 (a loop: numba does not compile all() of a generator)
+        if not (v >= 0.0 and v < math.inf):  # NaN fails both
+            return False
+    return True
+
+
+@njit(cache=True)
 def _normal_force(force, weight, kk, ke, ee):
     squared = force * force * kk + 2.0 * force * weight * ke + weight * weight * ee
     return math.sqrt(squared) if squared > 0.0 else 0.0

@@ -46,6 +46,7 @@ METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
 # numba dispatchers, typed loosely: mypy cannot see through their signatures; called by keyword
 _march_one: Any = _kernels.march_one
 _march_cases: Any = _kernels.march_cases
+_all_finite_non_negative: Any = _kernels.all_finite_non_negative
 _march_profile: Any = _kernels.march_profile
 _march_gradient: Any = _kernels.march_gradient
 
@@ -160,9 +161,8 @@ def _run_breaks(well: Well, grid: HoleGrid) -> NDArray[np.bool_]:
 
 
 def _check_friction_values(values: NDArray[np.float64], what: str) -> None:
-    # two reductions instead of isfinite/>= temporaries: NaN fails ``low >= 0``
-    low, high = float(values.min()), float(values.max())
-    if not (low >= 0.0 and high < math.inf):
+    """Raise unless every friction factor of the C-contiguous ``values`` is finite and >= 0."""
+    if not _all_finite_non_negative(values.reshape(-1)):
         raise ModelError(f"{what} must be finite and >= 0")
 
 
@@ -231,8 +231,9 @@ class WellModel:
                 f"per-element friction must have one value per hole-grid element "
                 f"({self.n_elements}), got shape {values.shape}"
             )
+        values = np.ascontiguousarray(values)
         _check_friction_values(values, "per-element friction factors")
-        return np.ascontiguousarray(values)
+        return values
 
     def _uniform_friction(self, value: float) -> NDArray[np.float64]:
         """One friction factor on every element, kept by value; read only by the kernels."""

@@ -28,7 +28,7 @@ from tdmon.model.well import Fluid, HoleSection, Well
 #: The compiled entry points (numba dispatchers) the model calls.
 ENTRY_POINTS: tuple[Any, ...] = (
     _kernels._pack_well, _kernels.march_one, _kernels.march_cases, _kernels.march_profile,
-    _kernels.sweep, _kernels.march_gradient,
+    _kernels.sweep, _kernels.march_gradient, _kernels.all_finite_non_negative,
 )
 
 
