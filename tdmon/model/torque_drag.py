@@ -117,7 +117,11 @@ def operation_terms(
 
 # the terms of the calls the calibration repeats, computed once (an enum lookup and a few
 # branches, about 1 us: a third of `evaluate`'s fixed cost)
-_cached_terms = lru_cache(maxsize=256)(operation_terms)
+@lru_cache(maxsize=256)
+def _cached_terms(operation: Operation | str, wob: float, bit_torque: float,
+                  psi: float | None) -> tuple[float, float, float, float]:
+    # positional: lru_cache builds its key faster without keywords
+    return operation_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi)
 
 _KERNEL_METHODS = {"soft-string": _kernels.SOFT_STRING, "aadnoy": _kernels.AADNOY}
 
@@ -205,9 +209,9 @@ class WellModel:
         self._max_nodes = grid.n_elements + len(string.components) + 2
         # `check_bit_depth`'s limits as floats, and uniform friction arrays by value: the
         # calibration calls `evaluate` thousands of times with the same few
-        self._string_length = float(string.length)
-        self._hole_top = float(self.node_md[0])
-        self._hole_bottom = float(self.node_md[-1])
+        # the usual bit depths: above the shallowest and down to the deepest allowed
+        self._depth_above = float(self.node_md[0]) + _DEPTH_TOLERANCE
+        self._depth_down_to = min(float(string.length), float(self.node_md[-1]))
         self._uniform: dict[float, NDArray[np.float64]] = {}
 
     @property
@@ -255,8 +259,7 @@ class WellModel:
     def check_bit_depth(self, bit_depth: float) -> float:
         """Validate a bit depth against the string and the hole; returns it as float [m]."""
         depth = float(bit_depth)
-        if self._hole_top + _DEPTH_TOLERANCE < depth <= min(self._string_length,
-                                                             self._hole_bottom):
+        if self._depth_above < depth <= self._depth_down_to:
             return depth  # the usual case, checked with one comparison
         string_length = self.well.string.length
         if not math.isfinite(depth):
@@ -300,11 +303,18 @@ class WellModel:
         bit_torque : bit torque for ``on_bottom`` [N m]
         psi : combined motion angle for pick-up/slack-off while rotating [rad]
         """
-        kernel_method = _check_method(method)
-        depth = self.check_bit_depth(bit_depth)
-        friction = self._kernel_friction(mu)
+        # the calibration's call: every step inlined where it costs more as a call
+        kernel_method = _KERNEL_METHODS.get(method)
+        if kernel_method is None:
+            kernel_method = _check_method(method)
+        depth = float(bit_depth)
+        if not self._depth_above < depth <= self._depth_down_to:
+            depth = self.check_bit_depth(depth)
+        friction = self._uniform.get(mu) if type(mu) is float else None
+        if friction is None:
+            friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = _cached_terms(
-            operation, wob=wob, bit_torque=bit_torque, psi=psi)
+            operation, wob, bit_torque, psi)
         # positional: the fast path of numba's dispatch (keywords are folded in Python)
         force, torque = _march_one(self.kernel_well, kernel_method, friction, depth, bit_force,
                                    bit_torque_term, axial_factor, torque_factor)
@@ -342,7 +352,7 @@ class WellModel:
                 f"per hole-grid element, got shape {cases.shape}"
             )
         _check_friction_values(cases, "friction factors")
-        terms = np.array(_cached_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi))
+        terms = np.array(_cached_terms(operation, wob, bit_torque, psi))
         forces, torques = _march_cases(self.kernel_well, kernel_method, cases, depth,
                                        terms[0:1], terms[1:2], terms[2:3], terms[3:4])
         return forces[:, 0] + self.well.block_weight, torques[:, 0]
