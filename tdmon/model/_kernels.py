@@ -555,13 +555,27 @@ def _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axi
                 bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
                 top_inc = _inclination(tt[0], tt[1], tt[2])
                 theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1], run_tan[2])
+                # `_aadnoy_run`'s straight run takes the sine and cosine of the run's mean
+                # inclination: geometry only, so computed once for all cases here, then the
+                # same products in the same order (the same numbers)
+                straight = theta < _STRAIGHT_DOGLEG
+                mean_inc = 0.5 * (top_inc + bottom_inc)
+                cos_a = math.cos(mean_inc) if straight else 0.0
+                sin_a = math.sin(mean_inc) if straight else 0.0
+                run_length = run_md - upper
                 for c in range(n_case):
-                    run_mu = run_mu_length[c] / (run_md - upper)
+                    run_mu = run_mu_length[c] / run_length
                     for o in range(n_op):
-                        forces[c, o], torques[c, o] = _aadnoy_run(
-                            run_force[c, o], run_torque[c, o], top_inc, bottom_inc,
-                            run_md - upper, theta, curve_kind[j], run_mu, axial_factors[o],
-                            torque_factors[o], weight, radius)
+                        if straight:
+                            forces[c, o] = run_force[c, o] + weight * run_length * (
+                                cos_a + axial_factors[o] * run_mu * sin_a)
+                            torques[c, o] = run_torque[c, o] + (
+                                torque_factors[o] * run_mu * weight * run_length * radius * sin_a)
+                        else:
+                            forces[c, o], torques[c, o] = _aadnoy_run(
+                                run_force[c, o], run_torque[c, o], top_inc, bottom_inc,
+                                run_length, theta, curve_kind[j], run_mu, axial_factors[o],
+                                torque_factors[o], weight, radius)
                         run_force[c, o] = forces[c, o]
                         run_torque[c, o] = torques[c, o]
                     run_mu_length[c] = 0.0
