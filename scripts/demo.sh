@@ -12,10 +12,9 @@ cd "$(dirname "$0")/.."
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e .
+# compile the model kernels into numba's cache now, not in the first command (about 10 s)
+.venv/bin/tdmon model warmup
 
-# single-threaded OpenBLAS: the daemon's matrices are small (141 x 141 friction-profile
-# covariance), and BLAS threads fighting over two busy cores made them ~16x slower
-export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1}
 TDMON=.venv/bin/tdmon
 CONFIG=config/daemon/replay-zenoh-demo.toml
 REPLAY=replays/trip-out-tight-spot.mcap

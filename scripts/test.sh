@@ -14,9 +14,8 @@ fi
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[test]"
-
-# small-matrix linear algebra: BLAS threads only contend on 2 cores (see tdmon/cli/__init__.py)
-export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}" OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
+# compile the model kernels into numba's cache now, not in the first test (about 10 s)
+.venv/bin/tdmon model warmup
 
 .venv/bin/ruff check tdmon tests benchmarks
 .venv/bin/mypy

@@ -18,6 +18,11 @@ from pathlib import Path
 
 import pytest
 
+from tdmon.blas import limit_blas_threads
+
+# the tests' small matrices, like the command line's, on one BLAS thread (tdmon/blas.py)
+limit_blas_threads()
+
 MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
 #: The broker configuration tdmon ships (docs/daemon.md, "The broker").
 SHIPPED_CONF = Path(__file__).resolve().parents[1] / "config" / "mosquitto" / "tdmon.conf"

@@ -22,7 +22,6 @@ from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from tdmon import vocabulary
 from tdmon.calib.windows import Window
@@ -181,9 +180,18 @@ def back_calculate(
         friction = np.where(mask, mu, base)
         return model.evaluate(operation, bit_depth, friction, method=method, psi=psi)[index]
 
+    def modelled_pair(mu_a: float, mu_b: float) -> tuple[float, float]:
+        """`modelled` at two friction factors, marched together (one call)."""
+        nonlocal calls
+        calls += 2
+        cases = np.stack((np.where(mask, mu_a, base), np.where(mask, mu_b, base)))
+        values = model.evaluate_cases(operation, bit_depth, cases, method=method, psi=psi)[index]
+        return float(values[0]), float(values[1])
+
     low, high = bracket
     try:
-        f_low, f_high = modelled(low) - measured, modelled(high) - measured
+        model_low, model_high = modelled_pair(low, high)
+        f_low, f_high = model_low - measured, model_high - measured
     except ModelError as exc:
         raise FitError(f"cannot model {operation} at bit depth {bit_depth:.1f} m: {exc}") from exc
     if f_low * f_high > 0.0:
@@ -199,12 +207,16 @@ def back_calculate(
     if f_low == 0.0 or f_high == 0.0:
         mu = low if f_low == 0.0 else high
     else:
+        # here, not at import: scipy.optimize is 20 MB and 0.2 s an idle daemon need not pay
+        from scipy.optimize import brentq
+
         try:
             mu = float(brentq(lambda m: modelled(m) - measured, low, high, xtol=xtol))
         except (RuntimeError, ValueError) as exc:
             raise FitError(f"root solve for {operation} failed: {exc}") from exc
     step_low, step_high = max(low, mu - _DERIVATIVE_STEP), min(high, mu + _DERIVATIVE_STEP)
-    slope = (modelled(step_high) - modelled(step_low)) / (step_high - step_low)
+    at_high, at_low = modelled_pair(step_high, step_low)
+    slope = (at_high - at_low) / (step_high - step_low)
     if not (math.isfinite(slope) and slope != 0.0):
         raise FitError(f"{operation} {quantity} does not depend on friction at "
                        f"{bit_depth:.1f} m (vertical string or no free element)")

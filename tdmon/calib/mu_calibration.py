@@ -196,22 +196,28 @@ def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Ar
     where = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
 
-    def evaluate(parameters: Array, extra: Array | float = 0.0) -> float:
+    def friction(parameters: Array, extra: Array | float = 0.0) -> Array:
         mu = np.where(where, parametrisation.mu(parameters, temperature) + extra, base)
-        friction = np.maximum(mu, 0.0)
-        return model.evaluate(operation, bit_depth, friction, method=method)[quantity_index]
+        return np.maximum(mu, 0.0)
 
-    predicted = evaluate(theta)
-    jacobian = np.empty(theta.size)
+    # every friction case of the finite differences marched together, in one call
+    cases = [friction(theta)]
+    steps = np.empty(theta.size)
     for k in range(theta.size):
-        step = max(abs(theta[k]) * relative_step, 1e-6)
+        steps[k] = max(abs(theta[k]) * relative_step, 1e-6)
         bumped = theta.copy()
-        bumped[k] += step
-        jacobian[k] = (evaluate(bumped) - predicted) / step
+        bumped[k] += steps[k]
+        cases.append(friction(bumped))
     delta = 1e-3
-    uniform = evaluate(theta, delta) - predicted
     scale = max(float(np.max(np.abs(temperature))), 1.0)
-    weighted = evaluate(theta, delta * temperature / scale) - predicted
+    cases.append(friction(theta, delta))
+    cases.append(friction(theta, delta * temperature / scale))
+    values = model.evaluate_cases(operation, bit_depth, np.stack(cases),
+                                  method=method)[quantity_index]
+    predicted = float(values[0])
+    jacobian = (values[1:theta.size + 1] - predicted) / steps
+    uniform = float(values[-2]) - predicted
+    weighted = float(values[-1]) - predicted
     effective = weighted / uniform * scale if uniform != 0.0 else math.nan
     return predicted, jacobian, effective
 

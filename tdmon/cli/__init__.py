@@ -8,22 +8,15 @@ with exit code 2; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
-import os
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from typing import NoReturn
 
-# tdmon's linear algebra is small matrices (Kalman updates of a few hundred bins) where BLAS
-# threads only contend for the cores: measured 34 ms against 0.6 ms per friction-profile update
-# on 2 busy cores. Set before numpy is first imported; an explicit setting by the user wins.
-for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_variable, "1")
-
-import argparse  # noqa: E402
-import importlib  # noqa: E402
-import sys  # noqa: E402
-from collections.abc import Sequence  # noqa: E402
-from typing import NoReturn  # noqa: E402
-
-from tdmon import __version__  # noqa: E402
-from tdmon.errors import TdmonError  # noqa: E402
+from tdmon import __version__
+from tdmon.blas import limit_blas_threads
+from tdmon.errors import TdmonError
 
 _COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "fleet")
 
@@ -61,6 +54,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if func is None:
         parser.print_help(sys.stderr)
         return 2
+    # the small matrices of the calibration run faster on one BLAS thread (tdmon.blas); after
+    # parsing, so that --help and usage mistakes do not import numpy
+    limit_blas_threads()
     try:
         return int(func(args) or 0)
     except TdmonError as exc:

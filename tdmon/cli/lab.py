@@ -14,13 +14,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 if TYPE_CHECKING:
-    from tdmon.calib.labfit import FrictionFit, TribometerData
+    import numpy as np
+    from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+    Array = NDArray[np.float64]
+
+    from tdmon.calib.labfit import FrictionFit, TribometerData
 
 _MODEL_NAMES = "linear, poly-2, poly-3 (any poly-m), power, exponential, saturation-growth"
 
@@ -175,6 +175,8 @@ def _print(fits: _Fits, path: Path) -> None:
 
 def _plot(fits: _Fits, path: Path, source: Path) -> None:
     """Runs, averages, fitted laws and the 95 % bands of the best linear/polynomial fits."""
+    import numpy as np
+
     from tdmon.calib.labfit import confidence_band
     from tdmon.cli.plots import _figure, save
 

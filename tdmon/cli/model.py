@@ -10,13 +10,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from tdmon.cli.arguments import add_units_option, display_units, output_file, quantity_arg
 from tdmon.errors import ConfigError, TdmonError
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
     from tdmon.display import UnitSystem
     from tdmon.model.broomstick import Broomstick
     from tdmon.model.well import Well
@@ -84,11 +84,31 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      "against depth")
     broom.set_defaults(func=_run_broomstick)
 
+    warmup = commands.add_parser(
+        "warmup",
+        help="compile the model's kernels into numba's cache (the set-up scripts run it)",
+        description=(
+            "Compile every numba kernel of the torque-and-drag model and store it in numba's "
+            "cache, so that the first real command loads it instead of compiling it (about "
+            "10 s). scripts/demo.sh and scripts/test.sh run it after installing; run it again "
+            "after changing tdmon/model/_kernels.py or upgrading numba."
+        ),
+    )
+    warmup.set_defaults(func=_run_warmup)
+
     try:  # the temperature commands land with the temperature models' command line
         temperature = importlib.import_module("tdmon.cli.temperature")
     except ModuleNotFoundError:
         return
     temperature.register_model_commands(commands)
+
+
+def _run_warmup(args: argparse.Namespace) -> int:
+    from tdmon.model.warmup import cache_folder, compile_kernels
+
+    seconds = compile_kernels()
+    print(f"model kernels ready in {seconds:.1f} s (numba cache: {cache_folder()})")
+    return 0
 
 
 def _add_common(parser: argparse.ArgumentParser) -> None:
@@ -184,6 +204,8 @@ def _run_loads(args: argparse.Namespace) -> int:
 
 
 def _run_broomstick(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from tdmon.model.broomstick import broomstick
 
     well, file_friction = _load(args.well)
@@ -219,6 +241,8 @@ def _run_broomstick(args: argparse.Namespace) -> int:
 
 
 def _broomstick_document(well: Well, result: Broomstick, method: str) -> dict[str, Any]:
+    import numpy as np
+
     return {
         "well": well.name,
         "method": method,
@@ -231,6 +255,8 @@ def _broomstick_document(well: Well, result: Broomstick, method: str) -> dict[st
 
 
 def _columns(result: Broomstick) -> tuple[list[str], list[np.ndarray[Any, Any]]]:
+    import numpy as np
+
     names = ["bit_depth_m"]
     columns = [result.bit_depth]
     for key, table, unit in (
@@ -245,6 +271,8 @@ def _columns(result: Broomstick) -> tuple[list[str], list[np.ndarray[Any, Any]]]
 
 
 def _write_csv(path: Path, result: Broomstick) -> None:
+    import numpy as np
+
     names, columns = _columns(result)
     try:
         with output_file(path, "--csv").open("w", newline="") as handle:
@@ -256,6 +284,8 @@ def _write_csv(path: Path, result: Broomstick) -> None:
 
 
 def _print_broomstick(result: Broomstick, units: UnitSystem) -> None:
+    import numpy as np
+
     mus = np.asarray(result.mu)
     header = f"{'bit depth ' + units.label('depth'):>12}" + "".join(
         f"{'PU ' + label:>10}{'SO ' + label:>10}{'T ' + label:>9}"

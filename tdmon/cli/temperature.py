@@ -15,19 +15,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from tdmon.cli.arguments import add_units_option, display_units, quantity_arg
 from tdmon.errors import ConfigError
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    Array = NDArray[np.float64]
+
     from tdmon.config.well import WellConfig
     from tdmon.display import UnitSystem
     from tdmon.model.temperature import WellboreTemperature
     from tdmon.model.well import Well
-
-Array = NDArray[np.float64]
 
 
 def register_model_commands(commands: argparse._SubParsersAction[Any]) -> None:
@@ -73,6 +73,8 @@ class _Profiles:
 
 
 def _profiles(path: Path) -> _Profiles:
+    import numpy as np
+
     from tdmon.config.well import load_well
     from tdmon.model.well import hole_grid
 
@@ -142,6 +144,8 @@ def _document(result: _Profiles) -> dict[str, Any]:
 
 
 def _print(result: _Profiles, path: Path, step: float, units: UnitSystem) -> None:
+    import numpy as np
+
     profile, ends = result.profile, result.ends
     depth, degrees, other = units.label("depth"), units.label("temperature"), units.other
     state = ("static mud at the formation temperature" if profile.model == "geothermal" else

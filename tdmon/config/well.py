@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Annotated, Any, Final, Literal, cast
 
 import numpy as np
-import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, Field, ValidationInfo, field_validator, model_validator
 
@@ -432,6 +431,8 @@ def _md_scale(source: str, unit: str) -> float:
 
 def _read_survey_csv(source: str, config: SurveyConfig) -> np.ndarray[Any, np.dtype[np.float64]]:
     assert config.file is not None
+    import pandas as pd  # 0.4 s and pyarrow: only a well with a survey file pays it
+
     columns = [config.md_column, config.inclination_column, config.azimuth_column]
     try:
         frame = pd.read_csv(config.file)

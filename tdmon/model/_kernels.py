@@ -218,6 +218,16 @@ def _pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
 
 
 @njit(cache=True)
+def all_finite_non_negative(values):
+    """Whether every value of a 1-D array is finite and >= 0 (friction checks: one compiled
+    pass instead of two numpy reductions, each of which costs about 1 us on a short array)."""
+    for v in values:  # noqa: SIM110 (a loop: numba does not compile all() of a generator)
+        if not (v >= 0.0 and v < math.inf):  # NaN fails both
+            return False
+    return True
+
+
+@njit(cache=True)
 def _normal_force(force, weight, kk, ke, ee):
     squared = force * force * kk + 2.0 * force * weight * ke + weight * weight * ee
     return math.sqrt(squared) if squared > 0.0 else 0.0
@@ -469,6 +479,144 @@ def march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, t
 
 
 @njit(cache=True)
+def _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
+                 torque_factors, forces, torques):
+    """`_march` without recording for several friction cases at once: writes the top force and
+    torque of every (case, operation) into ``forces`` and ``torques`` (n_case, n_op).
+
+    The pieces, their geometry and the Aadnoy runs depend on the bit depth only, so they are
+    found once for all cases; each (case, operation) then takes exactly `_march`'s steps, in
+    the same order, and gets its numbers bit for bit. The cases are independent chains of
+    square roots and divisions, which the processor overlaps: that, and the shared geometry,
+    is why several cases cost little more than one.
+    """
+    node_md = well.node_md
+    tangents = well.tangents
+    dogleg = well.dogleg
+    el_kk = well.element_kk
+    el_ke = well.element_ke
+    el_ee = well.element_ee
+    el_dtvd = well.element_dtvd
+    curve_kind = well.curve_kind
+    run_break = well.run_break
+    comp_top = well.component_top
+    comp_weight = well.component_weight
+    comp_radius = well.component_radius
+    n_comp = comp_top.size
+    n_case = mu_cases.shape[0]
+    n_op = bit_forces.size
+    j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
+    comp = 0
+    lower = bit_depth
+    tb = _tangent_at(node_md, tangents, dogleg, j, lower)
+    for c in range(n_case):
+        for o in range(n_op):
+            forces[c, o] = bit_forces[o]
+            torques[c, o] = bit_torques[o]
+    # Aadnoy runs: the state at the run's bottom and each case's length-weighted friction
+    run_force = forces.copy()
+    run_torque = torques.copy()
+    run_mu_length = np.zeros(n_case)
+    run_md = lower
+    run_tan = tb
+    while True:
+        element_top = node_md[j]
+        component_top = bit_depth - comp_top[comp]
+        while comp < n_comp - 1 and component_top >= lower - _MD_TOLERANCE:
+            comp += 1
+            component_top = bit_depth - comp_top[comp]
+        at_component_top = comp < n_comp - 1 and component_top > element_top + _MD_TOLERANCE
+        if at_component_top:
+            upper = component_top
+            tt = _tangent_at(node_md, tangents, dogleg, j, upper)
+        else:
+            upper = element_top
+            tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
+        length = lower - upper
+        weight = comp_weight[comp]
+        radius = comp_radius[comp]
+        if method == SOFT_STRING:
+            if at_component_top or lower < node_md[j + 1]:
+                kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
+            else:
+                kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
+            for c in range(n_case):
+                mu = mu_cases[c, j]
+                for o in range(n_op):
+                    forces[c, o], normal = _soft_string_piece(
+                        forces[c, o], kk, ke, ee, dtvd, weight, axial_factors[o] * mu)
+                    torques[c, o] += torque_factors[o] * mu * normal * radius
+        else:
+            for c in range(n_case):
+                run_mu_length[c] += mu_cases[c, j] * length
+            component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
+            at_node = not at_component_top
+            if component_ends or (at_node and (run_break[j] or j == 0)):
+                bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
+                top_inc = _inclination(tt[0], tt[1], tt[2])
+                theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1], run_tan[2])
+                # `_aadnoy_run`'s straight run takes the sine and cosine of the run's mean
+                # inclination: geometry only, so computed once for all cases here, then the
+                # same products in the same order (the same numbers)
+                straight = theta < _STRAIGHT_DOGLEG
+                mean_inc = 0.5 * (top_inc + bottom_inc)
+                cos_a = math.cos(mean_inc) if straight else 0.0
+                sin_a = math.sin(mean_inc) if straight else 0.0
+                run_length = run_md - upper
+                for c in range(n_case):
+                    run_mu = run_mu_length[c] / run_length
+                    for o in range(n_op):
+                        if straight:
+                            forces[c, o] = run_force[c, o] + weight * run_length * (
+                                cos_a + axial_factors[o] * run_mu * sin_a)
+                            torques[c, o] = run_torque[c, o] + (
+                                torque_factors[o] * run_mu * weight * run_length * radius * sin_a)
+                        else:
+                            forces[c, o], torques[c, o] = _aadnoy_run(
+                                run_force[c, o], run_torque[c, o], top_inc, bottom_inc,
+                                run_length, theta, curve_kind[j], run_mu, axial_factors[o],
+                                torque_factors[o], weight, radius)
+                        run_force[c, o] = forces[c, o]
+                        run_torque[c, o] = torques[c, o]
+                    run_mu_length[c] = 0.0
+                run_md = upper
+                run_tan = tt
+        lower = upper
+        tb = tt
+        if at_component_top:
+            comp += 1
+        elif j == 0:
+            break
+        else:
+            j -= 1
+
+
+@njit(cache=True)
+def march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
+                torque_factors):
+    """`march` for several friction cases in one march: arrays (n_case, n_op) of the top
+    forces [N] and torques [N m]; ``mu_cases`` is (n_case, n_elements), C-contiguous [-]."""
+    forces = np.empty((mu_cases.shape[0], bit_forces.size))
+    torques = np.empty((mu_cases.shape[0], bit_forces.size))
+    _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
+                 torque_factors, forces, torques)
+    return forces, torques
+
+
+@njit(cache=True)
+def march_one(well, method, mu, bit_depth, bit_force, bit_torque, axial_factor, torque_factor):
+    """`march` of one operation and one friction array, as two floats: (top force [N], top
+    torque [N m]). The operation's terms are scalars (`march_gradient`'s), and nothing is
+    returned as an array, which keeps the call's fixed cost low."""
+    forces = np.empty((1, 1))
+    torques = np.empty((1, 1))
+    _march_cases(well, method, mu.reshape((1, mu.size)), bit_depth, np.full(1, bit_force),
+                 np.full(1, bit_torque), np.full(1, axial_factor), np.full(1, torque_factor),
+                 forces, torques)
+    return forces[0, 0], torques[0, 0]
+
+
+@njit(cache=True)
 def march_profile(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors,
                   torque_factors, out_md, out_force, out_torque, out_comp, out_tan):
     """`march` that also writes the loads at every node, bit first; returns the node count.
@@ -497,19 +645,13 @@ def sweep(well, method, mu_cases, bit_depths, bit_forces, bit_torques, axial_fac
     n_op = axial_factors.size
     forces = np.empty((n_case, n_depth, n_op))
     torques = np.empty((n_case, n_depth, n_op))
-    no_float = np.empty(0)  # record nothing
-    no_float_2d = np.empty((0, 0))
-    no_int = np.empty(0, dtype=np.int64)
-    no_tangent = np.empty((0, 3))
-    for c in range(n_case):
-        for d in range(n_depth):
-            _, f, t = _march(
-                well=well, method=method, mu=mu_cases[c], bit_depth=bit_depths[d],
-                bit_forces=bit_forces, bit_torques=bit_torques, axial_factors=axial_factors,
-                torque_factors=torque_factors, out_md=no_float, out_force=no_float_2d,
-                out_torque=no_float_2d, out_comp=no_int, out_tan=no_tangent)
-            forces[c, d, :] = f
-            torques[c, d, :] = t
+    top_forces = np.empty((n_case, n_op))
+    top_torques = np.empty((n_case, n_op))
+    for d in range(n_depth):
+        _march_cases(well, method, mu_cases, bit_depths[d], bit_forces, bit_torques,
+                     axial_factors, torque_factors, top_forces, top_torques)
+        forces[:, d, :] = top_forces
+        torques[:, d, :] = top_torques
     return forces, torques
 
 

@@ -32,7 +32,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_bvp
 
 from tdmon.errors import ModelError
 
@@ -623,6 +622,8 @@ def numerical_temperature(md: ArrayLike, survey_md: ArrayLike, survey_tvd: Array
     mesh = np.unique(np.concatenate((np.linspace(0.0, 1.0, nodes), stations, [1.0])))
     guess_f = formation(mesh * big_h)
     guess = np.vstack((t_in + (guess_f - t_s) * 0.5, guess_f))
+    from scipy.integrate import solve_bvp  # 0.46 s to import: only the numerical model pays it
+
     solution = solve_bvp(rhs, boundary, mesh, guess, tol=tolerance, max_nodes=200_000)
     if not solution.success:
         raise ModelError(f"numerical temperature model did not converge: {solution.message}")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Literal
 
 import numpy as np
@@ -43,7 +44,9 @@ Method = Literal["soft-string", "aadnoy"]
 METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
 
 # numba dispatchers, typed loosely: mypy cannot see through their signatures; called by keyword
-_march: Any = _kernels.march
+_march_one: Any = _kernels.march_one
+_march_cases: Any = _kernels.march_cases
+_all_finite_non_negative: Any = _kernels.all_finite_non_negative
 _march_profile: Any = _kernels.march_profile
 _march_gradient: Any = _kernels.march_gradient
 
@@ -112,11 +115,21 @@ def operation_terms(
     return 0.0, 0.0, sign * math.sin(psi), math.cos(psi)
 
 
+# the terms of the calls the calibration repeats, computed once (an enum lookup and a few
+# branches, about 1 us: a third of `evaluate`'s fixed cost)
+@lru_cache(maxsize=256)
+def _cached_terms(operation: Operation | str, wob: float, bit_torque: float,
+                  psi: float | None) -> tuple[float, float, float, float]:
+    # positional: lru_cache builds its key faster without keywords
+    return operation_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi)
+
+_KERNEL_METHODS = {"soft-string": _kernels.SOFT_STRING, "aadnoy": _kernels.AADNOY}
+
+
 def _check_method(method: str) -> int:
-    if method == "soft-string":
-        return _kernels.SOFT_STRING
-    if method == "aadnoy":
-        return _kernels.AADNOY
+    kernel_method = _KERNEL_METHODS.get(method)
+    if kernel_method is not None:
+        return kernel_method
     raise ModelError(f"unknown torque-and-drag method {method!r}: use one of {', '.join(METHODS)}")
 
 
@@ -149,6 +162,12 @@ def _run_breaks(well: Well, grid: HoleGrid) -> NDArray[np.bool_]:
     breaks[nearest[np.abs(grid.md[nearest] - marks) < 1e-6]] = True
     breaks[0] = True
     return np.asarray(breaks)
+
+
+def _check_friction_values(values: NDArray[np.float64], what: str) -> None:
+    """Raise unless every friction factor of the C-contiguous ``values`` is finite and >= 0."""
+    if not _all_finite_non_negative(values.reshape(-1)):
+        raise ModelError(f"{what} must be finite and >= 0")
 
 
 class WellModel:
@@ -188,6 +207,12 @@ class WellModel:
             component_radius=self.component_radius,
         )
         self._max_nodes = grid.n_elements + len(string.components) + 2
+        # `check_bit_depth`'s limits as floats, and uniform friction arrays by value: the
+        # calibration calls `evaluate` thousands of times with the same few
+        # the usual bit depths: above the shallowest and down to the deepest allowed
+        self._depth_above = float(self.node_md[0]) + _DEPTH_TOLERANCE
+        self._depth_down_to = min(float(string.length), float(self.node_md[-1]))
+        self._uniform: dict[float, NDArray[np.float64]] = {}
 
     @property
     def n_elements(self) -> int:
@@ -200,23 +225,42 @@ class WellModel:
             if self._section_mu is None:
                 self._section_mu = np.ascontiguousarray(section_friction(self.well, self.grid))
             return self._section_mu
+        if isinstance(mu, float | int) and not isinstance(mu, bool):
+            return self._uniform_friction(float(mu)).copy()
         values = np.asarray(mu, dtype=np.float64)
         if values.ndim == 0:
-            if not (math.isfinite(float(values)) and float(values) >= 0.0):
-                raise ModelError(f"friction factor must be a finite number >= 0, got {mu}")
-            return np.full(self.n_elements, float(values))
+            return self._uniform_friction(float(values)).copy()
         if values.shape != (self.n_elements,):
             raise ModelError(
                 f"per-element friction must have one value per hole-grid element "
                 f"({self.n_elements}), got shape {values.shape}"
             )
-        if not (np.isfinite(values).all() and (values >= 0.0).all()):
-            raise ModelError("per-element friction factors must be finite and >= 0")
-        return np.ascontiguousarray(values)
+        values = np.ascontiguousarray(values)
+        _check_friction_values(values, "per-element friction factors")
+        return values
+
+    def _uniform_friction(self, value: float) -> NDArray[np.float64]:
+        """One friction factor on every element, kept by value; read only by the kernels."""
+        uniform = self._uniform.get(value)
+        if uniform is None:
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ModelError(f"friction factor must be a finite number >= 0, got {value}")
+            if len(self._uniform) >= 64:
+                self._uniform.clear()
+            uniform = self._uniform[value] = np.full(self.n_elements, value)
+        return uniform
+
+    def _kernel_friction(self, mu: float | ArrayLike | None) -> NDArray[np.float64]:
+        """`friction` for the kernels: a uniform one is shared, not copied (they only read)."""
+        if isinstance(mu, float | int) and not isinstance(mu, bool):
+            return self._uniform_friction(float(mu))
+        return self.friction(mu)
 
     def check_bit_depth(self, bit_depth: float) -> float:
         """Validate a bit depth against the string and the hole; returns it as float [m]."""
         depth = float(bit_depth)
+        if self._depth_above < depth <= self._depth_down_to:
+            return depth  # the usual case, checked with one comparison
         string_length = self.well.string.length
         if not math.isfinite(depth):
             raise ModelError(f"bit depth must be finite, got {bit_depth}")
@@ -259,16 +303,59 @@ class WellModel:
         bit_torque : bit torque for ``on_bottom`` [N m]
         psi : combined motion angle for pick-up/slack-off while rotating [rad]
         """
+        # the calibration's call: every step inlined where it costs more as a call
+        kernel_method = _KERNEL_METHODS.get(method)
+        if kernel_method is None:
+            kernel_method = _check_method(method)
+        depth = float(bit_depth)
+        if not self._depth_above < depth <= self._depth_down_to:
+            depth = self.check_bit_depth(depth)
+        friction = self._uniform.get(mu) if type(mu) is float else None
+        if friction is None:
+            friction = self._kernel_friction(mu)
+        bit_force, bit_torque_term, axial_factor, torque_factor = _cached_terms(
+            operation, wob, bit_torque, psi)
+        # positional: the fast path of numba's dispatch (keywords are folded in Python)
+        force, torque = _march_one(self.kernel_well, kernel_method, friction, depth, bit_force,
+                                   bit_torque_term, axial_factor, torque_factor)
+        return force + self.well.block_weight, torque
+
+    def evaluate_cases(
+        self,
+        operation: Operation | str,
+        bit_depth: float,
+        mu_cases: ArrayLike,
+        *,
+        method: Method | str = "soft-string",
+        wob: float = 0.0,
+        bit_torque: float = 0.0,
+        psi: float | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """`evaluate` for several friction cases at once, in one march.
+
+        Parameters
+        ----------
+        operation, bit_depth, method, wob, bit_torque, psi : as in `evaluate`
+        mu_cases : (n_cases, n_elements) per-element friction factors, one row per case [-]
+
+        Returns
+        -------
+        hook loads [N] and surface torques [N m], (n_cases,) each; every case's numbers are
+        `evaluate`'s bit for bit, at a fraction of the cost of one call per case.
+        """
         kernel_method = _check_method(method)
         depth = self.check_bit_depth(bit_depth)
-        friction = self.friction(mu)
-        terms = np.array(operation_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi))
-        force, torque = _march(
-            well=self.kernel_well, method=kernel_method, mu=friction, bit_depth=depth,
-            bit_forces=terms[0:1], bit_torques=terms[1:2], axial_factors=terms[2:3],
-            torque_factors=terms[3:4],
-        )
-        return float(force[0]) + self.well.block_weight, float(torque[0])
+        cases = np.ascontiguousarray(mu_cases, dtype=np.float64)
+        if cases.ndim != 2 or cases.shape[1] != self.n_elements or cases.shape[0] == 0:
+            raise ModelError(
+                f"friction cases must be an array (n_cases, {self.n_elements}) with one value "
+                f"per hole-grid element, got shape {cases.shape}"
+            )
+        _check_friction_values(cases, "friction factors")
+        terms = np.array(_cached_terms(operation, wob, bit_torque, psi))
+        forces, torques = _march_cases(self.kernel_well, kernel_method, cases, depth,
+                                       terms[0:1], terms[1:2], terms[2:3], terms[3:4])
+        return forces[:, 0] + self.well.block_weight, torques[:, 0]
 
     def evaluate_gradient(
         self,
@@ -323,7 +410,7 @@ class WellModel:
                              f"got {quantity_index}")
         kernel_method = _check_method(method)
         depth = self.check_bit_depth(bit_depth)
-        friction = self.friction(mu)
+        friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = operation_terms(
             operation, wob=wob, bit_torque=bit_torque, psi=psi)
         force, torque, gradient = _march_gradient(
@@ -358,7 +445,7 @@ class WellModel:
         """
         kernel_method = _check_method(method)
         depth = self.check_bit_depth(bit_depth)
-        friction = self.friction(mu)
+        friction = self._kernel_friction(mu)
         terms = np.array([operation_terms(op, wob=wob, bit_torque=bit_torque, psi=psi)
                           for op in operations]).reshape(-1, 4)
         size = self._max_nodes

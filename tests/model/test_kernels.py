@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from tdmon.errors import ModelError
 from tdmon.model import _kernels
 from tdmon.model.survey import tangent_vectors
 from tdmon.model.torque_drag import WellModel
@@ -99,3 +100,48 @@ def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: i
         bit_torque=0.0, axial_factor=1.0, torque_factor=0.0, force_seed=1.0, torque_seed=0.0)
     assert value == force[0]
     assert gradient.sum() > 0.0  # more friction, more pick-up
+
+
+@pytest.mark.parametrize("method", [_kernels.SOFT_STRING, _kernels.AADNOY])
+def test_cases_marched_together_equal_marches_one_by_one(three_d: Well, method: int) -> None:
+    """`march_cases`, `march_one` and `sweep` give `march`'s numbers bit for bit: the same
+    steps in the same order, only interleaved across cases."""
+    model = WellModel(three_d)
+    rng = np.random.default_rng(7)
+    cases = np.ascontiguousarray(rng.uniform(0.05, 0.45, (5, model.n_elements)))
+    ops = {"bit_forces": np.array([0.0, 0.0, 0.0, -9e4]),
+           "bit_torques": np.array([0.0, 0.0, 0.0, 4e3]),
+           "axial_factors": np.array([1.0, -1.0, 0.0, 0.0]),
+           "torque_factors": np.array([0.0, 0.0, 1.0, 1.0])}
+    depths = np.array([350.0, 1234.5, 2999.0, 4100.0])
+    swept_f, swept_t = _kernels.sweep(well=model.kernel_well, method=method, mu_cases=cases,
+                                      bit_depths=depths, **ops)
+    for d, depth in enumerate(depths):
+        together_f, together_t = _kernels.march_cases(model.kernel_well, method, cases, depth,
+                                                      *ops.values())
+        for c in range(cases.shape[0]):
+            alone_f, alone_t = _kernels.march(well=model.kernel_well, method=method,
+                                              mu=cases[c], bit_depth=depth, **ops)
+            assert together_f[c].tolist() == alone_f.tolist()
+            assert together_t[c].tolist() == alone_t.tolist()
+            assert swept_f[c, d].tolist() == alone_f.tolist()
+            assert swept_t[c, d].tolist() == alone_t.tolist()
+            for o in range(4):
+                terms = [ops[name][o] for name in ops]
+                one = _kernels.march_one(model.kernel_well, method, cases[c], depth, *terms)
+                assert one == (alone_f[o], alone_t[o])
+
+
+def test_evaluate_cases_equals_evaluate(three_d: Well) -> None:
+    model = WellModel(three_d)
+    cases = np.stack([model.friction(mu) for mu in (0.0, 0.1, 0.37)])
+    cases[2, :50] = 0.6
+    for operation in ("pick_up", "slack_off", "rotating"):
+        hookloads, torques = model.evaluate_cases(operation, 2500.0, cases, method="aadnoy")
+        for c in range(3):
+            assert (hookloads[c], torques[c]) == model.evaluate(operation, 2500.0, cases[c],
+                                                                method="aadnoy")
+    with pytest.raises(ModelError, match="finite and >= 0"):
+        model.evaluate_cases("pick_up", 2500.0, np.where(cases > 0.5, np.nan, cases))
+    with pytest.raises(ModelError, match="n_cases"):
+        model.evaluate_cases("pick_up", 2500.0, cases[0])
