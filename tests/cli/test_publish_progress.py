@@ -40,7 +40,7 @@ def _stop(process: subprocess.Popen[bytes]) -> int:
     shutdown ends it that way."""
     process.send_signal(signal.SIGINT)
     try:
-        code = process.wait(15)
+        code = process.wait(60)  # generous: a loaded CI machine
         return 130 if code == -signal.SIGINT else code
     finally:
         if process.poll() is None:
