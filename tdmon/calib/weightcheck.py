@@ -25,6 +25,9 @@ __all__ = ["ODD_HANGS", "block_weight_alarm", "weight_check"]
 
 #: consecutive hangs whose weight is off that raise the weight-check alarm [-]
 ODD_HANGS = 3
+#: a hang outside these times the modelled weight is no weight error a fluid or a tally can
+#: make: the bit depth (or block weight) is wrong, e.g. depth tracking reset to 0 [-]
+PLAUSIBLE_RATIO = (0.5, 2.0)
 
 
 def block_weight_alarm(t: float, learnt: float, configured: float, tolerance: float
@@ -75,6 +78,13 @@ def weight_check(model: WellModel, air_model: WellModel, window: Window, block_w
         return check, odd, None
     difference = check.measured_weight - check.modelled_weight
     word = "lighter" if difference < 0 else "heavier"
+    if not PLAUSIBLE_RATIO[0] <= check.ratio <= PLAUSIBLE_RATIO[1]:
+        return check, odd, Alarm(
+            window.t_end, AlarmKind.WEIGHT_CHECK, Severity.WARNING,
+            f"hook load shows {check.measured_weight / 1e3:.0f} kN of string below the block, "
+            f"the model {check.modelled_weight / 1e3:.0f} kN for a bit at "
+            f"{window.bit_depth:.0f} m, for three hangs in a row: check the bit-depth "
+            "tracking and the block weight", check.measured_weight, check.modelled_weight)
     return check, odd, Alarm(
         window.t_end, AlarmKind.WEIGHT_CHECK, Severity.INFO,
         f"{window.state} string at {window.bit_depth:.0f} m hangs {abs(difference) / 1e3:.0f} kN "
