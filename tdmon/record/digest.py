@@ -114,8 +114,8 @@ def digest(data: ReportData) -> dict[str, Any]:
     message), ``run`` (recordings), ``time_range``, ``depth_range_m`` (bit depth),
     ``operations`` (share of rig time per rig state), ``friction`` (one row per operation and
     hole section), ``alarm_summary`` (one row per kind and severity, most important first),
-    ``mu_t`` (the verdict) and ``notes`` (the daemon's notes, e.g. why the mu(T) calibration
-    is off).
+    ``mu_t`` (the verdict), ``joint`` (friction and weight factor together) and ``notes``
+    (the daemon's notes, e.g. why the mu(T) calibration is off).
     """
     well = data.wells[0] if data.wells else {}
     return {
@@ -133,6 +133,7 @@ def digest(data: ReportData) -> dict[str, Any]:
         "friction": friction_rows(data.estimates),
         "alarm_summary": alarm_rows(data.alarms),
         "mu_t": mu_t_verdict(data.estimates, well),
+        "joint": joint_verdict(data.estimates),
         "notes": [str(n) for n in well.get("notes", [])],
     }
 
@@ -286,6 +287,44 @@ def mu_t_verdict(estimates: Sequence[dict[str, Any]], well: dict[str, Any] | Non
         verdict["words"] = (f"mu(T) not identifiable: {last.get('identifiability')} "
                             f"(last of {len(fits)} updates; its coefficients, not to be used as "
                             f"a law: {coefficients}).")
+    return verdict
+
+
+def joint_verdict(estimates: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Friction and string weight estimated together (``joint`` estimates,
+    docs/back-calculation.md): how often the data separated them, and the last estimate that
+    did (else the last one, with why they could not be separated)."""
+    joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
+    if not joint:
+        return {"status": "none", "estimates": 0,
+                "words": "No joint estimate of friction and string weight in this recording "
+                         "(calibration off, or no window)."}
+    separated = [e for e in joint if e.get("identifiable")]
+    last = (separated or joint)[-1]
+    w, w_std = _num(last.get("weight_factor")), _num(last.get("weight_factor_std"))
+    verdict: dict[str, Any] = {
+        "status": "identifiable" if separated else "not_identifiable",
+        "estimates": len(joint), "identifiable": len(separated), "t": _num(last.get("t")),
+        "bit_depth_m": _rounded(_num(last.get("bit_depth_m")), 1),
+        "operation": last.get("operation"),
+        "mu": _rounded(_num(last.get("mu"))), "mu_std": _rounded(_num(last.get("mu_std"))),
+        "weight_factor": _rounded(w), "weight_factor_std": _rounded(w_std),
+        "correlation": _rounded(_num(last.get("correlation")), 3),
+        "reason": last.get("identifiability"),
+    }
+    if separated:
+        heavier = "lighter" if w < 1 else "heavier"
+        verdict["words"] = (
+            f"Friction and string weight separated in {len(separated)} of {len(joint)} "
+            f"updates; the last at {_num(last.get('bit_depth_m')):.0f} m MD: friction factor "
+            f"{_num(last.get('mu')):.3f} ± {_num(last.get('mu_std')):.3f} with the string "
+            f"{100 * abs(w - 1):.1f} % {heavier} than modelled (weight factor {w:.3f} ± "
+            f"{w_std:.3f}).")
+    else:
+        verdict["words"] = (
+            f"Friction and string weight could not be separated ({len(joint)} updates): "
+            f"{last.get('identifiability')}; the friction factors above assume the modelled "
+            "string weight.")
     return verdict
 
 

@@ -539,6 +539,7 @@ def _friction_section(facts: dict[str, Any]) -> list[str]:
         return [*parts, "<p>No friction factor was back-calculated in this recording "
                 "(calibration off, or no steady pick-up, slack-off or rotating window).</p>"]
     parts.append("<ul>" + "".join(f"<li>{_e(friction_words(r))}</li>" for r in rows) + "</ul>")
+    parts.append(f"<p>{_e(facts['joint']['words'])}</p>")
 
     def text(value: float | None, digits: int) -> str:
         return "-" if value is None else f"{value:.{digits}f}"

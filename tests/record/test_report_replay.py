@@ -79,6 +79,14 @@ def test_summary_json_carries_the_engineers_numbers(replayed: tuple[Path, dict[s
     assert verdict["reason"] == (f"the temperature range seen, {high - low:.1f} K, is narrower "
                                  "than the 10 K needed")
     assert verdict["estimates"] == summary["estimates"]["mu_T"]
+    # friction and weight together: the simulated string weighs what the well file says
+    joint = [m for _, _, m in read_messages(out, ["/tdmon/estimate"]) if m["kind"] == "joint"]
+    together = summary["joint"]
+    assert together["estimates"] == len(joint) > 20
+    assert together["identifiable"] == sum(bool(m["identifiable"]) for m in joint) > 0
+    assert together["status"] == "identifiable"
+    assert abs(together["weight_factor"] - 1.0) < 0.01
+    assert abs(together["weight_factor"] - 1.0) < 3 * together["weight_factor_std"] + 0.002
 
 
 def test_report_page_names_the_well_and_states_the_friction(
@@ -93,6 +101,7 @@ def test_report_page_names_the_well_and_states_the_friction(
     assert (f"Pick-up, whole string: friction factor {statistics.median(pick_up):.3f} "
             f"(median of {len(pick_up)} windows") in page
     assert "mu(T) not identifiable: the temperature range seen" in page
+    assert summary["joint"]["words"] in page
     assert "No mu(T) figure." in page and not (report / "mu_T.png").exists()
     # plain words: the top of the string is "at surface", no solver language
     assert "rotating torque at surface is 94 % of the make-up torque limit" in page
@@ -110,7 +119,8 @@ def test_report_page_names_the_well_and_states_the_friction(
     assert f"of rotating samples only ({rotating} of {len(models)} model frames" in page
     # summary.json beside the page: the same numbers as tdmon replay --json
     written = json.loads((report / "summary.json").read_text())
-    for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t"):
+    for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t",
+                "joint"):
         assert written[key] == summary[key], key
 
 
@@ -123,7 +133,8 @@ def test_summarize_recording_adds_the_same_numbers(replayed: tuple[Path, dict[st
     out, summary = replayed
     recorded = summarize_recording(out)
     assert recorded["windows"] == summary["windows"] and recorded["alarms"] == summary["alarms"]
-    for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t"):
+    for key in ("well", "time_range", "depth_range_m", "friction", "alarm_summary", "mu_t",
+                "joint"):
         assert recorded[key] == summary[key], key
 
 
