@@ -25,7 +25,7 @@ from typing import NoReturn  # noqa: E402
 from tdmon import __version__  # noqa: E402
 from tdmon.errors import TdmonError  # noqa: E402
 
-_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge")
+_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "batch")
 
 
 class _Parser(argparse.ArgumentParser):
