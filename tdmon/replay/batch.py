@@ -109,6 +109,7 @@ def replay_task(job: BatchJob) -> RecordingOutcome:
     from tdmon.replay.run import resolve_config
 
     worker = f"{socket.gethostname()}:{os.getpid()}"
+    name = job.out.stem
     try:
         with blas_capped() as blas_threads:
             # the file first: a CSV or a missing file is named as such, before any config
@@ -121,7 +122,7 @@ def replay_task(job: BatchJob) -> RecordingOutcome:
         if result.interrupted:
             raise TdmonError(f"{job.recording}: replay interrupted by a signal")
         return RecordingOutcome(
-            recording=str(job.recording), out=str(job.out), well=collector.well,
+            recording=str(job.recording), out=str(job.out), name=name, well=collector.well,
             messages_in=result.messages_in, samples=result.samples, rejected=result.rejected,
             wall_s=result.wall_s, worker=worker, blas_threads=threads,
             windows=collector.windows,
@@ -129,10 +130,10 @@ def replay_task(job: BatchJob) -> RecordingOutcome:
             state_seconds=dict(collector.states.state_time), alarms=dict(collector.alarms))
     except TdmonError as exc:
         return RecordingOutcome(recording=str(job.recording), out=None, error=str(exc),
-                                worker=worker)
+                                name=name, worker=worker)
     except Exception as exc:  # a bug: reported with its type, the batch goes on
-        return RecordingOutcome(recording=str(job.recording), out=None, worker=worker,
-                                error=f"{type(exc).__name__}: {exc}")
+        return RecordingOutcome(recording=str(job.recording), out=None, name=name,
+                                worker=worker, error=f"{type(exc).__name__}: {exc}")
 
 
 def output_names(recordings: Sequence[Path]) -> list[str]:
@@ -166,9 +167,10 @@ def _client(scheduler: str | None, workers: int | None, jobs: int) -> Iterator[A
     count = workers if workers is not None else min(jobs, os.cpu_count() or 1)
     if count < 1:
         raise ConfigError("--workers", "", f"{count} workers: give at least 1")
-    # processes: the replay holds the GIL; loopback only, no dashboard to expose
+    # processes: the replay holds the GIL. Everything on loopback: the scheduler's HTTP
+    # server too (its default, ':8787', listens on every interface)
     with (LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                       host="127.0.0.1", dashboard_address=None) as cluster,
+                       host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster,
           Client(cluster) as client):
         yield client
 
@@ -227,6 +229,7 @@ def run_batch(
                 outcome = future.result()
             except Exception as exc:  # the worker died (KilledWorker) or the task was lost
                 outcome = RecordingOutcome(recording=str(jobs[i].recording), out=None,
+                                           name=jobs[i].out.stem,
                                            error=f"{type(exc).__name__}: {exc}")
             outcomes[i] = outcome
             if progress is not None:

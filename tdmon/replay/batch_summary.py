@@ -67,6 +67,8 @@ class RecordingOutcome:
     recording: str
     out: str | None
     error: str | None = None
+    name: str = ""
+    """The recording's name in the summary: its output file's, distinct within a batch."""
     well: str = ""
     messages_in: int = 0
     samples: int = 0
@@ -82,6 +84,10 @@ class RecordingOutcome:
     @property
     def ok(self) -> bool:
         return self.error is None
+
+    @property
+    def label(self) -> str:
+        return self.name or Path(self.recording).stem
 
 
 class FleetCollector:
@@ -175,14 +181,15 @@ def summary_tables(outcomes: Sequence[RecordingOutcome]) -> dict[str, pd.DataFra
     import pandas as pd
 
     recordings = pd.DataFrame([{
-        "recording": o.recording, "well": o.well, "status": "ok" if o.ok else "failed",
+        "recording": o.label, "path": o.recording, "well": o.well,
+        "status": "ok" if o.ok else "failed",
         "error": o.error or "", "messages_in": o.messages_in, "samples": o.samples,
         "rejected": o.rejected, "windows": len(o.windows), "alarms": sum(o.alarms.values()),
         "wall_s": round(o.wall_s, 3), "worker": o.worker, "blas_threads": o.blas_threads,
         "out": o.out or "",
     } for o in outcomes])
     done = [o for o in outcomes if o.ok]
-    windows = pd.DataFrame([{"well": o.well, "recording": o.recording, **row}
+    windows = pd.DataFrame([{"well": o.well, "recording": o.label, **row}
                             for o in done for row in o.windows],
                            columns=["well", "recording", "t", "operation", "section", "mu",
                                     "mu_std", "bit_depth_m", "low_confidence"])
@@ -190,7 +197,7 @@ def summary_tables(outcomes: Sequence[RecordingOutcome]) -> dict[str, pd.DataFra
         _friction(windows, ["well", "recording"]).assign(level="recording"),
         _friction(windows, ["well"]).assign(level="well", recording=""),
     ], ignore_index=True)
-    sections = pd.DataFrame([{"well": o.well, "recording": o.recording, **row}
+    sections = pd.DataFrame([{"well": o.well, "recording": o.label, **row}
                              for o in done for row in o.sections],
                             columns=["well", "recording", "section", "kind", "top_m",
                                      "bottom_m", "bins", "mu", "mu_std"])
@@ -199,7 +206,7 @@ def summary_tables(outcomes: Sequence[RecordingOutcome]) -> dict[str, pd.DataFra
                               _pooled_sections(sections).assign(level="well", recording="")],
                              ignore_index=True)
     states = _states(done)
-    alarms = pd.DataFrame([{"well": o.well, "recording": o.recording, "kind": kind,
+    alarms = pd.DataFrame([{"well": o.well, "recording": o.label, "kind": kind,
                             "severity": severity, "count": count}
                            for o in done for (kind, severity), count in sorted(o.alarms.items())],
                           columns=["well", "recording", "kind", "severity", "count"])
@@ -217,7 +224,7 @@ def _states(done: Sequence[RecordingOutcome]) -> pd.DataFrame:
     rows = []
     for o in done:
         total = sum(o.state_seconds.values())
-        rows += [{"well": o.well, "recording": o.recording, "state": state, "seconds": seconds,
+        rows += [{"well": o.well, "recording": o.label, "state": state, "seconds": seconds,
                   "share": seconds / total if total > 0 else math.nan, "level": "recording"}
                  for state, seconds in sorted(o.state_seconds.items())]
     frame = pd.DataFrame(rows, columns=["well", "recording", "state", "seconds", "share",

@@ -1,0 +1,117 @@
+"""Batch re-analysis on Dask: 12 replays on 2 worker processes against the same 12 in series.
+
+Side by side in one run (project virtualenv):
+
+* **serial**: this process replays each recording with ``tdmon.replay.batch.replay_task`` (the
+  function the workers run: the daemon's pipeline with the recorder inline, the fleet
+  collector, BLAS at one thread) one after the other, then builds and writes the summary;
+* **batch**: ``tdmon.replay.batch.run_batch`` on a local Dask cluster of ``--workers``
+  processes (127.0.0.1), started before the timing and warmed up with one replay per worker
+  (imports and numba's cached kernels, which the serial process has loaded by then too).
+
+The recordings are the six bundled replays, twice each (``--copies``), with the daemon files
+their expectations name: 29 000 input messages per set, 0.5-2.5 s each. Each side runs
+``--repeat`` times, alternating; the best time of each gives the figure, throughput ratio =
+serial time / batch time (target >= 1.7 on 2 workers). The cluster's start-up is printed
+apart.
+
+    .venv/bin/python benchmarks/bench_batch.py                    # 12 replays, 2 workers
+    .venv/bin/python benchmarks/bench_batch.py --repeat 3 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+REPLAYS = sorted((REPO / "replays").glob("*.mcap"))
+
+
+def serial(recordings: list[Path], out: Path) -> float:
+    from tdmon.replay.batch import BatchJob, output_names, replay_task
+    from tdmon.replay.batch_summary import summary_tables, write_html, write_tables
+
+    started = time.perf_counter()
+    outcomes = [replay_task(BatchJob(path, out / "recordings" / name))
+                for path, name in zip(recordings, output_names(recordings), strict=True)]
+    tables = summary_tables(outcomes)
+    write_tables(tables, out / "summary")
+    write_html(tables, out / "summary.html")
+    elapsed = time.perf_counter() - started
+    failed = [o for o in outcomes if not o.ok]
+    if failed:
+        sys.exit(f"serial replay failed: {failed[0].error}")
+    return elapsed
+
+
+def batch(recordings: list[Path], out: Path, scheduler: str) -> float:
+    from tdmon.replay.batch import run_batch
+
+    started = time.perf_counter()
+    result = run_batch(recordings, out, scheduler=scheduler)
+    elapsed = time.perf_counter() - started
+    if result.failed:
+        sys.exit(f"batch replay failed: {result.failed[0].error}")
+    return elapsed
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--copies", type=int, default=2, help="copies of each bundled replay")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--json", type=Path, help="write the figures as JSON")
+    args = parser.parse_args()
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the CLI does, before numpy
+
+    from distributed import Client, LocalCluster
+
+    from tdmon.replay.batch import BatchJob, replay_task
+
+    recordings = REPLAYS * args.copies
+    with tempfile.TemporaryDirectory(prefix="tdmon-bench-batch-") as tmp:
+        root = Path(tmp)
+        replay_task(BatchJob(REPLAYS[0], root / "warm.mcap"))  # imports and kernels, here
+        started = time.perf_counter()
+        with (LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                           host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster,
+              Client(cluster) as client):
+            startup = time.perf_counter() - started
+            workers = list(client.scheduler_info()["workers"])
+            warm = [client.submit(replay_task, BatchJob(REPLAYS[0], root / f"warm-{i}.mcap"),
+                                  workers=[address], pure=False)
+                    for i, address in enumerate(workers)]
+            client.gather(warm)
+            serial_times, batch_times = [], []
+            for run in range(args.repeat):
+                serial_times.append(serial(recordings, root / f"serial-{run}"))
+                batch_times.append(batch(recordings, root / f"batch-{run}",
+                                         cluster.scheduler_address))
+                print(f"run {run + 1}: serial {serial_times[-1]:.2f} s, batch "
+                      f"{batch_times[-1]:.2f} s", flush=True)
+    best_serial, best_batch = min(serial_times), min(batch_times)
+    figures = {
+        "recordings": len(recordings), "workers": args.workers,
+        "serial_s": round(best_serial, 3), "batch_s": round(best_batch, 3),
+        "throughput_ratio": round(best_serial / best_batch, 2),
+        "cluster_startup_s": round(startup, 2),
+        "serial_runs_s": [round(t, 2) for t in serial_times],
+        "batch_runs_s": [round(t, 2) for t in batch_times],
+        "load_average": os.getloadavg(),
+    }
+    print(f"{len(recordings)} replays: serial {best_serial:.2f} s, {args.workers} workers "
+          f"{best_batch:.2f} s -> throughput x{best_serial / best_batch:.2f} (best of "
+          f"{args.repeat}); local cluster start-up {startup:.1f} s; load average "
+          f"{figures['load_average'][0]:.1f}")
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2))
+
+
+if __name__ == "__main__":
+    main()
