@@ -4,7 +4,8 @@ Each message becomes one row; nested objects are flattened with dotted column na
 (``hookload_N.pick_up``, ``connections.mqtt``) and lists stay lists in one cell (a profile's
 ``md_m``). Every frame keeps ``log_time_ns`` (the recorder's log time [ns]); frames whose
 messages carry a rig time ``t`` [Unix s] also get ``time`` (the same instant as a UTC
-timestamp). pandas is imported when a recording is read, not with the module.
+timestamp, to the microsecond). pandas is imported when a recording is read, not with the
+module.
 """
 
 from __future__ import annotations
@@ -90,7 +91,9 @@ def _frame(rows: list[dict[str, Any]], log_times: list[int]) -> pd.DataFrame:
     frame = pd.json_normalize(rows) if rows else pd.DataFrame()
     frame.insert(0, "log_time_ns", pd.Series(log_times, dtype="int64"))
     if "t" in frame.columns:
-        frame.insert(1, "time", pd.to_datetime(frame["t"], unit="s", utc=True, errors="coerce"))
+        # a float64 Unix time resolves ~0.2 us: rounded, 06:05:00.988 does not show as .98799991
+        time = pd.to_datetime(frame["t"], unit="s", utc=True, errors="coerce").dt.round("us")
+        frame.insert(1, "time", time)
     return frame
 
 
