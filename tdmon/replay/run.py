@@ -102,7 +102,7 @@ def replay_file(
     """
     from tdmon.replay.driver import check_replay_file, replay
 
-    check_replay_file(recording)  # a missing replay is named as such, not by its config
+    check_replay_file(Path(recording))  # a missing replay is named as such, not by its config
     daemon_config = resolve_config(recording, config)
     return run_sync(replay(Path(recording), daemon_config, Path(out),
                            rrd=None if rrd is None else Path(rrd), speed=speed, progress=progress,

@@ -46,14 +46,14 @@ def test_replay_is_callable_and_a_package_at_once(tmp_path: Path) -> None:
 
     assert callable(tdmon.replay)
     assert tdmon.replay.driver.replay is not None  # type: ignore[attr-defined]
-    with pytest.raises(IngestError, match="none.mcap: replay not found"):
+    with pytest.raises(IngestError, match=r"none\.mcap: replay not found"):
         tdmon.replay(tmp_path / "none.mcap", tmp_path / "out.mcap")
 
 
 def test_read_recording_refuses_what_is_not_a_recording(tmp_path: Path) -> None:
     text = tmp_path / "x.mcap"
     text.write_text("time,hookload\n")
-    with pytest.raises(RecordError, match="x.mcap"):
+    with pytest.raises(RecordError, match=r"x\.mcap"):
         tdmon.read_recording(text)
     with pytest.raises(RecordError, match="as a list"):
         tdmon.read_recording(REPO / "replays" / "trip-in-noisy.mcap",
