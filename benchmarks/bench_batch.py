@@ -12,8 +12,9 @@ Side by side in one run (project virtualenv):
 The recordings are the six bundled replays, twice each (``--copies``), with the daemon files
 their expectations name: 29 000 input messages per set, 0.5-2.5 s each. Each side runs
 ``--repeat`` times, alternating; the best time of each gives the figure, throughput ratio =
-serial time / batch time (target >= 1.7 on 2 workers). The cluster's start-up is printed
-apart.
+serial time / batch time (target >= 1.7 on 2 workers); the ratio of each run's pair and the
+machine's load average at its start are printed too (on a shared machine, other work takes
+cores from the workers). The cluster's start-up is printed apart.
 
     .venv/bin/python benchmarks/bench_batch.py                    # 12 replays, 2 workers
     .venv/bin/python benchmarks/bench_batch.py --repeat 3 --json out.json
@@ -88,13 +89,15 @@ def main() -> None:
                                   workers=[address], pure=False)
                     for i, address in enumerate(workers)]
             client.gather(warm)
-            serial_times, batch_times = [], []
+            serial_times, batch_times, loads = [], [], []
             for run in range(args.repeat):
+                loads.append(round(os.getloadavg()[0], 1))
                 serial_times.append(serial(recordings, root / f"serial-{run}"))
                 batch_times.append(batch(recordings, root / f"batch-{run}",
                                          cluster.scheduler_address))
                 print(f"run {run + 1}: serial {serial_times[-1]:.2f} s, batch "
-                      f"{batch_times[-1]:.2f} s", flush=True)
+                      f"{batch_times[-1]:.2f} s, ratio {serial_times[-1] / batch_times[-1]:.2f} "
+                      f"(load average {loads[-1]})", flush=True)
     best_serial, best_batch = min(serial_times), min(batch_times)
     figures = {
         "recordings": len(recordings), "workers": args.workers,
@@ -103,12 +106,14 @@ def main() -> None:
         "cluster_startup_s": round(startup, 2),
         "serial_runs_s": [round(t, 2) for t in serial_times],
         "batch_runs_s": [round(t, 2) for t in batch_times],
-        "load_average": os.getloadavg(),
+        "paired_ratios": [round(a / b, 2) for a, b in zip(serial_times, batch_times,
+                                                         strict=True)],
+        "load_average_per_run": loads,
     }
     print(f"{len(recordings)} replays: serial {best_serial:.2f} s, {args.workers} workers "
           f"{best_batch:.2f} s -> throughput x{best_serial / best_batch:.2f} (best of "
-          f"{args.repeat}); local cluster start-up {startup:.1f} s; load average "
-          f"{figures['load_average'][0]:.1f}")
+          f"{args.repeat}); local cluster start-up {startup:.1f} s; 1-min load average at "
+          f"the runs' starts {loads}")
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2))
 

@@ -3,6 +3,7 @@ importable, mistakes as TdmonError."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -80,3 +81,14 @@ def test_evaluate_loads_mistakes_and_shapes() -> None:
     # pick-up above static above slack-off, at each depth in the inclined hole
     wide = table.pivot(index="bit_depth_m", columns="operation", values="hookload_N")
     assert ((wide["pick_up"] > wide["static"]) & (wide["static"] > wide["slack_off"])).all()
+
+
+def test_replay_from_inside_a_running_event_loop(tmp_path: Path) -> None:
+    # as in a notebook: asyncio.run would refuse to nest, so the replay gets a thread of its own
+    async def notebook_cell() -> object:
+        return tdmon.replay(REPO / "replays" / "trip-in-noisy.mcap", tmp_path / "out.mcap",
+                            recorder="inline")
+
+    result = asyncio.run(notebook_cell())
+    assert result.messages_in == 965  # type: ignore[attr-defined]
+    assert tdmon.read_recording(tmp_path / "out.mcap").counts["/tdmon/raw"] == 965
