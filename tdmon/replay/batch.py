@@ -157,7 +157,7 @@ def _client(scheduler: str | None, workers: int | None, jobs: int) -> Iterator[A
             from exc
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError("--scheduler", "",
                               f"cannot reach the Dask scheduler {scheduler!r}: {exc}") from exc
