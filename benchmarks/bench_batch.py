@@ -10,7 +10,7 @@ Side by side in one run (project virtualenv):
   (imports and numba's cached kernels, which the serial process has loaded by then too).
 
 The recordings are the six bundled replays, twice each (``--copies``), with the daemon files
-their expectations name: 29 000 input messages per set, 0.5-2.5 s each. Each side runs
+their expectations name: 39 500 input messages per set, 0.5-2.5 s each. Each side runs
 ``--repeat`` times, alternating; the best time of each gives the figure, throughput ratio =
 serial time / batch time (target >= 1.7 on 2 workers); the ratio of each run's pair and the
 machine's load average at its start are printed too (on a shared machine, other work takes
