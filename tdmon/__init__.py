@@ -1,3 +1,49 @@
-"""tdmon: real-time torque-and-drag monitoring and friction back-calculation."""
+"""tdmon: real-time torque-and-drag monitoring and friction back-calculation.
+
+The Python API (docs/api.md) is loaded on first use, so that ``import tdmon`` stays cheap
+(no pandas, numba or Dask until a function needs them)::
+
+    import tdmon
+    recording = tdmon.read_recording("out/trip-out.mcap")
+    recording.estimates        # a pandas DataFrame, one row per estimate
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
+
+__all__ = ["Recording", "WellFile", "__version__", "batch", "evaluate_loads", "load_well",
+           "read_recording", "replay"]
+
+if TYPE_CHECKING:  # names listed in __all__ are re-exported
+    from tdmon.api import (
+        Recording,
+        WellFile,
+        batch,
+        evaluate_loads,
+        load_well,
+        read_recording,
+        replay,
+    )
+
+#: names of the API defined in tdmon.api (``replay`` is the callable package tdmon.replay)
+_API = frozenset(__all__) - {"__version__", "replay"}
+
+
+def __getattr__(name: str) -> Any:
+    if name == "replay":
+        # the package tdmon.replay is callable as tdmon.api.replay (see its docstring): a name
+        # here would be replaced by the package as soon as one of its modules is imported
+        return importlib.import_module("tdmon.replay")
+    if name in _API:
+        value = getattr(importlib.import_module("tdmon.api"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'tdmon' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -18,7 +18,7 @@ from tdmon import __version__
 from tdmon.blas import limit_blas_threads
 from tdmon.errors import TdmonError
 
-_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "fleet")
+_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "fleet", "batch")
 
 
 class _Parser(argparse.ArgumentParser):
