@@ -334,6 +334,8 @@ async def replay(
             async with build_daemon(run_config, extra_sinks=sinks,
                                     stop_when_sources_done=True) as built:
                 pipeline = built.pipeline
+                # log times and the status in rig time: the recording spans the session
+                pipeline.follow_input_time()
                 if speed is None:
                     built.daemon.tick_interval = _NO_TICKS
                 await built.daemon.run(stop)
