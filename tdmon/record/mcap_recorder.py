@@ -33,6 +33,7 @@ import shutil
 import threading
 import time
 import weakref
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -121,12 +122,45 @@ def encode_message(message: Message) -> tuple[bytes, bool]:
         data = orjson.dumps(message, default=_numpy_default)
     except TypeError:  # orjson.JSONEncodeError: a key that is not a string, a huge integer...
         return _encode_slow(message)
-    if b"null" in data:
-        try:
-            _ENCODER.encode(message)
-        except ValueError:
-            return data, True
-    return data, False
+    return data, b"null" in data and _has_nonfinite(message)
+
+
+_PLAIN: Final = (str, int, bool, type(None))
+
+
+def _has_nonfinite(message: Any) -> bool:
+    """Whether a NaN or an infinity is somewhere in ``message``.
+
+    Walks plain dicts, lists, tuples and floats (the daemon's messages; a model message with a
+    null took ~5x longer through the json module, which formats every float in Python when it
+    refuses NaN); anything else (numpy values, other types) is left to :func:`_refused_by_json`.
+    """
+    stack = [message]
+    pop, many = stack.pop, stack.extend
+    while stack:
+        item = pop()
+        kind = type(item)
+        if kind is float:
+            if item - item != 0.0:  # nan - nan and inf - inf are nan
+                return True
+        elif kind is dict:
+            many(item.values())
+        elif kind is list or kind is tuple:
+            many(item)
+        elif kind not in _PLAIN:
+            return _refused_by_json(message)
+    return False
+
+
+def _refused_by_json(message: Any) -> bool:
+    """Whether the json module refuses ``message`` for a NaN/inf (orjson wrote null)."""
+    try:
+        _ENCODER.encode(message)
+    except ValueError:
+        return True
+    except (TypeError, RecursionError):  # something only orjson writes (a datetime...)
+        return False
+    return False
 
 
 def file_name(prefix: str, sequence: int, start: datetime) -> str:
@@ -601,42 +635,32 @@ class McapRecorder:
         if current is None:
             stats.lost += len(queue)
             return
+        datas = self._encode(queue)
         channels = self._channels
-        per_topic = stats.per_topic
         output = current.output
-        written = handled = 0
+        written = 0
         try:
-            for topic, log_time_ns, message, replaced in queue:
-                handled += 1
-                if replaced is None:
-                    try:
-                        data, replaced = encode_message(message)
-                    except (TypeError, ValueError, RecursionError) as exc:
-                        stats.unencodable += 1
-                        stats.lost += 1
-                        log.error("message on %s is not JSON and was not recorded: %s",
-                                  topic, exc)
-                        continue
-                else:
-                    data = message
-                if replaced:
-                    stats.nonfinite_replaced += 1
-                log_message = channels.get(topic)
-                if log_message is None:
-                    log_message = self._channel(topic)
+            for (topic, log_time_ns, _, _), data in zip(queue, datas, strict=True):
+                if data is None:
+                    continue
+                log_message = channels.get(topic) or self._channel(topic)
                 log_message(data, log_time_ns)
                 if output.error is not None:
                     raise output.error
                 written += 1
-                per_topic[topic] = per_topic.get(topic, 0) + 1
         except OSError as exc:
             # the message that met the error is lost, and so is what the file held unflushed
             # (counted by _fail) and the rest of the batch
+            kept = [item for item, data in zip(queue, datas, strict=True) if data is not None]
+            self._count_topics(kept[:written])
             current.unflushed += written
             stats.written += written
-            stats.lost += len(queue) - handled + 1
+            stats.lost += len(kept) - written
             self._fail(exc)
             return
+        self._count_topics(queue if written == len(queue) else
+                           [item for item, data in zip(queue, datas, strict=True)
+                            if data is not None])
         current.unflushed += written
         stats.written += written
         if now - current.last_flush >= self.flush_interval_s:
@@ -645,6 +669,41 @@ class McapRecorder:
                 stats.flushes += 1
             except OSError as exc:
                 self._fail(exc)
+
+    def _encode(self, queue: list[tuple[str, int, Any, bool | None]]) -> list[bytes | None]:
+        """The JSON bytes of each queued message; None for one that is not JSON (counted)."""
+        stats = self._stats
+        dumps = orjson.dumps
+        try:
+            # the usual batch in one comprehension; pre-encoded messages (a flag) are bytes
+            datas: list[bytes | None] = [
+                dumps(message, default=_numpy_default) if replaced is None else message
+                for _, _, message, replaced in queue]
+        except TypeError:  # one message orjson refuses: each alone, the json module's way
+            datas = [self._encode_one(topic, message) if replaced is None else message
+                     for topic, _, message, replaced in queue]
+        # orjson writes NaN/inf as null without a word: messages holding a null are checked
+        for (_, _, message, replaced), data in zip(queue, datas, strict=True):
+            if replaced is None:
+                if data is not None and b"null" in data and _has_nonfinite(message):
+                    stats.nonfinite_replaced += 1
+            elif replaced:
+                stats.nonfinite_replaced += 1
+        return datas
+
+    def _encode_one(self, topic: str, message: Any) -> bytes | None:
+        try:
+            return encode_message(message)[0]
+        except (TypeError, ValueError, RecursionError) as exc:
+            self._stats.unencodable += 1
+            self._stats.lost += 1
+            log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
+            return None
+
+    def _count_topics(self, items: list[tuple[str, int, Any, bool | None]]) -> None:
+        per_topic = self._stats.per_topic
+        for topic, count in Counter(item[0] for item in items).items():
+            per_topic[topic] = per_topic.get(topic, 0) + count
 
     def _channel(self, topic: str) -> Any:
         """The channel of ``topic`` (its ``log``), created on its first message."""

@@ -273,7 +273,7 @@ async def replay(
     speed: float | None = None,
     progress: Callable[[int], None] | None = None,
     extra_sinks: Sequence[Sink] = (),
-    separate_writer: bool = True,
+    separate_writer: bool = False,
 ) -> ReplayResult:
     """Run ``path`` through the daemon built from ``config``; record everything to ``out``.
 
@@ -288,7 +288,9 @@ async def replay(
     extra_sinks : more sinks (tests)
     separate_writer : record from a child process
         (:class:`~tdmon.record.writer_process.RecorderProcess`: encoding and writing on a
-        second core); False: in this process (:class:`McapRecorder`; e.g. to profile it)
+        second core); False (default): in this process (:class:`McapRecorder`), faster since
+        the recorder encodes with orjson and writes with a compiled writer
+        (docs/replays.md has the figures)
 
     Raises
     ------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -109,8 +110,12 @@ def test_non_finite_numpy_and_untyped_messages(tmp_path: Path) -> None:
                                              "mu": np.array([0.2, np.inf], dtype=np.float32)})
         recorder.write("/tdmon/unknown", 7, {"x": 1})
         recorder.write("/tdmon/alarm", 8, {"t": object()})
+        # a null that was None, beside NaN-free nested floats: not a replacement
+        recorder.write("/tdmon/model", 9, {"t": 3.0, "residual": {"torque_Nm": None},
+                                           "band": {"mu": [0.1, 0.2]}})
+        recorder.write("/tdmon/model", 10, {"t": 4.0, "band": {"pick_up_N": [1.0, -math.inf]}})
     stats = recorder.stats
-    assert stats.nonfinite_replaced == 2
+    assert stats.nonfinite_replaced == 3
     assert stats.untyped_topics == 1
     assert stats.unencodable == 1 and stats.lost == 1
     [path] = stats.files
@@ -118,6 +123,8 @@ def test_non_finite_numpy_and_untyped_messages(tmp_path: Path) -> None:
     assert back[5]["value"] is None
     assert back[6] == {"t": 2.0, "md_m": [0.0, 10.0], "mu": [pytest.approx(0.2), None]}
     assert back[7] == {"x": 1}
+    assert back[9]["residual"] == {"torque_Nm": None}
+    assert back[10]["band"]["pick_up_N"] == [1.0, None]
     assert schemas_of(path)["/tdmon/unknown"]["type"] == "object"
 
 
