@@ -2,7 +2,11 @@
 
 The daemon runs as its own process (``python -m tdmon run``), as in production; this script
 plays the rig (publishes) and the dashboard (subscribes to the results) over real MQTT
-(a mosquitto it starts on a free loopback port) and real Zenoh (peer mode, loopback).
+(a mosquitto it starts on a free loopback port with the shipped rig configuration,
+config/mosquitto/tdmon.conf, only its port and persistence folder changed) and real Zenoh
+(peer mode, loopback). The daemon records everything with its flight recorder, as on a rig;
+by default each transport is then measured again with the recorder off, in the same run, for
+the comparison (``--recorder on`` skips that, ``off`` measures only without it).
 
     .venv/bin/python benchmarks/bench_daemon.py                       # everything, 10 min soak
     .venv/bin/python benchmarks/bench_daemon.py --soak-seconds 60     # shorter soak
@@ -14,6 +18,8 @@ Measures
 - throughput: N samples as fast as the publisher can send (8 channels); samples/s until the
   daemon's status reports all N processed, and that none was rejected or dropped
 - soak: 10 Hz x 8 channels for --soak-seconds; the daemon's RSS sampled every 5 s
+- with the recorder: samples and messages in the recording (read back from the files'
+  summaries after the daemon stopped), and recorded bytes per input sample
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ import aiomqtt
 import zenoh
 
 ROOT = Path(__file__).resolve().parents[1]
+BROKER_CONF = ROOT / "config" / "mosquitto" / "tdmon.conf"
 WELL = ROOT / "config" / "wells" / "aadnoy-example-7-1.toml"
 CHANNELS = ("hookload", "torque", "bit_depth", "hole_depth", "rpm", "flow_in", "spp", "wob")
 PREFIX = "rig/B1"
@@ -66,9 +73,19 @@ class Broker:
         self.port = free_port()
         folder.chmod(0o755)
         conf = folder / "mosquitto.conf"
-        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\n"
-                        "max_queued_messages 1000000\nmax_inflight_messages 200\n"
-                        "set_tcp_nodelay true\n")
+        store = folder / f"mosquitto-store-{self.port}"
+        store.mkdir()
+        store.chmod(0o777)  # mosquitto drops to its own user when started as root
+        lines = []
+        for line in BROKER_CONF.read_text().splitlines():
+            if line.startswith("listener 1883 "):
+                line = f"listener {self.port} 127.0.0.1"
+            elif line.startswith("persistence_location "):
+                line = f"persistence_location {store}/"
+            elif line.startswith(("log_dest", "log_type", "connection_messages")):
+                continue
+            lines.append(line)
+        conf.write_text("\n".join(lines) + "\n")
         self.process = subprocess.Popen([shutil.which("mosquitto") or "/usr/sbin/mosquitto",
                                          "-c", str(conf)], stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 10
@@ -89,20 +106,23 @@ class Broker:
 class Daemon:
     """``tdmon run`` in a subprocess, with its RSS readable from /proc."""
 
-    def __init__(self, folder: Path, transport: str, port: int) -> None:
+    def __init__(self, folder: Path, transport: str, port: int, recorder: bool) -> None:
         if transport == "mqtt":
             source = (f'[sources.mqtt]\nport = {port}\nclient_id = "bench-{time.time_ns()}"\n'
                       "clean_session = true\n[publish]\nmqtt = true\nqos = 0\n")
         else:
             source = (f'[sources.zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
                       "[publish]\nzenoh = true\n")
+        self.recordings = folder / f"recordings-{transport}-{'on' if recorder else 'off'}"
+        recording = (f'[recorder]\nenabled = true\noutput = "{self.recordings}"\n'
+                     if recorder else "")
         config = folder / f"daemon-{transport}.toml"
         config.write_text(f'prefix = "{PREFIX}"\nwell = "{WELL}"\n{source}'
                           'names = ["model", "status"]\nstatus_interval = "0.1 s"\n'
                           "[queues]\ningest = 20000\npublish = 200000\n"
                           # the channel map: the first frame waits for all eight channels
                           + "".join(f"[channels.{c}]\n" for c in CHANNELS)
-                          + '[monitor]\nmethod = "aadnoy"\n')
+                          + '[monitor]\nmethod = "aadnoy"\n' + recording)
         self.log = folder / f"daemon-{transport}.log"
         self.stream = self.log.open("w")
         self.process = subprocess.Popen(
@@ -260,18 +280,24 @@ async def throughput(rig: Rig, samples: int) -> dict[str, Any]:
     rows = samples // len(CHANNELS)
     started = time.perf_counter()
     for i in range(rows):
-        for topic, payload in row(rig.next_t(0.001), i):
+        # 10 us apart: a publisher faster than real time must not take the rig clock more than
+        # the daemon's future tolerance (10 s) ahead of the wall clock, or the clock guard
+        # rightly rejects the rows (at 1 ms apart 50 000 rows sent in 5 s ran 45 s ahead)
+        for topic, payload in row(rig.next_t(1e-5), i):
             await rig.send(topic, payload)
         if i % 64 == 0:
             await asyncio.sleep(0)
     sent_s = time.perf_counter() - started
     total = rows * len(CHANNELS)
     deadline = time.monotonic() + 300
-    while int(rig.status.get("samples_in", 0)) - base < total:
-        if time.monotonic() > deadline:
-            break
+    seen, moved = -1, time.perf_counter()
+    while (now_in := int(rig.status.get("samples_in", 0))) - base < total:
+        if now_in != seen:
+            seen, moved = now_in, time.perf_counter()
+        if time.monotonic() > deadline or time.perf_counter() - moved > 10:
+            break  # lost or rejected: the count will not grow any more
         await asyncio.sleep(0.02)
-    elapsed = time.perf_counter() - started
+    elapsed = (time.perf_counter() if now_in - base >= total else moved) - started
     processed = int(rig.status.get("samples_in", 0)) - base
     return {"samples": total, "processed": processed, "seconds": round(elapsed, 2),
             "publish_seconds": round(sent_s, 2),
@@ -304,10 +330,26 @@ async def soak(rig: Rig, daemon: Daemon, seconds: float) -> dict[str, Any]:
             "growth_after_warmup_mb": round(rss[-1][1] - settled[0], 1)}
 
 
-def run_transport(transport: str, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
+def recorded(folder: Path) -> dict[str, Any]:
+    """What the daemon's recorder kept: messages per topic from the files' summaries."""
+    from tdmon.record.reader import topic_counts
+
+    counts: dict[str, int] = {}
+    files = sorted(folder.glob("*.mcap"))
+    for path in files:
+        for topic, n in topic_counts(path).items():
+            counts[topic] = counts.get(topic, 0) + n
+    return {"files": len(files), "bytes": sum(p.stat().st_size for p in files),
+            "samples": counts.get("/tdmon/sample", 0), "raw": counts.get("/tdmon/raw", 0),
+            "messages": sum(counts.values())}
+
+
+def run_transport(transport: str, args: argparse.Namespace, folder: Path,
+                  recorder: bool) -> dict[str, Any]:
     broker = Broker(folder) if transport == "mqtt" else None
     port = broker.port if broker else free_port()
-    daemon = Daemon(folder, transport, port)
+    daemon = Daemon(folder, transport, port, recorder)
+    label = f"{transport} (recorder {'on' if recorder else 'off'})"
     deadline = time.monotonic() + 30
     while "model for" not in daemon.log.read_text() and time.monotonic() < deadline:
         time.sleep(0.1)  # warning log level: wait for the process instead
@@ -319,14 +361,18 @@ def run_transport(transport: str, args: argparse.Namespace, folder: Path) -> dic
     samples = args.mqtt_samples if transport == "mqtt" else args.zenoh_samples
 
     async def body(rig: Rig) -> dict[str, Any]:
+        # the daemon is up once its status arrives (it also has to subscribe first)
+        deadline = time.monotonic() + 60
+        while not rig.status and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
         out: dict[str, Any] = {}
         out["latency"] = await latency(rig, args.latency_seconds)
-        print(transport, "latency", out["latency"], flush=True)
+        print(label, "latency", out["latency"], flush=True)
         out["throughput"] = await throughput(rig, samples)
-        print(transport, "throughput", out["throughput"], flush=True)
+        print(label, "throughput", out["throughput"], flush=True)
         if not args.skip_soak:
             out["soak"] = await soak(rig, daemon, args.soak_seconds)
-            print(transport, "soak", out["soak"], flush=True)
+            print(label, "soak", out["soak"], flush=True)
         return out
 
     try:
@@ -336,7 +382,10 @@ def run_transport(transport: str, args: argparse.Namespace, folder: Path) -> dic
         log = daemon.stop()
         if broker:
             broker.stop()
-    result["daemon_exit_summary"] = log.strip().splitlines()[-1]
+    result["daemon_exit_summary"] = log.strip().splitlines()[-1] if log.strip() else ""
+    if recorder:
+        result["recording"] = kept = recorded(daemon.recordings)
+        print(label, "recording", kept, flush=True)
     return result
 
 
@@ -349,12 +398,26 @@ def main() -> int:
     parser.add_argument("--zenoh-samples", type=int, default=400_000)
     parser.add_argument("--soak-seconds", type=float, default=600.0)
     parser.add_argument("--skip-soak", action="store_true")
+    parser.add_argument("--recorder", choices=["on", "off", "both"], default="both",
+                        help="the daemon records (on, as on a rig), or not (off); both: on, "
+                             "then off for the comparison (default)")
     parser.add_argument("--json", type=Path, help="write the results here")
     args = parser.parse_args()
     results: dict[str, Any] = {"cpus": os.cpu_count()}
     with tempfile.TemporaryDirectory(prefix="tdmon-bench-") as tmp:
+        modes = {"on": [True], "off": [False], "both": [True, False]}[args.recorder]
         for transport in (["mqtt", "zenoh"] if args.transport == "both" else [args.transport]):
-            results[transport] = run_transport(transport, args, Path(tmp))
+            results[transport] = {}
+            for recorder in modes:
+                key = "recorder_on" if recorder else "recorder_off"
+                results[transport][key] = run_transport(transport, args, Path(tmp), recorder)
+            both = results[transport]
+            if len(both) == 2:
+                on = both["recorder_on"]["throughput"]["samples_per_s"]
+                off = both["recorder_off"]["throughput"]["samples_per_s"]
+                both["on_over_off"] = round(on / off, 3)
+                print(f"{transport}: {on} samples/s with the recorder, {off} without "
+                      f"(ratio {on / off:.3f})", flush=True)
     print(json.dumps(results, indent=2))
     if args.json:
         args.json.write_text(json.dumps(results, indent=2) + "\n")

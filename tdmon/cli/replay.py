@@ -45,8 +45,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     replay.add_argument("--json", action="store_true", help="print the summary as JSON")
     replay.add_argument("--recorder", choices=("process", "inline"), default="process",
                         help="where the MCAP recorder runs: 'process' (default) in a child "
-                             "process, on a second core; 'inline' in this one (better when "
-                             "many replays already run side by side on every core)")
+                             "process, on a second core; 'inline' in this one (less CPU in "
+                             "all: better when replays already run side by side on every "
+                             "core)")
     replay.set_defaults(func=_replay)
 
     simulate = subparsers.add_parser(

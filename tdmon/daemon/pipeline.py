@@ -159,6 +159,25 @@ class Pipeline:
         self._recorded_payload_bytes = max(RECORDED_PAYLOAD_BYTES,
                                            getattr(decoder, "max_payload_bytes", 0))
         self.loss = LossDetector()
+        # the log time [ns] of messages that belong to no input (status, what the steps emit
+        # at the end, recorder alarms): the wall clock live, the latest input's time in a
+        # replay (follow_input_time)
+        self._now_ns: Callable[[], int] = time.time_ns
+        self._input_ns = 0
+
+    def follow_input_time(self) -> None:
+        """Stamp messages that belong to no input with the time of the latest input message
+        (its receive time as recorded) instead of the wall clock, and give the status that
+        time: a replay's or an import's recording then spans the rig's time, not the seconds
+        the run took (docs/recording.md). Before the first input: the wall clock."""
+        self._now_ns = self._latest_input_ns
+
+    def _latest_input_ns(self) -> int:
+        return self._input_ns or time.time_ns()
+
+    def now_ns(self) -> int:
+        """The pipeline's clock [ns since the Unix epoch] (see :meth:`follow_input_time`)."""
+        return self._now_ns()
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
@@ -179,7 +198,7 @@ class Pipeline:
         """Handle one message completely; returns what the decoder made of it."""
         stats = self.stats
         stats.messages_in += 1
-        log_ns = int(raw.receive_time * 1e9)
+        self._input_ns = log_ns = int(raw.receive_time * 1e9)
         if self._sinks_for("/tdmon/raw"):
             self._write("/tdmon/raw", log_ns, raw_message(raw, self._recorded_payload_bytes))
         decoded = self.decoder.decode(raw)
@@ -255,7 +274,7 @@ class Pipeline:
         self._closed = True
         for frame in self.aligner.flush():
             self._run_steps(frame)
-        log_ns = time.time_ns()
+        log_ns = self._now_ns()
         for step in self.steps:
             try:
                 step.close(self._emitter(log_ns, None))
@@ -273,7 +292,7 @@ class Pipeline:
 
     def emit(self, name: str, message: dict[str, Any], log_time_ns: int | None = None) -> None:
         """Send a message that belongs to no frame (e.g. status) to every sink."""
-        self._write(f"/tdmon/{name}", time.time_ns() if log_time_ns is None else log_time_ns,
+        self._write(f"/tdmon/{name}", self._now_ns() if log_time_ns is None else log_time_ns,
                     message)
 
     def emit_status(self, connections: dict[str, str]) -> None:
@@ -283,7 +302,7 @@ class Pipeline:
     def status_message(self, connections: dict[str, str], now: float | None = None
                        ) -> dict[str, Any]:
         """The periodic ``status`` message (docs/architecture.md)."""
-        now = time.time() if now is None else now
+        now = self._now_ns() / 1e9 if now is None else now
         stats = self.stats
         lag = 0.0 if stats.last_sample_t is None else max(0.0, now - stats.last_sample_t)
         return status_message(now, stats.samples_in, stats.rejected, stats.dropped, lag,

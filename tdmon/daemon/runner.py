@@ -33,11 +33,21 @@ async def run_daemon(config: DaemonConfig, stop: asyncio.Event | None = None,
         else:
             building = build_daemon(config, **build_options)
         async with building as built:
+            if replays_only(config) and not config.is_fleet:
+                # a recording of a replay spans the rig's time (docs/recording.md)
+                built.pipeline.follow_input_time()
             log.info("tdmon daemon running: prefix %s, sources %s", config.prefix,
                      ", ".join(s.name for s in built.daemon.sources))
             with reload_on_sighup(built):
                 await built.daemon.run(stop)
             return built.stats
+
+
+def replays_only(config: DaemonConfig) -> bool:
+    """Whether every source of ``config`` replays a recording (``[sources.mcap]`` alone)."""
+    sources = config.sources
+    return sources.mcap is not None and all(
+        getattr(sources, name) is None for name in type(sources).model_fields if name != "mcap")
 
 
 @contextlib.contextmanager

@@ -23,6 +23,7 @@ from types import TracebackType
 from typing import IO
 
 from mcap.exceptions import McapError
+from mcap.reader import make_reader
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 
@@ -66,10 +67,25 @@ def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMes
     return RawMessage("mcap", channel_topic.lstrip("/"), bytes(data), log_time_ns / 1e9)
 
 
+def _summary_has_raw(stream: IO[bytes]) -> bool:
+    """Whether a finished file has a ``/tdmon/raw`` channel (from its summary; False when it
+    has none, e.g. a footer-less file). A channel's record comes with its first message, so
+    other topics (``/truth/...``, ``/reference/...``) may come before it in file order."""
+    start = stream.tell()
+    try:
+        summary = make_reader(stream).get_summary()
+    except Exception:  # no footer or summary (a killed writer): decided while reading
+        return False
+    finally:
+        stream.seek(start)
+    return summary is not None and any(
+        channel.topic == RAW_TOPIC for channel in summary.channels.values())
+
+
 def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
     """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those."""
     channels: dict[int, str] = {}
-    has_raw = False
+    has_raw = _summary_has_raw(stream)
     truncated = 0
     try:
         for record in StreamReader(stream, skip_magic=False).records:

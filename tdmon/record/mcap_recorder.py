@@ -2,8 +2,11 @@
 
 Design points (docs/recording.md):
 
-* JSON messages, one JSON Schema per channel, registered once per file; integer-nanosecond log
-  times; zstd chunks.
+* JSON messages, one JSON Schema per channel, registered in a file with its first message;
+  integer-nanosecond log times; zstd chunks.
+* Fast path: ``write`` only queues the message; every ``BATCH_SIZE`` messages (and before any
+  flush, statistics read or close) the queue is encoded with orjson and handed to the compiled
+  MCAP writer of foxglove-sdk (docs/benchmarks.md: the recorder's share of the daemon).
 * ``Writer.flush()`` at least every ``flush_interval_s`` (also from a background thread when
   the pipeline is quiet): a SIGKILLed writer then loses at most that much, and the footer-less
   file it leaves is rewritten by :func:`tdmon.record.recover.recover_folder` on the next start.
@@ -18,6 +21,7 @@ Design points (docs/recording.md):
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import io
 import json
@@ -29,6 +33,7 @@ import shutil
 import threading
 import time
 import weakref
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -36,7 +41,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
 
-from mcap.writer import CompressionType, Writer
+import orjson
+from foxglove import Channel, Context, Schema, open_mcap
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions, MCAPWriter
 
 from tdmon import __version__
 from tdmon.errors import RecordError
@@ -54,6 +61,17 @@ MIB: Final = 1024 * 1024
 LIBRARY: Final = f"tdmon {__version__}"
 FILE_PATTERN: Final = re.compile(r"^(?P<prefix>.+)_(?P<seq>\d{5,})_(?P<start>\d{8}T\d{6}Z)\.mcap$")
 
+#: Messages queued by ``write`` before they are encoded and written in one go: the lock, the
+#: clock and the rotation check are paid per batch, not per message.
+BATCH_SIZE: Final = 256
+
+#: Chunk compression by name (``compression=`` of :class:`McapRecorder`).
+COMPRESSIONS: Final[dict[str, MCAPCompression | None]] = {
+    "zstd": MCAPCompression.Zstd, "lz4": MCAPCompression.Lz4, "none": None}
+
+# foxglove-sdk logs every message it cannot write as a warning; the recorder reports the
+# failure itself (one error line, one alarm, the lost count), so only errors pass.
+logging.getLogger("foxglove").setLevel(logging.ERROR)
 
 
 def _numpy_default(value: Any) -> Any:
@@ -76,21 +94,73 @@ def _replace_nonfinite(value: Any) -> Any:
     return value
 
 
-# one encoder for every message: json.dumps with non-default options builds a new encoder per
-# call, which cost 1.5 us of the ~4 us an encoding takes (measured on a /tdmon/raw message)
+# the stdlib encoder: for what orjson refuses (non-string keys, integers beyond 64 bits) and to
+# find whether a ``null`` in orjson's output was a NaN/inf (json refuses those, orjson writes
+# them as null). One encoder object: json.dumps with options builds a new one per call.
 _ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=_numpy_default)
 
 
-def encode_message(message: Message) -> tuple[bytes, bool]:
-    """JSON bytes of a message, and whether a NaN/inf had to be replaced by ``null``.
-
-    Raises ``TypeError``/``ValueError`` for something that is not JSON at all.
-    """
+def _encode_slow(message: Any) -> tuple[bytes, bool]:
     try:
         return _ENCODER.encode(message).encode(), False
     except ValueError:
         cleaned = _replace_nonfinite(message)
         return _ENCODER.encode(cleaned).encode(), True
+
+
+def encode_message(message: Message) -> tuple[bytes, bool]:
+    """JSON bytes of a message, and whether a NaN/inf had to be replaced by ``null``.
+
+    orjson (about ten times faster than the json module) writes NaN and infinities as ``null``
+    without saying so; only a message whose bytes contain ``null`` is checked again with the
+    json module, which refuses them. Raises ``TypeError``/``ValueError`` for something that is
+    not JSON at all.
+    """
+    try:
+        # numpy values through ``default`` (``tolist``), not orjson's own numpy option: the
+        # same numbers as the json module writes (float32 included)
+        data = orjson.dumps(message, default=_numpy_default)
+    except TypeError:  # orjson.JSONEncodeError: a key that is not a string, a huge integer...
+        return _encode_slow(message)
+    return data, b"null" in data and _has_nonfinite(message)
+
+
+_PLAIN: Final = (str, int, bool, type(None))
+
+
+def _has_nonfinite(message: Any) -> bool:
+    """Whether a NaN or an infinity is somewhere in ``message``.
+
+    Walks plain dicts, lists, tuples and floats (the daemon's messages; a model message with a
+    null took ~5x longer through the json module, which formats every float in Python when it
+    refuses NaN); anything else (numpy values, other types) is left to :func:`_refused_by_json`.
+    """
+    stack = [message]
+    pop, many = stack.pop, stack.extend
+    while stack:
+        item = pop()
+        kind = type(item)
+        if kind is float:
+            if item - item != 0.0:  # nan - nan and inf - inf are nan
+                return True
+        elif kind is dict:
+            many(item.values())
+        elif kind is list or kind is tuple:
+            many(item)
+        elif kind not in _PLAIN:
+            return _refused_by_json(message)
+    return False
+
+
+def _refused_by_json(message: Any) -> bool:
+    """Whether the json module refuses ``message`` for a NaN/inf (orjson wrote null)."""
+    try:
+        _ENCODER.encode(message)
+    except ValueError:
+        return True
+    except (TypeError, RecursionError):  # something only orjson writes (a datetime...)
+        return False
+    return False
 
 
 def file_name(prefix: str, sequence: int, start: datetime) -> str:
@@ -130,15 +200,64 @@ class RecorderStats:
     """Messages written per topic."""
 
 
+class _Output:
+    """The open file as foxglove's writer sees it (``write``/``seek``/``flush``).
+
+    The writer does not raise a failed write back to ``log``: it logs it and refuses every later
+    write. Keeping the first ``OSError`` here lets the recorder see a full disk at the message
+    that met it, as it did with an exception.
+    """
+
+    __slots__ = ("_stream", "error")
+
+    def __init__(self, stream: io.BufferedWriter[Any]) -> None:
+        self._stream = stream
+        self.error: OSError | None = None
+
+    def write(self, data: bytes | bytearray) -> int:
+        try:
+            return self._stream.write(data)
+        except OSError as exc:
+            self.error = self.error or exc
+            raise
+
+    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
+        try:
+            return self._stream.seek(offset, whence)  # writes out the buffer first
+        except OSError as exc:
+            self.error = self.error or exc
+            raise
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            self.error = self.error or exc
+            raise
+
+    def tell(self) -> int:
+        return self._stream.tell()
+
+    def failure(self, exc: Exception) -> OSError:
+        """The OSError behind a writer error (``RuntimeError`` from foxglove-sdk)."""
+        if isinstance(exc, OSError):
+            return exc
+        return self.error or OSError(errno.EIO, str(exc))
+
+
 class _McapFile:
-    """One open MCAP file: mcap's ``Writer`` with the lock, the channels and ``finish()``."""
+    """One open MCAP file: foxglove-sdk's ``MCAPWriter`` on a locked file, and ``finish()``.
+
+    The recorder's channels live in its own foxglove ``Context`` (not the process's default
+    one) and outlast the file: each file gets a channel's schema and channel records with the
+    channel's first message in it, and a channel's sequence numbers run on across files.
+    """
 
     def __init__(
         self,
         path: Path,
-        topics: Mapping[str, Mapping[str, Any]],
-        chunk_size: int,
-        compression: CompressionType,
+        context: Context,
+        options: MCAPWriteOptions,
         metadata: Mapping[str, str],
         lock: threading.RLock,
     ) -> None:
@@ -150,18 +269,19 @@ class _McapFile:
             # An exclusive lock tells a recovery scan in another process that this file is live.
             fcntl.flock(self._raw.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
             self._stream = io.BufferedWriter(self._raw, buffer_size=MIB)
-            self._writer = Writer(self._stream, chunk_size=chunk_size, compression=compression)
-            self._channels: dict[str, int] = {}
+            self.output = _Output(self._stream)
             self.unflushed = 0
             self.opened_at = time.monotonic()
             self.last_flush = self.opened_at
-            self._finalizer = weakref.finalize(
-                self, _finish_at_exit, self._writer, self._stream, lock
-            )
-            self._writer.start(profile="", library=LIBRARY)
-            self._writer.add_metadata("tdmon", dict(metadata))
-            for topic, schema in topics.items():
-                self.add_topic(topic, schema)
+            try:
+                self._writer: MCAPWriter = open_mcap(self.output, context=context,
+                                                     writer_options=options)
+                self._finalizer = weakref.finalize(
+                    self, _finish_at_exit, self._writer, self._stream, lock
+                )
+                self._writer.write_metadata("tdmon", dict(metadata))
+            except RuntimeError as exc:  # foxglove-sdk's error for a failed write
+                raise self.output.failure(exc) from exc
             self.flush()
             header_on_disk = True
         except BaseException:
@@ -174,28 +294,13 @@ class _McapFile:
                     path.unlink()
             raise
 
-    def add_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
-        schema_id = self._writer.register_schema(
-            name=schemas.schema_name(topic),
-            encoding="jsonschema",
-            data=schemas.schema_bytes(schema),
-        )
-        self._channels[topic] = self._writer.register_channel(
-            topic=topic, message_encoding="json", schema_id=schema_id
-        )
-
-    def add(self, topic: str, log_time_ns: int, data: bytes, sequence: int) -> None:
-        self._writer.add_message(
-            channel_id=self._channels[topic],
-            log_time=log_time_ns,
-            publish_time=log_time_ns,
-            data=data,
-            sequence=sequence,
-        )
-        self.unflushed += 1
-
     def flush(self) -> None:
-        self._writer.flush()
+        try:
+            self._writer.flush()
+        except RuntimeError as exc:  # foxglove-sdk's error for a failed write
+            raise self.output.failure(exc) from exc
+        if self.output.error is not None:
+            raise self.output.error
         self.unflushed = 0
         self.last_flush = time.monotonic()
 
@@ -206,7 +311,10 @@ class _McapFile:
         """Write the summary and footer, then close; the file is complete."""
         self._finalizer.detach()
         try:
-            self._writer.finish()
+            try:
+                self._writer.close()
+            except RuntimeError as exc:
+                raise self.output.failure(exc) from exc
             self._stream.flush()
         finally:
             self._close_quietly()
@@ -217,6 +325,11 @@ class _McapFile:
         finalizer = getattr(self, "_finalizer", None)
         if finalizer is not None:
             finalizer.detach()
+        writer = getattr(self, "_writer", None)
+        if writer is not None:
+            # the writer refuses every write after the failure; closing it frees it
+            with contextlib.suppress(Exception):
+                writer.close()
         self._close_quietly()
 
     def _close_quietly(self) -> None:
@@ -229,14 +342,15 @@ class _McapFile:
             self._raw.close()
 
 
-def _finish_at_exit(writer: Writer, stream: io.BufferedWriter[Any], lock: threading.RLock) -> None:
+def _finish_at_exit(writer: MCAPWriter, stream: io.BufferedWriter[Any],
+                    lock: threading.RLock) -> None:
     # A recorder that was never closed: finish its file at interpreter exit rather than leave
     # a footer-less one. The lock keeps the flusher thread (still alive at exit) out of the way;
     # errors cannot be reported anywhere useful this late.
     locked = lock.acquire(timeout=2.0)
     try:
         with contextlib.suppress(Exception):
-            writer.finish()
+            writer.close()
         with contextlib.suppress(OSError, ValueError):
             stream.close()
     finally:
@@ -318,17 +432,22 @@ class McapRecorder:
         self.flush_interval_s = flush_interval_s
         self.retry_s = retry_s
         self.on_alarm = on_alarm
-        self._chunk_size = chunk_size
-        try:
-            self._compression = CompressionType[compression.upper()]
-        except KeyError:
-            raise RecordError(f"unknown MCAP compression {compression!r}") from None
+        if compression.lower() not in COMPRESSIONS:
+            raise RecordError(f"unknown MCAP compression {compression!r} "
+                              f"(one of {', '.join(COMPRESSIONS)})")
+        # no compression threads: zstd runs in the writing thread, as with the mcap package
+        # (helper threads would compete with the pipeline for the second core)
+        self._options = MCAPWriteOptions(compression=COMPRESSIONS[compression.lower()],
+                                         chunk_size=chunk_size, profile="",
+                                         compression_threads=0)
+        self._context = Context()
+        self._channels: dict[str, Any] = {}  # topic -> its channel's log(data, log_time)
+        self._queue: list[tuple[str, int, Any, bool | None]] = []
         self._topics: dict[str, dict[str, Any]] = {
             topic: dict(schema) for topic, schema in schemas.TOPIC_SCHEMAS.items()
         }
         for topic, schema in (extra_topics or {}).items():
             self._topics[topic] = dict(schema)
-        self._sequence_numbers: dict[str, int] = {}
         self._lock = threading.RLock()
         self._file: _McapFile | None = None
         self._error: RecordError | None = None
@@ -384,6 +503,7 @@ class McapRecorder:
     @property
     def stats(self) -> RecorderStats:
         with self._lock:
+            self._write_queued()
             snapshot = RecorderStats(**vars(self._stats))
             snapshot.files = list(self._stats.files)
             snapshot.per_topic = dict(self._stats.per_topic)
@@ -401,61 +521,34 @@ class McapRecorder:
                 if self._topics[topic] != dict(schema):
                     raise RecordError(f"topic {topic} is already registered with another schema")
                 return
+            self._write_queued()
             self._topics[topic] = dict(schema)
-            if self._file is not None:
-                try:
-                    self._file.add_topic(topic, schema)
-                except OSError as exc:
-                    self._fail(exc)
         self._fire_alarms()
 
     def write(self, topic: str, log_time_ns: int, message: Message) -> None:
         """Record one message at ``log_time_ns`` [ns since the Unix epoch].
 
-        Never raises for I/O problems: see ``error``/``stats``/``on_alarm``.
+        The message is queued and encoded with the next batch (at most ``BATCH_SIZE`` messages
+        or ``flush_interval_s`` later): it must not be changed after ``write``. Never raises for
+        I/O problems: see ``error``/``stats``/``on_alarm``.
         """
-        try:
-            data, replaced = encode_message(message)
-        except (TypeError, ValueError, RecursionError) as exc:
-            with self._lock:
-                self._stats.unencodable += 1
-                self._stats.lost += 1
-            log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
-            return
-        self.write_encoded(topic, log_time_ns, data, replaced)
+        with self._lock:
+            queue = self._queue
+            queue.append((topic, log_time_ns, message, None))
+            if len(queue) >= BATCH_SIZE:
+                self._write_queued()
+        if self._pending_alarms:
+            self._fire_alarms()
 
     def write_encoded(self, topic: str, log_time_ns: int, data: bytes,
                       replaced: bool = False) -> None:
         """Record one message already encoded as JSON bytes (``replaced``: a NaN/inf in it was
         written as ``null``). Never raises for I/O problems, like ``write``."""
         with self._lock:
-            if self._closed:
-                self._stats.lost += 1
-                return
-            if replaced:
-                self._stats.nonfinite_replaced += 1
-            if topic not in self._topics:
-                self._register_untyped(topic)
-            now = time.monotonic()
-            if self._file is None:
-                self._maybe_resume(now)
-            current = self._file
-            if current is None:
-                self._stats.lost += 1
-            else:
-                try:
-                    if self._rotation_due(current, now):
-                        current = self._rotate()
-                    sequence = self._sequence_numbers.get(topic, 0) + 1
-                    self._sequence_numbers[topic] = sequence
-                    current.add(topic, int(log_time_ns), data, sequence)
-                    self._stats.written += 1
-                    self._stats.per_topic[topic] = self._stats.per_topic.get(topic, 0) + 1
-                    if now - current.last_flush >= self.flush_interval_s:
-                        current.flush()
-                        self._stats.flushes += 1
-                except OSError as exc:
-                    self._fail(exc)
+            queue = self._queue
+            queue.append((topic, log_time_ns, data, replaced))
+            if len(queue) >= BATCH_SIZE:
+                self._write_queued()
         if self._pending_alarms:
             self._fire_alarms()
 
@@ -475,6 +568,7 @@ class McapRecorder:
     def flush(self) -> None:
         """Flush the current file now (also done automatically every ``flush_interval_s``)."""
         with self._lock:
+            self._write_queued()
             if self._file is not None:
                 try:
                     self._file.flush()
@@ -488,6 +582,7 @@ class McapRecorder:
         with self._lock:
             if self._closed:
                 return
+            self._write_queued()
             self._closed = True
         self._stop.set()
         if self._flusher is not None:
@@ -515,6 +610,110 @@ class McapRecorder:
         self.close()
 
     # -- internals ---------------------------------------------------------------------------
+
+    def _write_queued(self) -> None:
+        """Encode the queued messages and hand them to the file (call with the lock held)."""
+        queue = self._queue
+        if not queue:
+            return
+        self._queue = []
+        stats = self._stats
+        if self._closed:
+            stats.lost += len(queue)
+            return
+        now = time.monotonic()
+        current = self._file
+        if current is None:
+            self._maybe_resume(now)
+            current = self._file
+        elif self._rotation_due(current, now):
+            try:
+                current = self._rotate()
+            except OSError as exc:
+                self._fail(exc)
+                current = None
+        if current is None:
+            stats.lost += len(queue)
+            return
+        datas = self._encode(queue)
+        channels = self._channels
+        output = current.output
+        written = 0
+        try:
+            for (topic, log_time_ns, _, _), data in zip(queue, datas, strict=True):
+                if data is None:
+                    continue
+                log_message = channels.get(topic) or self._channel(topic)
+                log_message(data, log_time_ns)
+                if output.error is not None:
+                    raise output.error
+                written += 1
+        except OSError as exc:
+            # the message that met the error is lost, and so is what the file held unflushed
+            # (counted by _fail) and the rest of the batch
+            kept = [item for item, data in zip(queue, datas, strict=True) if data is not None]
+            self._count_topics(kept[:written])
+            current.unflushed += written
+            stats.written += written
+            stats.lost += len(kept) - written
+            self._fail(exc)
+            return
+        self._count_topics(queue if written == len(queue) else
+                           [item for item, data in zip(queue, datas, strict=True)
+                            if data is not None])
+        current.unflushed += written
+        stats.written += written
+        if now - current.last_flush >= self.flush_interval_s:
+            try:
+                current.flush()
+                stats.flushes += 1
+            except OSError as exc:
+                self._fail(exc)
+
+    def _encode(self, queue: list[tuple[str, int, Any, bool | None]]) -> list[bytes | None]:
+        """The JSON bytes of each queued message; None for one that is not JSON (counted)."""
+        stats = self._stats
+        dumps = orjson.dumps
+        try:
+            # the usual batch in one comprehension; pre-encoded messages (a flag) are bytes
+            datas: list[bytes | None] = [
+                dumps(message, default=_numpy_default) if replaced is None else message
+                for _, _, message, replaced in queue]
+        except TypeError:  # one message orjson refuses: each alone, the json module's way
+            datas = [self._encode_one(topic, message) if replaced is None else message
+                     for topic, _, message, replaced in queue]
+        # orjson writes NaN/inf as null without a word: messages holding a null are checked
+        for (_, _, message, replaced), data in zip(queue, datas, strict=True):
+            if replaced is None:
+                if data is not None and b"null" in data and _has_nonfinite(message):
+                    stats.nonfinite_replaced += 1
+            elif replaced:
+                stats.nonfinite_replaced += 1
+        return datas
+
+    def _encode_one(self, topic: str, message: Any) -> bytes | None:
+        try:
+            return encode_message(message)[0]
+        except (TypeError, ValueError, RecursionError) as exc:
+            self._stats.unencodable += 1
+            self._stats.lost += 1
+            log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
+            return None
+
+    def _count_topics(self, items: list[tuple[str, int, Any, bool | None]]) -> None:
+        per_topic = self._stats.per_topic
+        for topic, count in Counter(item[0] for item in items).items():
+            per_topic[topic] = per_topic.get(topic, 0) + count
+
+    def _channel(self, topic: str) -> Any:
+        """The channel of ``topic`` (its ``log``), created on its first message."""
+        if topic not in self._topics:
+            self._register_untyped(topic)
+        schema = Schema(name=schemas.schema_name(topic), encoding="jsonschema",
+                        data=schemas.schema_bytes(self._topics[topic]))
+        channel = Channel(topic, schema=schema, message_encoding="json", context=self._context)
+        self._channels[topic] = log_message = channel.base.log
+        return log_message
 
     def _prepare_folder(self, min_free_bytes: int) -> None:
         try:
@@ -553,9 +752,7 @@ class McapRecorder:
             "started_utc": datetime.now(UTC).isoformat(),
             "flush_interval_s": repr(self.flush_interval_s),
         }
-        opened = _McapFile(
-            path, self._topics, self._chunk_size, self._compression, metadata, self._lock
-        )
+        opened = _McapFile(path, self._context, self._options, metadata, self._lock)
         self._stats.files.append(path)
         return opened
 
@@ -577,11 +774,6 @@ class McapRecorder:
         log.warning("topic %s has no registered schema; recording it as untyped JSON", topic)
         self._stats.untyped_topics += 1
         self._topics[topic] = dict(schemas.UNTYPED)
-        if self._file is not None:
-            try:
-                self._file.add_topic(topic, schemas.UNTYPED)
-            except OSError as exc:
-                self._fail(exc)
 
     def _fail(self, exc: OSError) -> None:
         """Enter the failure state: count what the file still held, alarm, retry later."""
@@ -639,6 +831,8 @@ class McapRecorder:
             current = self._file
             if current is None:
                 self._maybe_resume(now)
+            elif self._queue and now - current.last_flush >= self.flush_interval_s:
+                self._write_queued()  # flushes: the interval is over
             elif current.unflushed and now - current.last_flush >= self.flush_interval_s:
                 try:
                     current.flush()

@@ -286,9 +286,11 @@ async def replay(
     speed : real time x ``speed``; None: as fast as the pipeline goes (deterministic)
     progress : called with the number of input messages handled since the last call
     extra_sinks : more sinks (tests)
-    separate_writer : record from a child process
-        (:class:`~tdmon.record.writer_process.RecorderProcess`: encoding and writing on a
-        second core); False: in this process (:class:`McapRecorder`; e.g. to profile it)
+    separate_writer : record from a child process (default;
+        :class:`~tdmon.record.writer_process.RecorderProcess`: encoding and writing on a
+        second core, which still pays when one is free); False: in this process
+        (:class:`McapRecorder`: less CPU in all, for replays run side by side on every core;
+        docs/replays.md has the figures)
 
     Raises
     ------
@@ -334,6 +336,8 @@ async def replay(
             async with build_daemon(run_config, extra_sinks=sinks,
                                     stop_when_sources_done=True) as built:
                 pipeline = built.pipeline
+                # log times and the status in rig time: the recording spans the session
+                pipeline.follow_input_time()
                 if speed is None:
                     built.daemon.tick_interval = _NO_TICKS
                 await built.daemon.run(stop)

@@ -373,3 +373,58 @@ class TestStaleAfterAGap:
             send(float(k))
         pipeline.flush()
         assert len([m for m in sink["alarm"] if m["kind"] == "sensor_stale"]) == 1
+
+
+class TimedSink(CollectSink):
+    """Keeps the log time of each message too."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.log_times: list[tuple[str, int]] = []
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        super().write(topic, log_time_ns, message)
+        self.log_times.append((topic, log_time_ns))
+
+
+def test_a_pipeline_following_input_time_stamps_status_and_closing_results_with_it() -> None:
+    """Replays: what belongs to no input is stamped with the latest input's time (2024 here),
+    not the wall clock; a live pipeline keeps the wall clock for it."""
+    decoder = Decoder("rig", [ChannelSpec("hookload", "hookload", "N"),
+                              ChannelSpec("bit_depth", "bit_depth", "m")])
+    rig_t = 1_709_272_800.0  # 2024-03-01
+    for follow in (True, False):
+        sink = TimedSink()
+        pipeline = Pipeline(decoder, Aligner(wait_for=("bit_depth",)),
+                            [RigStateStep(), MonitorStep(linear_model())], [sink])
+        if follow:
+            pipeline.follow_input_time()
+        for i in range(5):
+            for channel, value in (("bit_depth", 1000.0 + i), ("hookload", 1e6)):
+                body = json.dumps({"t": rig_t + i, "value": value}).encode()
+                pipeline.process(RawMessage("mqtt", f"rig/{channel}", body, rig_t + i + 0.5))
+        pipeline.emit("status", pipeline.status_message({"mqtt": "finished"}))
+        last_input = int((rig_t + 4.5) * 1e9)
+        status_ns = sink.log_times[-1][1]
+        status = sink.messages["/tdmon/status"][-1]
+        if follow:
+            assert status_ns == last_input and status["t"] == pytest.approx(rig_t + 4.5)
+            assert status["lag_s"] == pytest.approx(0.5)
+            assert max(ns for _, ns in sink.log_times) == last_input
+        else:
+            assert status_ns > last_input + 10**9 * 86400 * 365  # today's wall clock
+
+
+def test_tdmon_run_follows_input_time_only_when_it_replays_a_recording() -> None:
+    from pathlib import Path
+
+    from tdmon.config.daemon import load_daemon_config
+    from tdmon.daemon.runner import replays_only
+
+    folder = Path(__file__).resolve().parents[2] / "config" / "daemon"
+    replaying = load_daemon_config(folder / "replay-sim-trip-out.toml")
+    assert replays_only(replaying)
+    assert not replays_only(load_daemon_config(folder / "mqtt-local.toml"))
+    both = replaying.model_copy(update={"sources": replaying.sources.model_copy(
+        update={"mqtt": load_daemon_config(folder / "mqtt-local.toml").sources.mqtt})})
+    assert not replays_only(both)

@@ -90,6 +90,22 @@ def test_replays_cover_every_state_and_alarm_kind(
     assert not unrequired, f"alarm kinds no expectation requires: {sorted(unrequired)}"
 
 
+def test_a_replays_recording_spans_the_rig_time_of_its_input(
+        replayed: Callable[[str], tuple[ReplayResult, list[Check]]]) -> None:
+    """Log times are rig time (the inputs' recorded receive times), not the seconds the replay
+    took: the recording spans the session, and the last status carries its end."""
+    name = "trip-out-tight-spot.mcap"
+    result, _ = replayed(name)
+    inputs = [m.log_time_ns for m in read_messages(REPO / "replays" / name, "/tdmon/raw")]
+    recorded = list(read_messages(result.out))
+    log_times = [m.log_time_ns for m in recorded]
+    assert max(inputs) - min(inputs) > 20 * 60 * 10**9  # a 25-minute session
+    assert (min(log_times), max(log_times)) == (min(inputs), max(inputs))
+    status = [m for m in recorded if m.topic == "/tdmon/status"][-1]
+    assert status.log_time_ns == max(inputs)
+    assert status.message["t"] == pytest.approx(max(inputs) / 1e9)
+
+
 def test_same_replay_twice_gives_identical_estimates(tmp_path: Path) -> None:
     """Twice, once recording from a child process (the default) and once in-process: the
     estimate streams, and every other recorded message bar the wall-clock status, agree."""
