@@ -131,13 +131,17 @@ def _run(args: argparse.Namespace) -> int:
             return await run_daemon(config)
         printer = asyncio.create_task(status.run())
         try:
-            return await run_daemon(config, extra_sinks=[status])
+            stats = await run_daemon(config, extra_sinks=[status])
         finally:
             printer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await printer
-            status.show()  # where it ended, before the one-line summary
             status.close()
+        # where it ended, before the one-line summary (not after a start-up error: its one
+        # line is all the user needs)
+        status.show()
+        status.close()
+        return stats
 
     # the Rerun views are built inside the daemon: they read the units from tdmon.display
     with using(display_units(args, config.display.units)):

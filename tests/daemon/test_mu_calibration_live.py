@@ -222,7 +222,7 @@ def test_no_temperature_model_means_no_mu_t_said_once(tmp_path: Path, trip: Path
     jsonschema.validate(well_message, TOPIC_SCHEMAS["/tdmon/well"])
     estimates = [m for topic, m in messages if topic == "/tdmon/estimate"]
     assert estimates and not [m for m in estimates if m["kind"] == "mu_T"]
-    assert {m["kind"] for m in estimates} == {"window", "profile"}
+    assert {m["kind"] for m in estimates} == {"window", "profile", "joint"}
     # the profile then carries the friction alone
     profiles = [m for topic, m in messages if topic == "/tdmon/profile"]
     assert profiles and all("temperature_C" not in m and "mu" in m for m in profiles)
