@@ -85,7 +85,10 @@ def blas_capped(threads: int = WORKER_BLAS_THREADS) -> Iterator[Callable[[], int
                   if pool.get("user_api") == "blas"]
         return max(counts) if counts else None
 
-    import numpy  # noqa: F401  - load the BLAS before limiting it
+    # load the BLAS libraries before limiting them: numpy's, and scipy's own copy, which the
+    # replay would otherwise load later (lazily) with its default thread count
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
 
     with threadpool_limits(limits=threads, user_api="blas"):
         yield most

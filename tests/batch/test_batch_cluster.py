@@ -42,7 +42,10 @@ def broken(tmp_path: Path) -> Path:
 
 
 def _blas_threads_outside_tasks() -> int:
+    # numpy's and scipy's own OpenBLAS: a worker may load numpy's before its environment is
+    # applied (1 thread), scipy's comes up at the workers' 2 threads
     import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
     from threadpoolctl import threadpool_info
 
     return max(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
@@ -119,3 +122,20 @@ def test_cli_batch_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert "nope.toml: --config: no such file" in capsys.readouterr().err
     assert main(["batch", str(SHORT), "--out", str(tmp_path), "--workers", "0"]) == 2
     assert "--workers" in capsys.readouterr().err
+
+
+def test_the_cap_holds_for_a_blas_the_replay_loads_later() -> None:
+    """scipy carries its own OpenBLAS, loaded when the replay first needs scipy (lazily): the
+    task's cap must cover it too (a fresh process whose BLAS would start at 2 threads)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from tdmon.replay.batch import blas_capped\n"
+            "with blas_capped() as most:\n"
+            "    import scipy.optimize\n"
+            "    print(most())\n")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "2"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True, timeout=120)
+    assert out.stdout.split() == ["1"], out.stderr
