@@ -109,11 +109,11 @@ def _decompress(content: bytes) -> bytes:
     if compression == "zstd":
         import zstandard  # a dependency of mcap, as lz4
 
-        return zstandard.decompress(records, size)  # type: ignore[no-any-return]
+        return zstandard.decompress(records, size)
     if compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(records)  # type: ignore[no-any-return]
+        return lz4.frame.decompress(records)
     if compression == "":
         return records
     raise UnsupportedCompressionError(compression)
