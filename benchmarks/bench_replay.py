@@ -10,9 +10,10 @@ Two measurements, one process (project virtualenv):
    rig state, monitor, calibration, alarms, MCAP recorder in single-file mode; the recorder runs
    in a child process, as ``tdmon replay`` does, and the same replay with the recorder in the
    replaying process, ``--recorder inline``, is printed beside it, with CPU times). Side by side,
-   the *bare* path reads the same ``/tdmon/raw`` messages with
-   ``tdmon.ingest.mcap_source.iter_raw``, decodes each payload with ``json.loads`` and writes
-   it to an MCAP file with mcap's ``Writer`` (zstd chunks, as the recorder). Best of
+   the *bare* path reads the same ``/tdmon/raw`` messages with the ``mcap`` package's
+   ``StreamReader``, decodes each with ``json.loads`` (the recorded message and its payload)
+   and writes it to an MCAP file with mcap's ``Writer`` (zstd chunks, as the recorder): pure
+   Python, as issue 15 states the floor (the replay reads with tdmon's own reader). Best of
    ``--repeat`` runs each, alternated; the ratio pipeline/bare is the figure (target >= 1.0
    for the replay in one process).
 2. **Long session** (``--days``, default 7; 0 skips): the same programme generated for that
@@ -162,31 +163,43 @@ def _phase_seconds(phase: Any) -> float:
 def bare_copy(src: Path, dst: Path) -> int:
     """Read every input message, decode its payload, write it to MCAP: the floor.
 
-    Under the same garbage-collector setting as a full-speed replay (``replay`` raises the
+    Pure Python as the issue states it: the ``mcap`` package's ``StreamReader`` (not tdmon's
+    own reader, which the replay uses: the floor does not get faster with the replay), the
+    ``json`` module for the recorded message and its payload, and ``mcap``'s ``Writer``. Under
+    the same garbage-collector setting as a full-speed replay (``replay`` raises the
     young-generation threshold for the run; ~4 % faster here too)."""
-    from tdmon.ingest.mcap_source import iter_raw
     from tdmon.replay.driver import FULL_SPEED_GC_YOUNG
 
     previous = gc.get_threshold()
     gc.set_threshold(FULL_SPEED_GC_YOUNG, *previous[1:])
     try:
-        return _bare_copy(src, dst, iter_raw)
+        return _bare_copy(src, dst)
     finally:
         gc.set_threshold(*previous)
 
 
-def _bare_copy(src: Path, dst: Path, iter_raw: Callable[..., Any]) -> int:
+def _bare_copy(src: Path, dst: Path) -> int:
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+
     count = 0
+    topics: dict[int, str] = {}
     with src.open("rb") as stream, dst.open("wb") as out:
         writer = Writer(out, compression=CompressionType.ZSTD, chunk_size=4 * 1024 * 1024)
         writer.start()
         schema = writer.register_schema("raw", "jsonschema", b"{}")
         channel = writer.register_channel("/tdmon/raw", "json", schema)
-        for log_ns, raw in iter_raw(stream):
-            payload = json.loads(raw.payload)
-            body = json.dumps({"topic": raw.topic, "receive_time": raw.receive_time,
+        for record in StreamReader(stream).records:
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            if not isinstance(record, Message) or topics.get(record.channel_id) != "/tdmon/raw":
+                continue
+            raw = json.loads(record.data)
+            payload = json.loads(raw["payload"])
+            body = json.dumps({"topic": raw["topic"], "receive_time": raw["receive_time"],
                                "payload": payload}, separators=(",", ":")).encode()
-            writer.add_message(channel, log_ns, body, log_ns, sequence=count)
+            writer.add_message(channel, record.log_time, body, record.log_time,
+                               sequence=count)
             count += 1
         writer.finish()
     return count

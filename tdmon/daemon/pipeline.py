@@ -196,11 +196,18 @@ class Pipeline:
 
     def process(self, raw: RawMessage) -> Sample | Rejected:
         """Handle one message completely; returns what the decoder made of it."""
+        # once per input message (a replay's whole cost is in here): routes, counters and the
+        # loss detector's figures are read once, not through helper calls
         stats = self.stats
         stats.messages_in += 1
         self._input_ns = log_ns = int(raw.receive_time * 1e9)
-        if self._sinks_for("/tdmon/raw"):
-            self._write("/tdmon/raw", log_ns, raw_message(raw, self._recorded_payload_bytes))
+        routes = self._routes
+        sinks = routes.get("/tdmon/raw")
+        if sinks is None:
+            sinks = self._sinks_for("/tdmon/raw")
+        if sinks:
+            self._write_to(sinks, "/tdmon/raw", log_ns,
+                           raw_message(raw, self._recorded_payload_bytes))
         decoded = self.decoder.decode(raw)
         if isinstance(decoded, Rejected):
             return self._reject(decoded, log_ns)
@@ -213,23 +220,29 @@ class Pipeline:
             jump = verdict
         stats.samples_in += 1
         stats.last_sample_t = decoded.t
-        if self._sinks_for("/tdmon/sample"):
-            self._write("/tdmon/sample", log_ns, sample_message(decoded))
+        sinks = routes.get("/tdmon/sample")
+        if sinks is None:
+            sinks = self._sinks_for("/tdmon/sample")
+        if sinks:
+            self._write_to(sinks, "/tdmon/sample", log_ns, sample_message(decoded))
+        loss = self.loss
         if jump is not None:
-            self.loss.reanchor()
-        for alarm in self.loss.observe(decoded):
+            loss.reanchor()
+        for alarm in loss.observe(decoded):
             self._write("/tdmon/alarm", log_ns, alarm)
-        stats.seq_lost = self.loss.seq_lost
-        stats.sampling_gaps = self.loss.sampling_gaps
+        stats.seq_lost = loss.seq_lost
+        stats.sampling_gaps = loss.sampling_gaps
         if jump is not None:
             self._clock_jump(jump, log_ns)
-        frames = self.aligner.push(decoded, self._monotonic())
-        self._sync_aligner_counts()
+        aligner = self.aligner
+        frames = aligner.push(decoded, self._monotonic())
+        stats.duplicates = aligner.duplicates
+        stats.out_of_order = aligner.out_of_order
         if self._take_jumps is not None:
             for jump in self._take_jumps():
                 if self.clock is not None:
                     self.clock.reanchor(jump.offset)
-                self.loss.reanchor()
+                loss.reanchor()
                 self._clock_jump(jump, log_ns)
         for frame in frames:
             self._run_steps(frame)
@@ -336,7 +349,11 @@ class Pipeline:
         return emit
 
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        for sink in self._sinks_for(topic):
+        self._write_to(self._sinks_for(topic), topic, log_time_ns, message)
+
+    def _write_to(self, sinks: list[Sink], topic: str, log_time_ns: int,
+                  message: dict[str, Any]) -> None:
+        for sink in sinks:
             try:
                 sink.write(topic, log_time_ns, message)
             except Exception:

@@ -15,6 +15,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
+import orjson
+
 # CHANNEL_UNITS and ChannelSpec live in tdmon.channels (the config builds channel specs
 # without importing the decoder); they are named here too for the decoder's users.
 from tdmon.channels import CHANNEL_UNITS, ChannelSpec, check_channel
@@ -40,6 +42,9 @@ _NUMBER = (int, float)
 #: The decoder ``json.loads`` uses (default settings), for its faster ``raw_decode``.
 _JSON = json.JSONDecoder()
 _NOT_PLAIN = object()  # what `_plain_json_object` returns when json.loads must look
+#: Payload fields whose type could differ between orjson and json (integers beyond 64 bits).
+_NUMERIC_KEYS = ("t", "value", "seq")
+_INT64 = 2.0**63
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,17 +201,20 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     message counter per topic, is a non-negative integer or None (anything else is ignored, never
     a rejection: the sample is good without it).
     """
-    try:
-        # decode explicitly: json.loads on bytes would also guess UTF-16/32 from the first bytes
-        text = payload.decode("utf-8")
-    except UnicodeDecodeError:
-        return "payload is not UTF-8"
-    obj = _plain_json_object(text)
+    obj = _orjson_object(payload)
     if obj is _NOT_PLAIN:
         try:
-            obj = json.loads(text)
-        except (ValueError, RecursionError) as exc:
-            return f"malformed JSON: {_clip(str(exc), 80)}"
+            # decode explicitly: json.loads on bytes would also guess UTF-16/32 from the
+            # first bytes
+            text = payload.decode("utf-8")
+        except UnicodeDecodeError:
+            return "payload is not UTF-8"
+        obj = _plain_json_object(text)
+        if obj is _NOT_PLAIN:
+            try:
+                obj = json.loads(text)
+            except (ValueError, RecursionError) as exc:
+                return f"malformed JSON: {_clip(str(exc), 80)}"
     if not isinstance(obj, dict):
         return f"payload is a JSON {type(obj).__name__}, not an object"
     error = obj.get("error")
@@ -239,6 +247,26 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     if type(seq) is not int or seq < 0:
         seq = None
     return t, value, unit, seq
+
+
+def _orjson_object(payload: bytes) -> object:
+    """The usual payload, a JSON object, parsed by orjson (~4x faster than ``json``), else
+    ``_NOT_PLAIN``. Only where the two agree: anything orjson refuses (invalid UTF-8, NaN,
+    lone surrogates, errors of any kind) and any object whose ``t``, ``value`` or ``seq`` is
+    a float beyond 2**63 in magnitude (orjson turns an integer too large for 64 bits into a
+    float, ``json`` keeps it an integer) is left to the ``json`` path, whose results and
+    messages stay the decoder's."""
+    try:
+        obj = orjson.loads(payload)
+    except orjson.JSONDecodeError:
+        return _NOT_PLAIN
+    if type(obj) is not dict:
+        return _NOT_PLAIN
+    for key in _NUMERIC_KEYS:
+        number = obj.get(key)
+        if type(number) is float and not -_INT64 < number < _INT64:
+            return _NOT_PLAIN
+    return obj
 
 
 def _plain_json_object(text: str) -> object:
