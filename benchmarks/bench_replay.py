@@ -13,7 +13,7 @@ Two measurements, one process (project virtualenv):
    the *bare* path reads the same ``/tdmon/raw`` messages with the ``mcap`` package's
    ``StreamReader``, decodes each with ``json.loads`` (the recorded message and its payload)
    and writes it to an MCAP file with mcap's ``Writer`` (zstd chunks, as the recorder): pure
-   Python, as issue 15 states the floor (the replay reads with tdmon's own reader). Best of
+   Python, as issue 15 states the floor. Best of
    ``--repeat`` runs each, alternated; the ratio pipeline/bare is the figure (target >= 1.0
    for the replay in one process).
 2. **Long session** (``--days``, default 7; 0 skips): the same programme generated for that
@@ -163,8 +163,8 @@ def _phase_seconds(phase: Any) -> float:
 def bare_copy(src: Path, dst: Path) -> int:
     """Read every input message, decode its payload, write it to MCAP: the floor.
 
-    Pure Python as the issue states it: the ``mcap`` package's ``StreamReader`` (not tdmon's
-    own reader, which the replay uses: the floor does not get faster with the replay), the
+    Pure Python as the issue states it: the ``mcap`` package's ``StreamReader`` itself (not
+    tdmon's ``iter_raw``: the floor must not get faster with the replay's own code), the
     ``json`` module for the recorded message and its payload, and ``mcap``'s ``Writer``. Under
     the same garbage-collector setting as a full-speed replay (``replay`` raises the
     young-generation threshold for the run; ~4 % faster here too)."""

@@ -25,9 +25,10 @@ from typing import IO
 import orjson
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap.records import Channel, Message
+from mcap.stream_reader import StreamReader
 
 from tdmon.errors import IngestError
-from tdmon.ingest.mcap_messages import iter_messages
 from tdmon.ingest.types import RawMessage
 
 RAW_TOPIC = "/tdmon/raw"
@@ -89,33 +90,28 @@ def _summary_has_raw(stream: IO[bytes]) -> bool:
 
 
 def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
-    """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those.
-
-    Read with :func:`tdmon.ingest.mcap_messages.iter_messages` (no record object per message).
-    """
+    """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those."""
     channels: dict[int, str] = {}
     has_raw = _summary_has_raw(stream)
     truncated = 0
-
-    def on_channel(channel_id: int, topic: str) -> None:
-        nonlocal has_raw
-        channels[channel_id] = topic
-        has_raw = has_raw or topic == RAW_TOPIC
-
     try:
-        for channel_id, log_time, data in iter_messages(stream, on_channel):
-            topic = channels.get(channel_id)
-            if topic is None:
-                continue
-            if has_raw and topic != RAW_TOPIC:
-                continue
-            try:
-                raw = raw_from_record(topic, data, log_time)
-            except _Truncated:
-                truncated += 1
-                continue
-            if raw is not None:
-                yield log_time, raw
+        for record in StreamReader(stream, skip_magic=False).records:
+            if isinstance(record, Channel):
+                channels[record.id] = record.topic
+                has_raw = has_raw or record.topic == RAW_TOPIC
+            elif isinstance(record, Message):
+                topic = channels.get(record.channel_id)
+                if topic is None:
+                    continue
+                if has_raw and topic != RAW_TOPIC:
+                    continue
+                try:
+                    raw = raw_from_record(topic, record.data, record.log_time)
+                except _Truncated:
+                    truncated += 1
+                    continue
+                if raw is not None:
+                    yield record.log_time, raw
     except (McapError, EOFError, ValueError) as exc:
         # a truncated file ends in the middle of a record: what came before is good
         if "magic" in str(exc).lower() and not channels:
