@@ -9,14 +9,14 @@ Side by side in one run (project virtualenv):
   processes (127.0.0.1), started before the timing and warmed up with one replay per worker
   (imports and numba's cached kernels, which the serial process has loaded by then too).
 
-The recordings are the six bundled replays, twice each (``--copies``), with the daemon files
-their expectations name: 39 500 input messages per set, 0.5-2.5 s each. Each side runs
-``--repeat`` times, alternating; the best time of each gives the figure, throughput ratio =
-serial time / batch time (target >= 1.7 on 2 workers); the ratio of each run's pair and the
-machine's load average at its start are printed too (on a shared machine, other work takes
-cores from the workers), with the machine's own ceiling measured just before each run: the
-throughput of two CPU-bound Python processes against one (2.0 on two idle cores). The
-cluster's start-up is printed apart.
+The recordings are the bundled replays taken in turn until there are ``--count`` (12: the
+nine bundled ones and three again), with the daemon files their expectations name, 0.5-2.5 s
+each. Each side runs ``--repeat`` times, alternating; the best time of each gives the figure,
+throughput ratio = serial time / batch time (target >= 1.7 on 2 workers); the ratio of each
+run's pair and the machine's load average at its start are printed too (on a shared machine,
+other work takes cores from the workers), with the machine's own ceiling measured just before
+each run: the throughput of two CPU-bound Python processes against one (2.0 on two idle
+cores). The cluster's start-up is printed apart.
 
     .venv/bin/python benchmarks/bench_batch.py                    # 12 replays, 2 workers
     .venv/bin/python benchmarks/bench_batch.py --repeat 3 --json out.json
@@ -98,7 +98,8 @@ def batch(recordings: list[Path], out: Path, scheduler: str) -> tuple[float, flo
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--copies", type=int, default=2, help="copies of each bundled replay")
+    parser.add_argument("--count", type=int, default=12,
+                        help="recordings per side: the bundled replays in turn (default 12)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--json", type=Path, help="write the figures as JSON")
     args = parser.parse_args()
@@ -108,7 +109,7 @@ def main() -> None:
 
     from tdmon.replay.batch import BatchJob, replay_task
 
-    recordings = REPLAYS * args.copies
+    recordings = [REPLAYS[i % len(REPLAYS)] for i in range(args.count)]
     with tempfile.TemporaryDirectory(prefix="tdmon-bench-batch-") as tmp:
         root = Path(tmp)
         replay_task(BatchJob(REPLAYS[0], root / "warm.mcap"))  # imports and kernels, here

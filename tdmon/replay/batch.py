@@ -104,6 +104,14 @@ def _hole_sections(config: DaemonConfig) -> list[HoleSectionSpan]:
                             bottom=s.bottom) for i, s in enumerate(well.hole)]
 
 
+def _size(path: Path) -> int:
+    """The file's size [bytes], 0 when it cannot be read (its task reports why)."""
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
 def replay_task(job: BatchJob) -> RecordingOutcome:
     """Replay one recording (in a worker) and summarise it; never raises."""
     import asyncio
@@ -224,8 +232,11 @@ def run_batch(
     with _client(scheduler, workers, len(jobs)) as client:
         from distributed import as_completed
 
-        futures = client.map(replay_task, jobs, pure=False)
-        index = {future.key: i for i, future in enumerate(futures)}
+        # longest first (file size stands for replay time): the last task to start is a short
+        # one, so the workers finish together instead of one waiting on a long tail
+        order = sorted(range(len(jobs)), key=lambda i: -_size(jobs[i].recording))
+        futures = client.map(replay_task, [jobs[i] for i in order], pure=False)
+        index = {future.key: i for future, i in zip(futures, order, strict=True)}
         for future in as_completed(futures):
             i = index[future.key]
             try:
