@@ -17,7 +17,8 @@ field: klbf, kft lbf, ft, degF), the unit in the entity's name; the messages sta
 * ``hookload_kN/{measured,model/*,band/*}``, ``torque_kNm/{measured,model/rotating}``,
   ``residual/*``: scalars on ``time``; the same under ``vs_depth/`` on ``bit_depth_cm``
   (field: ``hookload_klbf``, ``torque_kftlbf``, ``bit_depth_in``).
-* ``friction/<operation>``: window estimates of mu; ``friction_mu_T/<param>``.
+* ``friction/<operation>``: window estimates of mu; ``friction/joint`` and ``weight_factor``:
+  the joint estimate of friction and string weight; ``friction_mu_T/<param>``.
 * ``rig_state``: state changes (state timeline view); ``bit_depth_m`` (``bit_depth_ft``).
 * ``profile/friction``, ``profile/temperature_C`` (``_F``): bar charts against MD; friction
   only in the bins the windows informed, ``profile/note`` (text) says why the others are out.
@@ -358,6 +359,10 @@ class RerunViews:
         elif kind == EstimateKind.MU_T:
             for name, value in (message.get("params") or {}).items():
                 self._scalar(f"friction_mu_T/{name}", TIME, t_ns, _finite(value))
+        elif kind == EstimateKind.JOINT:
+            # friction with the string weight estimated beside it (docs/back-calculation.md)
+            self._scalar("friction/joint", TIME, t_ns, _finite(message.get("mu")))
+            self._scalar("weight_factor", TIME, t_ns, _finite(message.get("weight_factor")))
 
     def _on_profile(self, t_ns: int, message: Message) -> None:
         md = message["md_m"]
@@ -524,6 +529,8 @@ def blueprint(units: UnitSystem | None = None) -> Any:
         ),
         rrb.Horizontal(
             rrb.TimeSeriesView(origin="/friction", name="Friction factor per operation"),
+            rrb.TimeSeriesView(origin="/weight_factor",
+                               name="String weight factor (joint estimate, 1 = as modelled)"),
             rrb.TimeSeriesView(origin="/residual", name=f"Residuals [{force}, {torque}]"),
         ),
         rrb.StateTimelineView(origin="/rig_state", name="Rig state"),

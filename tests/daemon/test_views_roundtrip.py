@@ -165,6 +165,10 @@ def test_rrd_holds_what_the_daemon_logged(run: Run) -> None:
     windows = run.estimates("window")
     for operation, count in Counter(w["operation"] for w in windows).items():
         assert rows[f"/friction/{operation}"] == count, operation
+    joint = run.estimates("joint")
+    assert rows["/friction/joint"] == rows["/weight_factor"] == len(joint) > 0
+    joint = run.estimates("joint")
+    assert rows["/friction/joint"] == rows["/weight_factor"] == len(joint) > 0
     mu_t = run.estimates("mu_T")
     assert rows["/friction_mu_T/a"] == rows["/friction_mu_T/b"] == len(mu_t)
     assert rows["/alarms"] == len(run.by_topic["/tdmon/alarm"])
