@@ -289,6 +289,21 @@ class QueuesConfig(_Model):
     max_payload_bytes: int = Field(default=4096, ge=16)
 
 
+def _unix_time(value: Any, name: str, example: str) -> Any:
+    """A rig time from a TOML datetime, date, ISO string or Unix seconds [s since 1970, UTC];
+    anything else is left to the field's own check. ``name`` and ``example`` word the error."""
+    if isinstance(value, datetime):
+        return (value if value.tzinfo else value.replace(tzinfo=UTC)).timestamp()
+    if isinstance(value, date):
+        return datetime(value.year, value.month, value.day, tzinfo=UTC).timestamp()
+    if isinstance(value, str | int | float) and not isinstance(value, bool):
+        seconds = parse_time(value)
+        if isinstance(seconds, str):
+            raise ValueError(seconds.replace("'t'", name) + f" (give e.g. \"{example}\")")
+        return seconds
+    return value
+
+
 class AlignConfig(_Model):
     stale_timeout: Seconds = Field(default=5.0, gt=0, description="older channels are left out")
     max_wait: Seconds = Field(
@@ -312,18 +327,7 @@ class AlignConfig(_Model):
     @field_validator("earliest_time", mode="before")
     @classmethod
     def _earliest(cls, value: Any) -> Any:
-        if isinstance(value, datetime):
-            value = value if value.tzinfo else value.replace(tzinfo=UTC)
-            return value.timestamp()
-        if isinstance(value, date):
-            return datetime(value.year, value.month, value.day, tzinfo=UTC).timestamp()
-        if isinstance(value, str | int | float) and not isinstance(value, bool):
-            seconds = parse_time(value)
-            if isinstance(seconds, str):
-                raise ValueError(seconds.replace("'t'", "the time") +
-                                 " (give e.g. \"2000-01-01\")")
-            return seconds
-        return value
+        return _unix_time(value, "the time", "2000-01-01")
 
 
 class RigStateConfig(_Model):
@@ -405,15 +409,7 @@ class RunConfig(_Model):
     @field_validator("start", mode="before")
     @classmethod
     def _start(cls, value: Any) -> Any:
-        if isinstance(value, datetime):
-            return (value if value.tzinfo else value.replace(tzinfo=UTC)).timestamp()
-        if isinstance(value, str | int | float) and not isinstance(value, bool):
-            seconds = parse_time(value)
-            if isinstance(seconds, str):
-                raise ValueError(seconds.replace("'t'", "start") +
-                                 " (give e.g. \"2024-03-05T12:10:00Z\")")
-            return seconds
-        return value
+        return _unix_time(value, "start", "2024-03-05T12:10:00Z")
 
 
 #: The sections a rig of a fleet daemon may set for itself (``[[rigs]]``); the keys it sets

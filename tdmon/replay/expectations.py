@@ -316,8 +316,8 @@ def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
     return Check(name, passed, measured, " and ".join(expected), "; ".join(parts))
 
 
-def _truth_at(series: Sequence[tuple[float, float]], t: float) -> float | None:
-    """The truth series' value nearest after ``t`` (None: no series)."""
+def _truth_at(series: Sequence[tuple[float, float | None]], t: float) -> float | None:
+    """The truth series' value nearest after ``t`` (None: no series, or no value there)."""
     if not series:
         return None
     index = min(bisect.bisect_left([s[0] for s in series], t), len(series) - 1)
@@ -355,15 +355,13 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:
                    spec.weight_difference_kN)
         else:
             problems.append("no weight difference")
-    truth_mu: list[Any] = [m.get("mu_pick_up") for m in data.truth_friction]
-    truth_t = [float(m["t"]) for m in data.truth_friction]
     if spec.mu_truth_abs is not None:
+        truth_mu = [(float(m["t"]), m.get("mu_pick_up")) for m in data.truth_friction]
         errors = []
         for e in estimates:
-            if truth_t:
-                index = min(bisect.bisect_left(truth_t, float(e["t"])), len(truth_t) - 1)
-                if truth_mu[index] is not None:
-                    errors.append(abs(float(e["mu"]) - float(truth_mu[index])))
+            truth = _truth_at(truth_mu, float(e["t"]))
+            if truth is not None:
+                errors.append(abs(float(e["mu"]) - float(truth)))
         expected.append(f"median |mu - truth| <= {spec.mu_truth_abs}")
         if not errors:
             problems.append("no friction truth")
