@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import logging
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -323,10 +323,13 @@ class FleetPipeline:
 async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
                       stop_when_sources_done: bool | None = None,
                       extra_rig_sinks: Callable[[str], list[Sink]] | None = None,
+                      extra_sinks: Sequence[Sink] = (),
                       ) -> AsyncIterator[Built]:
     """Create the daemon of a fleet file (``config.is_fleet``); sessions close on exit.
 
-    ``extra_rig_sinks(prefix)`` adds sinks to each rig (tests). ``Built.pipeline`` is the
+    ``extra_rig_sinks(prefix)`` adds sinks to each rig (tests); ``extra_sinks`` receive every
+    rig's messages (as for ``build_daemon``, e.g. the command line's status line; each rig
+    closes them, so their ``close`` must bear being called again). ``Built.pipeline`` is the
     :class:`FleetPipeline`; its ``rigs`` hold each rig's own pipeline.
     """
     from tdmon.ingest.mqtt import MqttPublisher
@@ -385,6 +388,7 @@ async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
                 sinks.append(recorder)
             if extra_rig_sinks is not None:
                 sinks.extend(extra_rig_sinks(prefix))
+            sinks.extend(extra_sinks)
             if zenoh_session is not None:
                 sinks.append(ZenohPublisher(zenoh_session, prefix, names))
             if mqtt_shared is not None:

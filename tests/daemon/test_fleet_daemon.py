@@ -8,14 +8,14 @@ import json
 import shutil
 import time
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import aiomqtt
 import pytest
 import zenoh
-from daemon_support import FAST_BACKOFF, WELL_FILE, payload, wait_until
+from daemon_support import FAST_BACKOFF, WELL_FILE, CollectSink, payload, wait_until
 
 from tdmon.config.daemon import DaemonConfig, parse_daemon_config
 from tdmon.config.well import load_well_model
@@ -122,8 +122,8 @@ def _recorded(folder: Path) -> dict[str, list[dict[str, Any]]]:
 
 
 async def _run_fleet(config: DaemonConfig, publish: Callable[[], Any],
-                     done: Callable[[], bool]) -> FleetPipeline:
-    async with build_fleet(config, backoff=FAST_BACKOFF) as built:
+                     done: Callable[[], bool], extra_sinks: Sequence[Any] = ()) -> FleetPipeline:
+    async with build_fleet(config, backoff=FAST_BACKOFF, extra_sinks=extra_sinks) as built:
         stop = asyncio.Event()
         task = asyncio.create_task(built.daemon.run(stop))
         try:
@@ -205,11 +205,16 @@ async def test_three_rigs_over_zenoh(tmp_path: Path, free_tcp_port: Callable[[],
         subscriber = rigs.declare_subscriber(
             "rig/*/tdmon/**",
             lambda s: results[str(s.key_expr)].append(json.loads(s.payload.to_bytes())))
-        fleet = await _run_fleet(config, publish, done)
+        # a sink every rig writes to, as `tdmon run` passes its status line
+        shared = CollectSink()
+        fleet = await _run_fleet(config, publish, done, extra_sinks=[shared])
         subscriber.undeclare()
     finally:
         rigs.close()
     _check_three_rigs(fleet, results, sequences, tmp_path)
+    # every rig's model frames, as each rig recorded them
+    assert len(shared["model"]) == sum(
+        len(_recorded(tmp_path / "rec" / p.replace("/", "_"))["/tdmon/model"]) for p in RIGS)
 
 
 async def test_three_rigs_over_mqtt(mosquitto: Any, tmp_path: Path) -> None:
