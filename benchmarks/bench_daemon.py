@@ -103,8 +103,36 @@ class Broker:
         self.process.wait(10)
 
 
-class Daemon:
-    """``tdmon run`` in a subprocess, with its RSS readable from /proc."""
+class DaemonProcess:
+    """``tdmon run`` on a daemon file in a subprocess, with its RSS readable from /proc."""
+
+    stop_timeout = 60.0  # [s]
+
+    def _start(self, config: Path, log: Path) -> None:
+        self.log = log
+        self.stream = log.open("w")
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "tdmon", "run", "--config", str(config),
+             "--log-level", "warning"], stderr=self.stream, cwd=ROOT)
+
+    def rss_mb(self) -> float:
+        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def stop(self) -> str:
+        self.process.send_signal(signal.SIGTERM)
+        code = self.process.wait(self.stop_timeout)
+        self.stream.close()
+        text = self.log.read_text()
+        if code != 0:
+            raise RuntimeError(f"daemon exited {code}: {text}")
+        return text
+
+
+class Daemon(DaemonProcess):
+    """The benchmark's one-rig daemon."""
 
     def __init__(self, folder: Path, transport: str, port: int, recorder: bool) -> None:
         if transport == "mqtt":
@@ -123,27 +151,8 @@ class Daemon:
                           # the channel map: the first frame waits for all eight channels
                           + "".join(f"[channels.{c}]\n" for c in CHANNELS)
                           + '[monitor]\nmethod = "aadnoy"\n' + recording)
-        self.log = folder / f"daemon-{transport}.log"
-        self.stream = self.log.open("w")
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "tdmon", "run", "--config", str(config),
-             "--log-level", "warning"], stderr=self.stream, cwd=ROOT)
+        self._start(config, folder / f"daemon-{transport}.log")
         time.sleep(0.2)
-
-    def rss_mb(self) -> float:
-        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-        return float("nan")
-
-    def stop(self) -> str:
-        self.process.send_signal(signal.SIGTERM)
-        code = self.process.wait(60)
-        self.stream.close()
-        text = self.log.read_text()
-        if code != 0:
-            raise RuntimeError(f"daemon exited {code}: {text}")
-        return text
 
 
 class Rig:

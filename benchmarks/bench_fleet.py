@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench_daemon import Broker, free_port
+from bench_daemon import Broker, DaemonProcess, free_port
 
 #: A rig sent before the measured ones until the centre hears from it: the daemon is then
 #: subscribed (a message sent before that would be lost with a clean MQTT session)
@@ -84,13 +84,13 @@ class FleetBroker(Broker):
                 time.sleep(0.05)
 
 
-class FleetDaemon:
-    """``tdmon run`` on a fleet file in a subprocess, with its RSS readable from /proc."""
+class FleetDaemon(DaemonProcess):
+    """``tdmon run`` on a fleet file."""
+
+    stop_timeout = 120.0  # [s]: 50 rigs flush their recordings
 
     def __init__(self, folder: Path, transport: str, port: int, rigs: int,
                  record: bool = True) -> None:
-        import subprocess
-
         wells = folder / "wells"
         wells.mkdir()
         for n in range(rigs):
@@ -111,28 +111,7 @@ class FleetDaemon:
             '[align]\nstale_timeout = "5 s"\n'
             '[calibration]\nenabled = true\n'
             + "".join(f'[channels.{c}]\nunit = "{u}"\n' for c, u in CHANNELS.items()))
-        self.log = folder / f"fleet-{transport}.log"
-        self.stream = self.log.open("w")
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "tdmon", "run", "--config", str(config),
-             "--log-level", "warning"], stderr=self.stream, cwd=ROOT)
-
-    def rss_mb(self) -> float:
-        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-        return float("nan")
-
-    def stop(self) -> str:
-        import signal
-
-        self.process.send_signal(signal.SIGTERM)
-        code = self.process.wait(120)
-        self.stream.close()
-        text = self.log.read_text()
-        if code != 0:
-            raise RuntimeError(f"fleet daemon exited {code}: {text}")
-        return text
+        self._start(config, folder / f"fleet-{transport}.log")
 
 
 class Centre:
