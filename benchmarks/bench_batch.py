@@ -105,18 +105,16 @@ def main() -> None:
     args = parser.parse_args()
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the CLI does, before numpy
 
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    from tdmon.replay.batch import BatchJob, replay_task
+    from tdmon.replay.batch import BatchJob, local_cluster, replay_task
 
     recordings = [REPLAYS[i % len(REPLAYS)] for i in range(args.count)]
     with tempfile.TemporaryDirectory(prefix="tdmon-bench-batch-") as tmp:
         root = Path(tmp)
         replay_task(BatchJob(REPLAYS[0], root / "warm.mcap"))  # imports and kernels, here
         started = time.perf_counter()
-        with (LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster,
-              Client(cluster) as client):
+        with local_cluster(args.workers) as cluster, Client(cluster) as client:
             startup = time.perf_counter() - started
             workers = list(client.scheduler_info()["workers"])
             warm = [client.submit(replay_task, BatchJob(REPLAYS[0], root / f"warm-{i}.mcap"),

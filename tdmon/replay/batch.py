@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
 
 __all__ = ["WORKER_BLAS_THREADS", "BatchJob", "BatchResult", "RecordingOutcome", "blas_capped",
-           "output_names", "replay_task", "run_batch"]
+           "local_cluster", "output_names", "replay_task", "run_batch"]
 
 #: BLAS threads per worker task. The replay's linear algebra is small matrices where extra
 #: threads only contend with the other workers for the cores (the reason the CLI sets one
@@ -162,7 +162,7 @@ def output_names(recordings: Sequence[Path]) -> list[str]:
 @contextmanager
 def _client(scheduler: str | None, workers: int | None, jobs: int) -> Iterator[Any]:
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
     except ImportError as exc:
         raise TdmonError("tdmon batch needs Dask distributed: pip install 'tdmon[batch]'") \
             from exc
@@ -178,12 +178,40 @@ def _client(scheduler: str | None, workers: int | None, jobs: int) -> Iterator[A
     count = workers if workers is not None else min(jobs, os.cpu_count() or 1)
     if count < 1:
         raise ConfigError("--workers", "", f"{count} workers: give at least 1")
-    # processes: the replay holds the GIL. Everything on loopback: the scheduler's HTTP
-    # server too (its default, ':8787', listens on every interface)
-    with (LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                       host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster,
-          Client(cluster) as client):
+    with local_cluster(count) as cluster, Client(cluster) as client:
         yield client
+
+
+#: Environment variables the Dask nanny sets in its workers by default that the batch's own
+#: cluster leaves out. ``MALLOC_TRIM_THRESHOLD_=65536`` fixes glibc's thresholds, so that every
+#: numpy array above 128 KiB is mmapped and unmapped afresh: a replay then took about 1.3 x the
+#: CPU time it takes in a plain process (docs/replays.md, "Speed").
+_WORKER_ENVIRON_DROPPED = ("MALLOC_TRIM_THRESHOLD_",)
+
+
+@contextmanager
+def local_cluster(workers: int) -> Iterator[Any]:
+    """A Dask ``LocalCluster`` of ``workers`` processes for replays: one thread each (a replay
+    holds the GIL), everything on 127.0.0.1 (the scheduler's HTTP server too: its default,
+    ':8787', listens on every interface), and glibc's malloc left to tune itself."""
+    import dask
+    from distributed import LocalCluster
+
+    # the nanny runs in this process and writes its variables into os.environ before it
+    # spawns a worker (a worker inherits them): unset them in its configuration (None) and
+    # keep them out of os.environ while the cluster lives, then put back what was there
+    saved = {key: os.environ.pop(key) for key in _WORKER_ENVIRON_DROPPED if key in os.environ}
+    unset = {f"distributed.nanny.pre-spawn-environ.{key}": None
+             for key in _WORKER_ENVIRON_DROPPED}
+    try:
+        with (dask.config.set(unset),
+              LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster):
+            yield cluster
+    finally:
+        for key in _WORKER_ENVIRON_DROPPED:
+            os.environ.pop(key, None)
+        os.environ.update(saved)
 
 
 def run_batch(

@@ -139,3 +139,31 @@ def test_the_cap_holds_for_a_blas_the_replay_loads_later() -> None:
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          check=True, timeout=120)
     assert out.stdout.split() == ["1"], out.stderr
+
+
+def _worker_environ() -> dict[str, str | None]:
+    import os
+
+    return {key: os.environ.get(key) for key in ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")}
+
+
+def test_the_local_cluster_leaves_glibc_malloc_to_tune_itself() -> None:
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers by default (and in this
+    process's environment, which the workers inherit: the module's cluster above has left it
+    here), which made each replay cost about 1.3 x its CPU time in a plain process; the batch's
+    own cluster leaves it out, keeps the nanny's other settings (one OpenMP thread) and puts
+    back this process's environment."""
+    import os
+
+    import dask
+    from distributed import Client
+
+    from tdmon.replay.batch import local_cluster
+
+    assert "MALLOC_TRIM_THRESHOLD_" in dask.config.get("distributed.nanny.pre-spawn-environ")
+    before = os.environ.get("MALLOC_TRIM_THRESHOLD_")
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        (environ,) = client.run(_worker_environ).values()
+    assert environ == {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}
+    assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == before
+    assert "MALLOC_TRIM_THRESHOLD_" in dask.config.get("distributed.nanny.pre-spawn-environ")
