@@ -16,7 +16,10 @@ throughput ratio = serial time / batch time (target >= 1.7 on 2 workers); the ra
 run's pair and the machine's load average at its start are printed too (on a shared machine,
 other work takes cores from the workers), with the machine's own ceiling measured just before
 each run: the throughput of two CPU-bound Python processes against one (2.0 on two idle
-cores). The cluster's start-up is printed apart.
+cores). The cluster's start-up is printed apart, and one replay's CPU time in this process
+against on a worker (the same where the workers' environment is right; Dask's default
+MALLOC_TRIM_THRESHOLD_ made it about 1.35 x: ``--dask-default-environ`` runs the whole
+benchmark on such workers for comparison).
 
     .venv/bin/python benchmarks/bench_batch.py                    # 12 replays, 2 workers
     .venv/bin/python benchmarks/bench_batch.py --repeat 3 --json out.json
@@ -30,7 +33,13 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tdmon.replay.batch import BatchJob
 
 REPO = Path(__file__).resolve().parents[1]
 REPLAYS = sorted((REPO / "replays").glob("*.mcap"))
@@ -95,6 +104,27 @@ def batch(recordings: list[Path], out: Path, scheduler: str) -> tuple[float, flo
     return elapsed, max(per_worker.values())
 
 
+def replay_cpu(job: BatchJob) -> float:
+    """CPU time [s] of this thread for one replay: where it runs (this process or a worker)
+    must not change it, whatever else the machine does."""
+    from tdmon.replay.batch import replay_task
+
+    started = time.thread_time()
+    replay_task(job)
+    return time.thread_time() - started
+
+
+@contextmanager
+def dask_default_cluster(workers: int) -> Iterator[Any]:
+    """Dask's LocalCluster as configured by default (the nanny's MALLOC_TRIM_THRESHOLD_ kept),
+    for --dask-default-environ."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster:
+        yield cluster
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, default=2)
@@ -102,6 +132,9 @@ def main() -> None:
                         help="recordings per side: the bundled replays in turn (default 12)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--json", type=Path, help="write the figures as JSON")
+    parser.add_argument("--dask-default-environ", action="store_true",
+                        help="workers with Dask's default environment (MALLOC_TRIM_THRESHOLD_="
+                             "65536), as before tdmon's local_cluster left it out")
     args = parser.parse_args()
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the CLI does, before numpy
 
@@ -114,13 +147,24 @@ def main() -> None:
         root = Path(tmp)
         replay_task(BatchJob(REPLAYS[0], root / "warm.mcap"))  # imports and kernels, here
         started = time.perf_counter()
-        with local_cluster(args.workers) as cluster, Client(cluster) as client:
+        make_cluster = dask_default_cluster if args.dask_default_environ else local_cluster
+        with make_cluster(args.workers) as cluster, Client(cluster) as client:
             startup = time.perf_counter() - started
             workers = list(client.scheduler_info()["workers"])
             warm = [client.submit(replay_task, BatchJob(REPLAYS[0], root / f"warm-{i}.mcap"),
                                   workers=[address], pure=False)
                     for i, address in enumerate(workers)]
             client.gather(warm)
+            cpu_here, cpu_worker = [], []
+            longest = REPO / "replays" / "model-error-density.mcap"
+            for i in range(3):  # one replay's CPU time here and on a worker, interleaved
+                cpu_here.append(replay_cpu(BatchJob(longest, root / f"cpu-here-{i}.mcap")))
+                cpu_worker.append(client.submit(
+                    replay_cpu, BatchJob(longest, root / f"cpu-worker-{i}.mcap"),
+                    workers=[workers[0]], pure=False).result())
+            print(f"{longest.name}: CPU time, best of 3: {min(cpu_here):.3f} s in this process, "
+                  f"{min(cpu_worker):.3f} s on a worker (x{min(cpu_worker) / min(cpu_here):.2f})",
+                  flush=True)
             serial_times, batch_times, loads, ceilings, busiest = [], [], [], [], []
             for run in range(args.repeat):
                 loads.append(round(os.getloadavg()[0], 1))
@@ -140,6 +184,9 @@ def main() -> None:
         "serial_s": round(best_serial, 3), "batch_s": round(best_batch, 3),
         "throughput_ratio": round(best_serial / best_batch, 2),
         "cluster_startup_s": round(startup, 2),
+        "dask_default_environ": args.dask_default_environ,
+        "replay_cpu_here_s": round(min(cpu_here), 3),
+        "replay_cpu_worker_s": round(min(cpu_worker), 3),
         "serial_runs_s": [round(t, 2) for t in serial_times],
         "batch_runs_s": [round(t, 2) for t in batch_times],
         "paired_ratios": [round(a / b, 2) for a, b in zip(serial_times, batch_times,
