@@ -8,8 +8,9 @@ Two measurements, one process (project virtualenv):
    back-calculation and alarms all do their work) is replayed with
    ``tdmon.replay.driver.replay`` at full speed (decode, record raw input and samples, align,
    rig state, monitor, calibration, alarms, MCAP recorder in single-file mode; the recorder runs
-   in a child process, as ``tdmon replay`` does, and the same replay with the recorder in the
-   replaying process, ``--recorder inline``, is printed beside it, with CPU times). Side by side,
+   in a child process, as ``tdmon replay --recorder process`` does, and the same replay with
+   the recorder in the replaying process, as ``tdmon replay`` does by default, is printed
+   beside it, with CPU times: the child's counted for the first). Side by side,
    the *bare* path reads the same ``/tdmon/raw`` messages with the ``mcap`` package's
    ``StreamReader``, decodes each with ``json.loads`` (the recorded message and its payload)
    and writes it to an MCAP file with mcap's ``Writer`` (zstd chunks, as the recorder): pure
@@ -387,7 +388,8 @@ def main(argv: list[str] | None = None) -> int:
         results["ratio"] = ratio(args.hours, args.repeat, folder)
         r = results["ratio"]
         print(f"| rig time | messages | bare read+decode+write | pipeline, recorder in a child "
-              f"process (the default) | ratio | pipeline, recorder in-process | ratio |\n"
+              f"process (--recorder process) | ratio | pipeline, recorder in-process (the default) "
+              f"| ratio |\n"
               f"|---|---|---|---|---|---|---|\n"
               f"| {r['hours']:g} h | {r['messages']} | {r['bare_s']} s ({r['bare_rate']} msg/s) "
               f"| {r['pipeline_s']} s ({r['pipeline_rate']} msg/s) | {r['ratio']} "
