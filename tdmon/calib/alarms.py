@@ -313,6 +313,9 @@ _FROZEN_KIND = {"hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
                 "torque": AlarmKind.SENSOR_TORQUE_FROZEN}
 
 
+_NONE: frozenset[str] = frozenset()
+
+
 @dataclass(frozen=True)
 class SensorState:
     """Channels reported stale, those named by a gap's alarm and not heard from since, the last
@@ -380,14 +383,16 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     daemon raises it while the silence lasts (``Aligner.silence``) and passes ``gap_reported``.
     """
     alarms: list[Alarm] = []
-    new_stale = frozenset(stale)
+    # once per frame: the sets are built only when a channel is stale or was announced
+    new_stale = frozenset(stale) if stale else _NONE
     announced = state.announced
     if gap:
         if not gap_reported:
             alarms.append(stale_gap_alarm(gap, t))
         announced = announced | frozenset(channel for channel, _ in gap)
-    announced = announced - frozenset(values)  # heard from again
-    started = new_stale - state.stale - announced
+    if announced:
+        announced = announced - frozenset(values)  # heard from again
+    started = new_stale - state.stale - announced if new_stale else _NONE
     if started:
         for channel in sorted(started):
             alarms.append(Alarm(t, AlarmKind.SENSOR_STALE, Severity.WARNING,

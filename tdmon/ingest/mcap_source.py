@@ -17,16 +17,18 @@ import binascii
 import json
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import IO
 
 import orjson
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Message
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, McapRecord, Message
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.summary import Summary
 
 from tdmon.errors import IngestError
 from tdmon.ingest.types import RawMessage
@@ -74,28 +76,70 @@ def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMes
     return RawMessage("mcap", channel_topic.lstrip("/"), bytes(data), log_time_ns / 1e9)
 
 
-def _summary_has_raw(stream: IO[bytes]) -> bool:
-    """Whether a finished file has a ``/tdmon/raw`` channel (from its summary; False when it
-    has none, e.g. a footer-less file). A channel's record comes with its first message, so
-    other topics (``/truth/...``, ``/reference/...``) may come before it in file order."""
+def _summary(stream: IO[bytes]) -> Summary | None:
+    """A finished file's summary (None without one, e.g. a footer-less file)."""
     start = stream.tell()
     try:
-        summary = make_reader(stream).get_summary()
+        return make_reader(stream).get_summary()
     except Exception:  # no footer or summary (a killed writer): decided while reading
-        return False
+        return None
     finally:
         stream.seek(start)
-    return summary is not None and any(
-        channel.topic == RAW_TOPIC for channel in summary.channels.values())
+
+
+def _all_in_indexed_chunks(summary: Summary) -> bool:
+    """Whether every message of the file sits in a chunk its summary indexes.
+
+    The chunk indexes give each chunk's message-index records' total length; each such record
+    is 15 bytes of opcode, length, channel id and entry length, then 16 bytes per message, so
+    the chunks hold (length - 15 x channels) / 16 messages. Equal to the statistics' count:
+    no message lies outside the chunks (an unchunked writer), none is left without an index.
+    """
+    statistics = summary.statistics
+    if statistics is None or not summary.chunk_indexes:
+        return False
+    indexed = 0
+    for index in summary.chunk_indexes:
+        entries, rest = divmod(index.message_index_length - 15 * len(index.message_index_offsets),
+                               16)
+        if rest or entries < 0:
+            return False
+        indexed += entries
+    return indexed == statistics.message_count
+
+
+def _indexed_records(stream: IO[bytes], summary: Summary) -> Iterator[McapRecord]:
+    """The records of each chunk, chunk by chunk in file order (the summary's channels first).
+
+    The ``mcap`` package's own chunk parsing (``Chunk.read``, ``breakup_chunk``), reached
+    through the summary's chunk indexes as its seeking reader does, but in file order and one
+    chunk at a time (that reader's file-order mode decodes every chunk before the first
+    message). It skips the message-index records after each chunk, which the stream reader
+    parses entry by entry in Python: a third less time reading a replay.
+    """
+    yield from summary.channels.values()
+    for index in sorted(summary.chunk_indexes, key=lambda chunk: chunk.chunk_start_offset):
+        stream.seek(index.chunk_start_offset + 1 + 8)  # past the opcode and record length
+        yield from breakup_chunk(Chunk.read(ReadDataStream(stream)))
 
 
 def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
     """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those."""
     channels: dict[int, str] = {}
-    has_raw = _summary_has_raw(stream)
+    summary = _summary(stream)
+    has_raw = summary is not None and any(
+        channel.topic == RAW_TOPIC for channel in summary.channels.values())
+    records: Iterable[McapRecord]
+    if summary is not None and _all_in_indexed_chunks(summary):
+        records = _indexed_records(stream, summary)
+    else:
+        # no summary (a killed writer) or messages outside indexed chunks: every record in
+        # turn; a channel's record comes with its first message, so other topics
+        # (``/truth/...``) may come before the first /tdmon/raw one
+        records = StreamReader(stream, skip_magic=False).records
     truncated = 0
     try:
-        for record in StreamReader(stream, skip_magic=False).records:
+        for record in records:
             if isinstance(record, Channel):
                 channels[record.id] = record.topic
                 has_raw = has_raw or record.topic == RAW_TOPIC

@@ -131,9 +131,9 @@ _PLAIN: Final = (str, int, bool, type(None))
 def _has_nonfinite(message: Any) -> bool:
     """Whether a NaN or an infinity is somewhere in ``message``.
 
-    Walks plain dicts, lists, tuples and floats (the daemon's messages; a model message with a
-    null took ~5x longer through the json module, which formats every float in Python when it
-    refuses NaN); anything else (numpy values, other types) is left to :func:`_refused_by_json`.
+    Walks plain dicts, lists, tuples, floats and strings (the daemon's messages; a model
+    message with a null took ~5x longer through the json module); anything else (numpy values,
+    other types) is left to :func:`_refused_by_json`, which encodes the whole message again.
     """
     stack = [message]
     pop, many = stack.pop, stack.extend
@@ -146,8 +146,21 @@ def _has_nonfinite(message: Any) -> bool:
         elif kind is dict:
             many(item.values())
         elif kind is list or kind is tuple:
-            many(item)
-        elif kind not in _PLAIN:
+            if len(item) < 16:
+                many(item)
+                continue
+            # a long list of plain numbers (a profile's bins) in one C loop: a finite float
+            # sum means every element is finite; a NaN or an infinity makes it non-finite,
+            # and so may an overflow, hence the walk then, as for anything else
+            try:
+                total = sum(item, 0.0)
+            except (TypeError, OverflowError):
+                many(item)
+                continue
+            if type(total) is not float or total - total != 0.0:
+                many(item)
+        elif kind not in _PLAIN and not isinstance(item, (str, int)):
+            # str and int subclasses (the vocabulary's enums, bool) are never non-finite
             return _refused_by_json(message)
     return False
 

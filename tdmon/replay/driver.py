@@ -273,7 +273,7 @@ async def replay(
     speed: float | None = None,
     progress: Callable[[int], None] | None = None,
     extra_sinks: Sequence[Sink] = (),
-    separate_writer: bool = True,
+    separate_writer: bool = False,
 ) -> ReplayResult:
     """Run ``path`` through the daemon built from ``config``; record everything to ``out``.
 
@@ -286,11 +286,11 @@ async def replay(
     speed : real time x ``speed``; None: as fast as the pipeline goes (deterministic)
     progress : called with the number of input messages handled since the last call
     extra_sinks : more sinks (tests)
-    separate_writer : record from a child process (default;
-        :class:`~tdmon.record.writer_process.RecorderProcess`: encoding and writing on a
-        second core, which still pays when one is free); False: in this process
-        (:class:`McapRecorder`: less CPU in all, for replays run side by side on every core;
-        docs/replays.md has the figures)
+    separate_writer : record from a child process
+        (:class:`~tdmon.record.writer_process.RecorderProcess`: encoding and writing on a
+        second core; at most ~5 % faster on a long session when a core is idle, ~25 % more
+        CPU in all, and slower on a short replay, which pays the child's start-up); False (the
+        default): in this process (:class:`McapRecorder`; figures in docs/benchmarks.md)
 
     Raises
     ------

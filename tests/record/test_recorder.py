@@ -195,3 +195,21 @@ def test_unfinished_file_is_refused_by_the_reader(tmp_path: Path) -> None:
     assert [m.log_time_ns for m in read_messages(path, allow_unfinished=True)] == [1]
     recorder.close()
     assert is_finished(path)
+
+
+def test_non_finite_walk_of_long_lists_and_enums() -> None:
+    from tdmon.record.mcap_recorder import _has_nonfinite
+    from tdmon.vocabulary import EstimateKind
+
+    profile = [0.1 * i for i in range(141)]
+    message = {"kind": EstimateKind.PROFILE, "mu_profile": profile,
+               "reason": ["none"] * 140 + [None], "flags": [True] * 141}
+    assert not _has_nonfinite(message)
+    for bad in (math.nan, math.inf, -math.inf):
+        assert _has_nonfinite({**message, "mu_profile": [*profile[:70], bad, *profile[70:]]})
+    # finite numbers whose sum overflows: walked one by one, nothing replaced
+    assert not _has_nonfinite({"big": [1e308] * 20, "ints": [10**400] * 20})
+    assert _has_nonfinite({"big": [1e308] * 20 + [math.nan]})
+    # a long list of numpy values: the json module decides
+    assert _has_nonfinite({"x": list(np.array([1.0] * 20 + [np.nan]))})
+    assert not _has_nonfinite({"x": list(np.array([1.0] * 21))})
