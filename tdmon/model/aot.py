@@ -9,9 +9,12 @@ The signatures are the types the model's callers pass (`tests/model/test_warmup.
 that the JIT compiles no other for the real calls). The module checks only each array's item
 size, not its dtype, layout or number of dimensions: callers pass exactly these
 (`tdmon.model.kernels.kernel_well` converts the well's arrays, `WellModel` its friction).
-The target is the architecture's generic processor, as numba's default for pycc: the file can
-be shared by machines of one architecture and gives the JIT's numbers (no fused multiply-add:
-numba does not allow the contraction either way).
+The target is this machine's processor, as for numba's JIT (the batched march of several
+friction cases runs about 12 % slower on the architecture's generic processor, pycc's default,
+docs/benchmarks.md), when `tdmon.model.kernels.processor` knows it: its model and features are
+part of the build's key, so another processor finds no build and runs the JIT. Where it is
+unknown the target is the generic one. Either way the numbers are the JIT's (numba allows no
+fused multiply-add contraction in either).
 """
 
 from __future__ import annotations
@@ -71,6 +74,7 @@ def build(destination: Path | None = None) -> tuple[Path, float]:
             compiler = CC(kernels.module_name())
             compiler.output_dir = scratch
             compiler.verbose = False
+            compiler.target_cpu = "host" if kernels.processor() else ""
             for name, signature in SIGNATURES.items():
                 compiler.export(name, signature)(getattr(_kernels, name).py_func)
             compiler.compile()

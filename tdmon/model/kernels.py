@@ -104,12 +104,35 @@ def _numba_version_text() -> bytes:
 
 
 @lru_cache(maxsize=1)
+def processor() -> bytes:
+    """The processor's vendor, model and feature flags (Linux's /proc/cpuinfo, first
+    processor), or empty where unknown: the ahead-of-time build uses the processor's own
+    instructions only when it is known (the key then holds it), as numba's JIT does."""
+    try:
+        with open("/proc/cpuinfo", "rb") as info:
+            head = info.read(32768)
+    except OSError:
+        return b""
+    wanted = (b"vendor_id", b"model name", b"flags", b"CPU implementer", b"CPU part",
+              b"Features")
+    found: dict[bytes, bytes] = {}
+    for line in head.splitlines():
+        name, _, value = line.partition(b":")
+        name = name.strip()
+        if name in wanted and name not in found:
+            found[name] = value.strip()
+    return b"\n".join(found[name] for name in wanted if name in found)
+
+
+@lru_cache(maxsize=1)
 def build_key() -> str:
     """Hex key of what the ahead-of-time module is built from: the kernels' source, numba's
-    and numpy's versions, the Python ABI and the platform (the extension suffix)."""
+    and numpy's versions, the Python ABI and the platform (the extension suffix), and the
+    processor (`processor`)."""
     digest = hashlib.sha256()
     for source in _SOURCES:
         digest.update(source.read_bytes())
+    digest.update(processor())
     digest.update(_numba_version_text())
     digest.update(np.__version__.encode())
     digest.update(sys.implementation.cache_tag.encode())
