@@ -9,12 +9,10 @@ The signatures are the types the model's callers pass (`tests/model/test_warmup.
 that the JIT compiles no other for the real calls). The module checks only each array's item
 size, not its dtype, layout or number of dimensions: callers pass exactly these
 (`tdmon.model.kernels.kernel_well` converts the well's arrays, `WellModel` its friction).
-The target is this machine's processor, as for numba's JIT (the batched march of several
-friction cases runs about 12 % slower on the architecture's generic processor, pycc's default,
-docs/benchmarks.md), when `tdmon.model.kernels.processor` knows it: its model and features are
-part of the build's key, so another processor finds no build and runs the JIT. Where it is
-unknown the target is the generic one. Either way the numbers are the JIT's (numba allows no
-fused multiply-add contraction in either).
+The target is the highest x86-64 level the processor has (`tdmon.model.kernels.target_cpu`,
+part of the build's key; the generic processor elsewhere): the batched march of several
+friction cases runs 12 % slower on the generic x86-64 than with AVX-512 (docs/benchmarks.md).
+Either way the numbers are the JIT's (numba allows no fused multiply-add contraction).
 """
 
 from __future__ import annotations
@@ -74,7 +72,7 @@ def build(destination: Path | None = None) -> tuple[Path, float]:
             compiler = CC(kernels.module_name())
             compiler.output_dir = scratch
             compiler.verbose = False
-            compiler.target_cpu = "host" if kernels.processor() else ""
+            compiler.target_cpu = kernels.target_cpu()
             for name, signature in SIGNATURES.items():
                 compiler.export(name, signature)(getattr(_kernels, name).py_func)
             compiler.compile()

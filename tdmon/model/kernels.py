@@ -103,36 +103,53 @@ def _numba_version_text() -> bytes:
         return spec.origin.encode()
 
 
+# the x86-64 micro-architecture levels, and the /proc/cpuinfo flags each needs beyond the last
+_X86_LEVELS = (
+    ("x86-64-v2", {"cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3"}),
+    ("x86-64-v3", {"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "movbe", "xsave", "abm"}),
+    ("x86-64-v4", {"avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl"}),
+)
+
+
 @lru_cache(maxsize=1)
-def processor() -> bytes:
-    """The processor's vendor, model and feature flags (Linux's /proc/cpuinfo, first
-    processor), or empty where unknown: the ahead-of-time build uses the processor's own
-    instructions only when it is known (the key then holds it), as numba's JIT does."""
+def target_cpu() -> str:
+    """The processor the ahead-of-time build targets: the highest x86-64 level this one has
+    (its flags in Linux's /proc/cpuinfo), or "" (the architecture's generic processor).
+
+    Not the processor's own model: numba's pycc with the model's tuning ran Aadnoy's march
+    a third slower here (AMD znver4), the level as fast as the JIT (docs/benchmarks.md). The
+    level is part of the build's key, so a processor without it finds no build.
+    """
+    if "x86_64" not in importlib.machinery.EXTENSION_SUFFIXES[0]:
+        return ""
     try:
         with open("/proc/cpuinfo", "rb") as info:
-            head = info.read(32768)
+            head = info.read(32768).decode("ascii", "replace")
     except OSError:
-        return b""
-    wanted = (b"vendor_id", b"model name", b"flags", b"CPU implementer", b"CPU part",
-              b"Features")
-    found: dict[bytes, bytes] = {}
+        return ""
+    flags: set[str] = set()
     for line in head.splitlines():
-        name, _, value = line.partition(b":")
-        name = name.strip()
-        if name in wanted and name not in found:
-            found[name] = value.strip()
-    return b"\n".join(found[name] for name in wanted if name in found)
+        name, _, value = line.partition(":")
+        if name.strip() == "flags":
+            flags = set(value.split())
+            break
+    level = ""
+    for name, needed in _X86_LEVELS:
+        if not needed <= flags:
+            break
+        level = name
+    return level
 
 
 @lru_cache(maxsize=1)
 def build_key() -> str:
     """Hex key of what the ahead-of-time module is built from: the kernels' source, numba's
     and numpy's versions, the Python ABI and the platform (the extension suffix), and the
-    processor (`processor`)."""
+    target processor (`target_cpu`)."""
     digest = hashlib.sha256()
     for source in _SOURCES:
         digest.update(source.read_bytes())
-    digest.update(processor())
+    digest.update(target_cpu().encode())
     digest.update(_numba_version_text())
     digest.update(np.__version__.encode())
     digest.update(sys.implementation.cache_tag.encode())
