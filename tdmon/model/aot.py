@@ -11,7 +11,8 @@ size, not its dtype, layout or number of dimensions: callers pass exactly these
 (`tdmon.model.kernels.kernel_well` converts the well's arrays, `WellModel` its friction).
 The target is the highest x86-64 level the processor has (`tdmon.model.kernels.target_cpu`,
 part of the build's key; the generic processor elsewhere): the batched march of several
-friction cases runs 12 % slower on the generic x86-64 than with AVX-512 (docs/benchmarks.md).
+friction cases runs about 9 % slower on the generic x86-64 than with AVX-512, and the
+processor's own model (pycc's "host") ran Aadnoy's march a third slower (docs/benchmarks.md).
 Either way the numbers are the JIT's (numba allows no fused multiply-add contraction).
 """
 

@@ -2,12 +2,13 @@
 
 The element loops live once, in `tdmon.model._kernels` (numba ``@njit``). `tdmon model warmup`
 compiles them ahead of time (`tdmon.model.aot`) into an extension module in the user's cache
-folder (``~/.cache/tdmon/kernels`` on Linux), named by a key of the kernels' source, numba's
-and numpy's versions and the Python ABI. `load` returns that module when it is there for the
-current key: then neither numba nor LLVM is imported, which saves about 0.4 s and 140 MB per
-process. Otherwise (not built yet, a changed source, no C compiler at set-up) it returns
-`tdmon.model._kernels` itself, compiled by numba on the first call and kept in numba's cache,
-and logs why at INFO. Both run the same functions and give the same numbers.
+folder (``~/.cache/tdmon/kernels`` on Linux), named by a key of the kernels' source, numba's and
+numpy's versions, the Python ABI and the processor level it targets. `load` returns that module
+when it is there for the current key: then neither numba nor LLVM is imported, which saves about
+120 MB and most of a second per process (docs/benchmarks.md). Otherwise (not built yet, a
+changed source, no C compiler at set-up) it returns `tdmon.model._kernels` itself, compiled by
+numba on the first call and kept in numba's cache, and logs why at INFO. Both run the same
+functions and give the same numbers.
 
 ``TDMON_KERNELS`` chooses: ``auto`` (the default, as above), ``jit`` (numba always) or ``aot``
 (the ahead-of-time module or an error). This module imports neither numba nor the kernels.
@@ -127,12 +128,16 @@ def target_cpu() -> str:
             head = info.read(32768).decode("ascii", "replace")
     except OSError:
         return ""
-    flags: set[str] = set()
     for line in head.splitlines():
         name, _, value = line.partition(":")
         if name.strip() == "flags":
-            flags = set(value.split())
-            break
+            return x86_level(set(value.split()))
+    return ""
+
+
+def x86_level(flags: set[str]) -> str:
+    """The highest x86-64 micro-architecture level whose flags (/proc/cpuinfo's names) are all
+    in ``flags``, or "" for the baseline x86-64."""
     level = ""
     for name, needed in _X86_LEVELS:
         if not needed <= flags:

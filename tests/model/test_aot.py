@@ -133,3 +133,15 @@ def test_warmup_without_a_compiler_uses_the_jit_with_a_note(
     kernels_env("aot")
     assert main(["model", "warmup"]) == 2  # asked for the ahead-of-time kernels: an error
     assert "TDMON_KERNELS=aot" in capsys.readouterr().err
+
+
+def test_the_processor_level_needs_every_flag_of_it_and_of_the_levels_below() -> None:
+    v2 = {"cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3"}
+    v3 = {"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "movbe", "xsave", "abm"}
+    v4 = {"avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl"}
+    assert kernels.x86_level({"fpu", "sse2"}) == ""
+    assert kernels.x86_level(v2) == "x86-64-v2"
+    assert kernels.x86_level(v2 | v3 | {"sha"}) == "x86-64-v3"
+    assert kernels.x86_level(v2 | v3 | v4) == "x86-64-v4"
+    assert kernels.x86_level((v2 | v3 | v4) - {"fma"}) == "x86-64-v2"  # no AVX2 level: no v4
+    assert kernels.x86_level(v3 | v4) == ""
