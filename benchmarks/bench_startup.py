@@ -1,9 +1,11 @@
 """Start-up benchmark: commands in fresh processes, an idle daemon's memory, the first command
 after set-up, and the model's fixed cost per call (issue 15).
 
-Every command runs in a new interpreter, alternately with this tree and, given ``--baseline``,
-with another copy of tdmon (e.g. ``git archive main | tar -x -C /tmp/main``), so that both see
-the same load; the best of ``--repeat`` runs is kept. Project virtualenv, no peers:
+Every command runs in a new interpreter, alternately with this tree on its kernels compiled
+ahead of time (``this``, after ``tdmon model warmup``), this tree on numba's JIT
+(``this_jit``: ``TDMON_KERNELS=jit``, kernels in numba's cache) and, given ``--baseline``,
+another copy of tdmon (e.g. ``git archive main | tar -x -C /tmp/main``), so that all see the
+same load; the best of ``--repeat`` runs is kept. Project virtualenv, no peers:
 
     .venv/bin/python benchmarks/bench_startup.py [--baseline /tmp/main] [--repeat 5] \
         [--skip-cold] [--json out.json]
@@ -15,13 +17,15 @@ Parts (docs/benchmarks.md, "Start-up"):
 - ``tdmon run`` idle: a Zenoh peer on a free loopback port with nothing publishing, recorder
   on, Rerun off; resident memory (VmRSS) once it listens and has settled;
 - first command after set-up: the package copied to a new folder (a fresh clone: no numba
-  cache), ``tdmon model warmup`` timed as the set-up step, then the first ``model loads`` and
+  cache) with an empty user cache folder (``XDG_CACHE_HOME``: no ahead-of-time build, no pint
+  store), ``tdmon model warmup`` timed as the set-up step, then the first ``model loads`` and
   the first ``tdmon replay`` of ``replays/trip-out-tight-spot.mcap``, against the same
   commands in another fresh copy without the warm-up (``--skip-cold`` leaves these out);
-- in this process: ``WellModel.evaluate`` on 201 and 6000 elements, the fixed cost per call
-  (the 201-element time less 201 times the per-element slope, and directly: the bit in the
-  first element, one piece marched), and 8 friction cases marched
-  together (``evaluate_cases``) against one ``evaluate`` per case.
+- in this process, with the ahead-of-time kernels and then with numba's JIT:
+  ``WellModel.evaluate`` on 201 and 6000 elements, the fixed cost per call (the 201-element
+  time less 201 times the per-element slope, and directly: the bit in the first element, one
+  piece marched), and 8 friction cases marched together (``evaluate_cases``) against one
+  ``evaluate`` per case.
 """
 
 from __future__ import annotations
@@ -62,15 +66,20 @@ def _wall(tree: Path, args: list[str], **extra: str) -> float:
     return time.perf_counter() - start
 
 
-def _best_commands(trees: dict[str, Path], repeat: int) -> dict[str, dict[str, float]]:
+#: A tree and the environment its commands run with.
+Variant = tuple[Path, dict[str, str]]
+
+
+def _best_commands(variants: dict[str, Variant], repeat: int) -> dict[str, dict[str, float]]:
     commands = {"help": ["--help"], "model_loads": ["model", "loads", "--well", str(WELL)]}
-    for tree in trees.values():  # fill each tree's numba cache and pint store first
-        _wall(tree, commands["model_loads"])
-    best: dict[str, dict[str, float]] = {name: {} for name in trees}
+    for tree, extra in variants.values():  # fill each tree's caches and pint store first
+        _wall(tree, ["model", "warmup"], **extra)
+        _wall(tree, commands["model_loads"], **extra)
+    best: dict[str, dict[str, float]] = {name: {} for name in variants}
     for _ in range(repeat):
-        for name, tree in trees.items():
+        for name, (tree, extra) in variants.items():
             for command, args in commands.items():
-                seconds = _wall(tree, args)
+                seconds = _wall(tree, args, **extra)
                 best[name][command] = min(best[name].get(command, np.inf), seconds)
     return best
 
@@ -81,7 +90,7 @@ def _free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def _idle_rss(tree: Path, folder: Path, settle: float) -> float:
+def _idle_rss(tree: Path, folder: Path, settle: float, **extra: str) -> float:
     """VmRSS [MB] of an idle ``tdmon run`` once it listens and ``settle`` seconds passed."""
     port = _free_port()
     config = folder / f"idle-{port}.toml"
@@ -93,7 +102,7 @@ def _idle_rss(tree: Path, folder: Path, settle: float) -> float:
         f'[monitor]\nmu = 0.25\nband_mu = [0.1, 0.2, 0.3, 0.4]\ngrid_step = "10 m"\n'
         f'[calibration]\nenabled = true\n')
     daemon = subprocess.Popen([sys.executable, "-m", "tdmon", "run", "--config", str(config),
-                               "--log-level", "warning"], env=_env(tree), cwd=tree,
+                               "--log-level", "warning"], env=_env(tree, **extra), cwd=tree,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
@@ -130,22 +139,27 @@ def _fresh_copy(tree: Path, folder: Path) -> Path:
 
 def _first_commands(tree: Path, folder: Path) -> dict[str, float]:
     """A fresh copy with the set-up's warm-up, and another without, first commands timed."""
-    cache = folder / "cache"  # its own numba user-wide cache, should the copy be read-only
+    cache = folder / "cache"  # its own numba cache (should the copy be read-only) and user cache
+
+    def fresh(name: str) -> dict[str, str]:
+        return {"NUMBA_CACHE_DIR": str(cache / name / "numba"),
+                "XDG_CACHE_HOME": str(cache / name / "user")}
+
     warmed = _fresh_copy(tree, folder / "warmed")
     cold = _fresh_copy(tree, folder / "cold")
     replay_out = folder / "replay.mcap"
     replay = ["replay", str(REPLAY), "--config", str(REPLAY_CONFIG), "--out", str(replay_out)]
     loads = ["model", "loads", "--well", str(WELL)]
     figures = {
-        "setup_warmup_s": _wall(warmed, ["model", "warmup"], NUMBA_CACHE_DIR=str(cache / "w")),
-        "first_model_loads_s": _wall(warmed, loads, NUMBA_CACHE_DIR=str(cache / "w")),
-        "first_replay_s": _wall(warmed, replay, NUMBA_CACHE_DIR=str(cache / "w")),
-        "second_replay_s": _wall(warmed, replay, NUMBA_CACHE_DIR=str(cache / "w")),
+        "setup_warmup_s": _wall(warmed, ["model", "warmup"], **fresh("w")),
+        "first_model_loads_s": _wall(warmed, loads, **fresh("w")),
+        "first_replay_s": _wall(warmed, replay, **fresh("w")),
+        "second_replay_s": _wall(warmed, replay, **fresh("w")),
     }
-    figures["cold_model_loads_s"] = _wall(cold, loads, NUMBA_CACHE_DIR=str(cache / "c"))
+    figures["cold_model_loads_s"] = _wall(cold, loads, **fresh("c"))
     shutil.rmtree(cold / "tdmon")
     cold = _fresh_copy(tree, folder / "cold2")
-    figures["cold_replay_s"] = _wall(cold, replay, NUMBA_CACHE_DIR=str(cache / "c2"))
+    figures["cold_replay_s"] = _wall(cold, replay, **fresh("c2"))
     return figures
 
 
@@ -153,13 +167,17 @@ def _per_call(function: Any, number: int, repeat: int = 7) -> float:
     return min(timeit.repeat(function, number=number, repeat=repeat)) / number
 
 
-def _fixed_cost() -> dict[str, float]:
+def _fixed_cost(kernels_mode: str) -> dict[str, Any]:
+    """The model's timings on the kernels ``TDMON_KERNELS=kernels_mode`` loads."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_torque_drag import TOTAL_DEPTH, tdmon_well
 
+    from tdmon.model import kernels
     from tdmon.model.torque_drag import WellModel
 
-    figures: dict[str, float] = {}
+    os.environ[kernels.ENVIRONMENT] = kernels_mode
+    kernels.forget()
+    figures: dict[str, Any] = {"kernels": kernels.load().kind}
     models = {30.0: WellModel(tdmon_well(30.0)), 1.0: WellModel(tdmon_well(1.0))}
     calls: dict[str, tuple[Any, int]] = {}
     for model in models.values():
@@ -210,6 +228,11 @@ def _fixed_cost() -> dict[str, float]:
     return figures
 
 
+def _model_both() -> dict[str, dict[str, Any]]:
+    """`_fixed_cost` on the ahead-of-time kernels, then on numba's JIT, in this process."""
+    return {"aot": _fixed_cost("aot"), "jit": _fixed_cost("jit")}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--baseline", type=Path, help="another tdmon tree to run side by side")
@@ -223,20 +246,21 @@ def main() -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     if args.model_only:
-        print(json.dumps({"model": _fixed_cost()}, indent=2))
+        print(json.dumps({"model": _model_both()}, indent=2))
         return 0
-    trees = {"this": ROOT}
+    variants: dict[str, Variant] = {"this": (ROOT, {}),
+                                    "this_jit": (ROOT, {"TDMON_KERNELS": "jit"})}
     if args.baseline is not None:
-        trees["baseline"] = args.baseline.resolve()
-    result: dict[str, Any] = {"commands": _best_commands(trees, args.repeat)}
+        variants["baseline"] = (args.baseline.resolve(), {})
+    result: dict[str, Any] = {"commands": _best_commands(variants, args.repeat)}
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
         result["idle_run_rss_MB"] = {
-            name: min(_idle_rss(tree, folder, args.settle) for _ in range(2))
-            for name, tree in trees.items()}
+            name: min(_idle_rss(tree, folder, args.settle, **extra) for _ in range(2))
+            for name, (tree, extra) in variants.items()}
         if not args.skip_cold:
             result["first_commands"] = _first_commands(ROOT, folder / "fresh")
-    result["model"] = _fixed_cost()
+    result["model"] = _model_both()
     print(json.dumps(result, indent=2))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2))

@@ -86,12 +86,15 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
     warmup = commands.add_parser(
         "warmup",
-        help="compile the model's kernels into numba's cache (the set-up scripts run it)",
+        help="compile the model's kernels ahead of time (the set-up scripts run it)",
         description=(
-            "Compile every numba kernel of the torque-and-drag model and store it in numba's "
-            "cache, so that the first real command loads it instead of compiling it (about "
-            "10 s). scripts/demo.sh and scripts/test.sh run it after installing; run it again "
-            "after changing tdmon/model/_kernels.py or upgrading numba."
+            "Compile the torque-and-drag model's kernels ahead of time into an extension "
+            "module in the user's cache folder (about 15 s; needs a C compiler), so that "
+            "commands and the daemon load them without numba; without a compiler, compile "
+            "them into numba's cache instead (about 10 s). scripts/demo.sh and scripts/test.sh "
+            "run it after installing; run it again after changing tdmon/model/_kernels.py or "
+            "upgrading numba or numpy (commands fall back to numba until then). "
+            "TDMON_KERNELS=jit uses numba only."
         ),
     )
     warmup.set_defaults(func=_run_warmup)
@@ -104,10 +107,17 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
 
 def _run_warmup(args: argparse.Namespace) -> int:
-    from tdmon.model.warmup import cache_folder, compile_kernels
+    from tdmon.model.warmup import cache_folder, warm_up
 
-    seconds = compile_kernels()
-    print(f"model kernels ready in {seconds:.1f} s (numba cache: {cache_folder()})")
+    done = warm_up()
+    if done.kernels.kind == "aot":
+        how = (f"compiled ahead of time in {done.build_seconds:.1f} s"
+               if done.build_seconds is not None else "ahead-of-time build already current")
+        print(f"model kernels {how}: {done.kernels.where} (checked in "
+              f"{done.call_seconds:.2f} s; commands load them without numba)")
+    else:
+        print(f"model kernels: {done.note}; numba's JIT compiled them in "
+              f"{done.call_seconds:.1f} s (numba cache: {cache_folder()})")
     return 0
 
 

@@ -12,27 +12,21 @@ one friction factor and lies on one circular arc. `march_gradient` is the same m
 operation followed by its adjoint: the value and its gradient with respect to every element's
 friction factor.
 
-The per-well arrays travel packed in one `KernelWell` (built once per well by `kernel_well`, by
-name); the entry points take it and the per-call values, and callers pass those by keyword.
+The per-well arrays travel packed in two flat buffers (built once per well by `pack_well`); the
+entry points take them and the per-call values. The same functions run under numba's JIT and,
+compiled ahead of time by `tdmon.model.aot`, without numba: `tdmon.model.kernels` picks one.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections import namedtuple
 
 import numpy as np
-from numba import njit, types
-from numba.experimental import structref
-from numpy.typing import ArrayLike
+from numba import njit
 
-SOFT_STRING = 0
-AADNOY = 1
-
-# element curve kinds (of the survey interval the element lies on)
-STRAIGHT = 0
-PLANAR_BUILD = 1
-GENERAL_CURVE = 2
+# the method and the curve kinds are named where the model (without numba) reads them
+from tdmon.model.kernels import PLANAR_BUILD, SOFT_STRING
 
 _STRAIGHT_DOGLEG = 1e-7
 _MD_TOLERANCE = 1e-9
@@ -131,90 +125,72 @@ def element_geometry(node_md, tangents):
 
 # --- the per-well arguments, packed ---
 #
-# A structref rather than a NamedTuple: numba types a NamedTuple argument in Python on every
-# call (about 0.5 us each), a structref from its stored type, which makes the call cheaper than
-# passing its arrays one by one (docs/benchmarks.md, "Kernel arguments (issue 11)").
+# Two flat buffers rather than twelve arrays or a structref: every array argument is unboxed on
+# each call (about 0.05 us each, in numba's dispatcher and in the ahead-of-time module alike),
+# and a structref cannot cross into the ahead-of-time module (its Python handle is numba's).
+# The entry points unpack the buffers into `_WellArrays`, views the loops read by name.
 
+_WellArrays = namedtuple("_WellArrays", [
+    "node_md", "tangents", "dogleg", "curve_kind", "run_break", "element_kk", "element_ke",
+    "element_ee", "element_dtvd", "component_top", "component_weight", "component_radius"])
 
-@structref.register
-class KernelWellType(types.StructRef):
-    """numba type of `KernelWell`."""
-
-
-class KernelWell(structref.StructRefProxy):
-    """The arrays of one well that every kernel reads, built once by `kernel_well`.
-
-    Hole grid: ``node_md`` (n_nodes,) [m], ``tangents`` (n_nodes, 3) unit tangents [-],
-    ``dogleg`` (n_elements,) [rad], ``curve_kind`` (n_elements,) (`STRAIGHT`, `PLANAR_BUILD`,
-    `GENERAL_CURVE`), ``run_break`` (n_nodes,) where an Aadnoy run ends; the whole elements'
-    `piece_geometry` as ``element_kk``, ``element_ke``, ``element_ee`` and ``element_dtvd``
-    (n_elements,). String, bit first: ``component_top`` (n_components,) cumulative top from
-    the bit [m], ``component_weight`` buoyed weight per length [N/m], ``component_radius``
-    friction radius of the torque [m]. Read only in jit code; the Python object is a handle.
-    """
-
-
-structref.define_boxing(KernelWellType, KernelWell)
-
-# numba's intrinsic, typed loosely: mypy sees its compile-time signature, not the jit-code one
-_new_struct: Any = structref.new
-
-_VECTOR = types.float64[::1]
-_KERNEL_WELL_TYPE = KernelWellType([
-    ("node_md", _VECTOR),
-    ("tangents", types.float64[:, ::1]),
-    ("dogleg", _VECTOR),
-    ("curve_kind", types.int64[::1]),
-    ("run_break", types.bool_[::1]),
-    ("element_kk", _VECTOR),
-    ("element_ke", _VECTOR),
-    ("element_ee", _VECTOR),
-    ("element_dtvd", _VECTOR),
-    ("component_top", _VECTOR),
-    ("component_weight", _VECTOR),
-    ("component_radius", _VECTOR),
-])
-
-
-def kernel_well(*, node_md: ArrayLike, tangents: ArrayLike, dogleg: ArrayLike,
-                curve_kind: ArrayLike, run_break: ArrayLike, component_top: ArrayLike,
-                component_weight: ArrayLike, component_radius: ArrayLike) -> KernelWell:
-    """Pack a well's arrays into a `KernelWell` (see there) and add its element geometry.
-
-    Each array is taken as the field's dtype, C-contiguous (copied only if it is not): numba
-    would store an array of another dtype or layout without converting it.
-    """
-    vector = np.ascontiguousarray
-    return _pack_well(
-        node_md=vector(node_md, dtype=np.float64),
-        tangents=vector(tangents, dtype=np.float64),
-        dogleg=vector(dogleg, dtype=np.float64),
-        curve_kind=vector(curve_kind, dtype=np.int64),
-        run_break=vector(run_break, dtype=np.bool_),
-        component_top=vector(component_top, dtype=np.float64),
-        component_weight=vector(component_weight, dtype=np.float64),
-        component_radius=vector(component_radius, dtype=np.float64),
-    )
+# the index buffer starts with the sizes: nodes, elements, components
+_HEADER = 3
 
 
 @njit(cache=True)
-def _pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
-               component_weight, component_radius):
-    well = _new_struct(_KERNEL_WELL_TYPE)
-    well.node_md = node_md
-    well.tangents = tangents
-    well.dogleg = dogleg
-    well.curve_kind = curve_kind
-    well.run_break = run_break
+def pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
+              component_weight, component_radius):
+    """Pack a well's arrays into the two buffers every entry point takes, and add the whole
+    elements' `piece_geometry`.
+
+    Hole grid: ``node_md`` (n_nodes,) [m], ``tangents`` (n_nodes, 3) unit tangents [-],
+    ``dogleg`` (n_elements,) [rad], ``curve_kind`` (n_elements,) (`STRAIGHT`, `PLANAR_BUILD`,
+    `GENERAL_CURVE`), ``run_break`` (n_nodes,) where an Aadnoy run ends. String, bit first:
+    ``component_top`` (n_components,) cumulative top from the bit [m], ``component_weight``
+    buoyed weight per length [N/m], ``component_radius`` friction radius of the torque [m].
+    Every array C-contiguous, float64 but ``curve_kind`` (int64) and ``run_break`` (bool).
+
+    Returns ``(real, index)``: float64 node MD, tangents, dogleg, the elements' kk, ke, ee,
+    dtvd and the three component arrays, in this order; int64 sizes (`_HEADER`), curve kinds
+    and run breaks (0 or 1).
+    """
+    n_nodes = node_md.size
+    n_elements = dogleg.size
+    n_components = component_top.size
+    real = np.empty(4 * n_nodes + 5 * n_elements + 3 * n_components)
+    index = np.empty(_HEADER + n_elements + n_nodes, dtype=np.int64)
+    index[0] = n_nodes
+    index[1] = n_elements
+    index[2] = n_components
     kk, ke, ee, dtvd = element_geometry(node_md, tangents)
-    well.element_kk = kk
-    well.element_ke = ke
-    well.element_ee = ee
-    well.element_dtvd = dtvd
-    well.component_top = component_top
-    well.component_weight = component_weight
-    well.component_radius = component_radius
-    return well
+    at = 0
+    for part in (node_md, tangents.ravel(), dogleg, kk, ke, ee, dtvd, component_top,
+                 component_weight, component_radius):
+        real[at:at + part.size] = part
+        at += part.size
+    index[_HEADER:_HEADER + n_elements] = curve_kind
+    for i in range(n_nodes):
+        index[_HEADER + n_elements + i] = 1 if run_break[i] else 0
+    return real, index
+
+
+@njit(cache=True)
+def _unpack(real, index):
+    """The `_WellArrays` views of `pack_well`'s buffers."""
+    n_nodes = index[0]
+    n_el = index[1]
+    n_comp = index[2]
+    t = n_nodes  # where each part starts
+    d = t + 3 * n_nodes
+    g = d + n_el
+    c = g + 4 * n_el
+    k = _HEADER + n_el
+    return _WellArrays(
+        real[:n_nodes], real[t:d].reshape((n_nodes, 3)), real[d:g], index[_HEADER:k],
+        index[k:k + n_nodes], real[g:g + n_el], real[g + n_el:g + 2 * n_el],
+        real[g + 2 * n_el:g + 3 * n_el], real[g + 3 * n_el:c], real[c:c + n_comp],
+        real[c + n_comp:c + 2 * n_comp], real[c + 2 * n_comp:c + 3 * n_comp])
 
 
 @njit(cache=True)
@@ -452,12 +428,13 @@ def _march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, 
 
 
 @njit(cache=True)
-def march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, torque_factors):
+def march(well_real, well_index, method, mu, bit_depth, bit_forces, bit_torques, axial_factors,
+          torque_factors):
     """Force and torque at the top of the hole for several operations, marched together.
 
     Parameters
     ----------
-    well : `KernelWell`
+    well_real, well_index : the well, packed by `pack_well`
     method : `SOFT_STRING` or `AADNOY`
     mu : (n_elements,) friction factor per element [-]
     bit_depth : [m], inside the string and the hole
@@ -471,8 +448,9 @@ def march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, t
     """
     no_float_2d = np.empty((0, 0))
     _, force, torque = _march(
-        well=well, method=method, mu=mu, bit_depth=bit_depth, bit_forces=bit_forces,
-        bit_torques=bit_torques, axial_factors=axial_factors, torque_factors=torque_factors,
+        well=_unpack(well_real, well_index), method=method, mu=mu, bit_depth=bit_depth,
+        bit_forces=bit_forces, bit_torques=bit_torques, axial_factors=axial_factors,
+        torque_factors=torque_factors,
         out_md=np.empty(0), out_force=no_float_2d, out_torque=no_float_2d,
         out_comp=np.empty(0, dtype=np.int64), out_tan=np.empty((0, 3)))
     return force, torque
@@ -592,33 +570,35 @@ def _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axi
 
 
 @njit(cache=True)
-def march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
-                torque_factors):
+def march_cases(well_real, well_index, method, mu_cases, bit_depth, bit_forces, bit_torques,
+                axial_factors, torque_factors):
     """`march` for several friction cases in one march: arrays (n_case, n_op) of the top
     forces [N] and torques [N m]; ``mu_cases`` is (n_case, n_elements), C-contiguous [-]."""
     forces = np.empty((mu_cases.shape[0], bit_forces.size))
     torques = np.empty((mu_cases.shape[0], bit_forces.size))
-    _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
-                 torque_factors, forces, torques)
+    _march_cases(_unpack(well_real, well_index), method, mu_cases, bit_depth, bit_forces,
+                 bit_torques, axial_factors, torque_factors, forces, torques)
     return forces, torques
 
 
 @njit(cache=True)
-def march_one(well, method, mu, bit_depth, bit_force, bit_torque, axial_factor, torque_factor):
+def march_one(well_real, well_index, method, mu, bit_depth, bit_force, bit_torque, axial_factor,
+              torque_factor):
     """`march` of one operation and one friction array, as two floats: (top force [N], top
     torque [N m]). The operation's terms are scalars (`march_gradient`'s), and nothing is
     returned as an array, which keeps the call's fixed cost low."""
     forces = np.empty((1, 1))
     torques = np.empty((1, 1))
-    _march_cases(well, method, mu.reshape((1, mu.size)), bit_depth, np.full(1, bit_force),
-                 np.full(1, bit_torque), np.full(1, axial_factor), np.full(1, torque_factor),
-                 forces, torques)
+    _march_cases(_unpack(well_real, well_index), method, mu.reshape((1, mu.size)), bit_depth,
+                 np.full(1, bit_force), np.full(1, bit_torque), np.full(1, axial_factor),
+                 np.full(1, torque_factor), forces, torques)
     return forces[0, 0], torques[0, 0]
 
 
 @njit(cache=True)
-def march_profile(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors,
-                  torque_factors, out_md, out_force, out_torque, out_comp, out_tan):
+def march_profile(well_real, well_index, method, mu, bit_depth, bit_forces, bit_torques,
+                  axial_factors, torque_factors, out_md, out_force, out_torque, out_comp,
+                  out_tan):
     """`march` that also writes the loads at every node, bit first; returns the node count.
 
     The outputs have room for n_elements + n_components + 2 nodes: ``out_md`` [m],
@@ -626,16 +606,17 @@ def march_profile(well, method, mu, bit_depth, bit_forces, bit_torques, axial_fa
     and per operation ``out_force`` [N] and ``out_torque`` [N m], (n_op, n).
     """
     count, _, _ = _march(
-        well=well, method=method, mu=mu, bit_depth=bit_depth, bit_forces=bit_forces,
-        bit_torques=bit_torques, axial_factors=axial_factors, torque_factors=torque_factors,
+        well=_unpack(well_real, well_index), method=method, mu=mu, bit_depth=bit_depth,
+        bit_forces=bit_forces, bit_torques=bit_torques, axial_factors=axial_factors,
+        torque_factors=torque_factors,
         out_md=out_md, out_force=out_force, out_torque=out_torque,
         out_comp=out_comp, out_tan=out_tan)
     return count
 
 
 @njit(cache=True)
-def sweep(well, method, mu_cases, bit_depths, bit_forces, bit_torques, axial_factors,
-          torque_factors):
+def sweep(well_real, well_index, method, mu_cases, bit_depths, bit_forces, bit_torques,
+          axial_factors, torque_factors):
     """Surface force and torque for every (case, depth, operation): arrays (n_case, n_depth, n_op).
 
     ``mu_cases`` is (n_case, n_element); the other arguments are `march`'s.
@@ -647,6 +628,7 @@ def sweep(well, method, mu_cases, bit_depths, bit_forces, bit_torques, axial_fac
     torques = np.empty((n_case, n_depth, n_op))
     top_forces = np.empty((n_case, n_op))
     top_torques = np.empty((n_case, n_op))
+    well = _unpack(well_real, well_index)
     for d in range(n_depth):
         _march_cases(well, method, mu_cases, bit_depths[d], bit_forces, bit_torques,
                      axial_factors, torque_factors, top_forces, top_torques)
@@ -755,8 +737,8 @@ def _aadnoy_run_adjoint(force, top_inc, bottom_inc, length, theta, kind, mu, axi
 
 
 @njit(cache=True)
-def march_gradient(well, method, mu, bit_depth, bit_force, bit_torque, axial_factor,
-                   torque_factor, force_seed, torque_seed):
+def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_torque,
+                   axial_factor, torque_factor, force_seed, torque_seed):
     """`march` of one operation with the gradient of ``force_seed F_top + torque_seed T_top``.
 
     The operation's terms are scalars here (`march` takes arrays of them). Returns (top force,
@@ -766,6 +748,7 @@ def march_gradient(well, method, mu, bit_depth, bit_force, bit_torque, axial_fac
     costs more per piece than the piece's physics; tests compare the values with `march`'s bit
     for bit.
     """
+    well = _unpack(well_real, well_index)
     node_md = well.node_md
     tangents = well.tangents
     dogleg = well.dogleg

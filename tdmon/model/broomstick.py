@@ -2,7 +2,7 @@
 against bit depth for a family of friction factors.
 
 Measured hook loads drawn against these curves show which friction factor the well behaves
-like. All depths and cases go through one compiled sweep (`tdmon.model._kernels.sweep`).
+like. All depths and cases go through one compiled sweep (`sweep` of `tdmon.model._kernels`).
 """
 
 from __future__ import annotations
@@ -15,14 +15,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
-from tdmon.model import _kernels
 from tdmon.model.torque_drag import Method, Operation, WellModel, _check_method, operation_terms
 from tdmon.model.well import Well
 
 __all__ = ["BROOMSTICK_OPERATIONS", "Broomstick", "broomstick", "broomstick_from_model"]
-
-# numba dispatcher, typed loosely: mypy cannot see through its signature; called by keyword
-_sweep: Any = _kernels.sweep
 
 BROOMSTICK_OPERATIONS: tuple[Operation, ...] = (
     Operation.PICK_UP, Operation.SLACK_OFF, Operation.ROTATING,
@@ -100,13 +96,11 @@ def broomstick_from_model(
     depths = np.array([model.check_bit_depth(d) for d in depths])
     cases = _friction_cases(model, mus)
     terms = np.array([operation_terms(op) for op in BROOMSTICK_OPERATIONS])
-    forces, torques = _sweep(
-        well=model.kernel_well, method=kernel_method, mu_cases=cases, bit_depths=depths,
-        bit_forces=np.ascontiguousarray(terms[:, 0]),
-        bit_torques=np.ascontiguousarray(terms[:, 1]),
-        axial_factors=np.ascontiguousarray(terms[:, 2]),
-        torque_factors=np.ascontiguousarray(terms[:, 3]),
-    )
+    compiled: Any = model.kernels.module  # positional arguments only (see `WellModel`)
+    forces, torques = compiled.sweep(
+        *model.kernel_well, kernel_method, cases, depths,
+        np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
+        np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]))
     hookloads = forces + model.well.block_weight
     lengths = np.diff(model.node_md)
     labels = np.asarray(mus, dtype=np.float64)

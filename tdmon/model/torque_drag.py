@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
-from tdmon.model import _kernels
+from tdmon.model import kernels
 from tdmon.model.survey import interpolate_survey, tangent_vectors
 from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
 from tdmon.vocabulary import Operation
@@ -42,13 +42,6 @@ __all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"
 
 Method = Literal["soft-string", "aadnoy"]
 METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
-
-# numba dispatchers, typed loosely: mypy cannot see through their signatures; called by keyword
-_march_one: Any = _kernels.march_one
-_march_cases: Any = _kernels.march_cases
-_all_finite_non_negative: Any = _kernels.all_finite_non_negative
-_march_profile: Any = _kernels.march_profile
-_march_gradient: Any = _kernels.march_gradient
 
 # Bit depths this close [m] outside the string or the hole are taken as on the limit.
 _DEPTH_TOLERANCE = 1e-6
@@ -123,7 +116,7 @@ def _cached_terms(operation: Operation | str, wob: float, bit_torque: float,
     # positional: lru_cache builds its key faster without keywords
     return operation_terms(operation, wob=wob, bit_torque=bit_torque, psi=psi)
 
-_KERNEL_METHODS = {"soft-string": _kernels.SOFT_STRING, "aadnoy": _kernels.AADNOY}
+_KERNEL_METHODS = {"soft-string": kernels.SOFT_STRING, "aadnoy": kernels.AADNOY}
 
 
 def _check_method(method: str) -> int:
@@ -134,7 +127,7 @@ def _check_method(method: str) -> int:
 
 
 def _curve_kinds(well: Well, grid: HoleGrid) -> NDArray[np.int64]:
-    """Curve kind of the survey interval each element lies on (see `_kernels`)."""
+    """Curve kind of the survey interval each element lies on (see `kernels`)."""
     survey = well.survey
     interval = np.clip(
         np.searchsorted(survey.md, grid.element_mid_md, side="right") - 1, 0, survey.md.size - 2
@@ -144,9 +137,9 @@ def _curve_kinds(well: Well, grid: HoleGrid) -> NDArray[np.int64]:
     d_azi = np.angle(np.exp(1j * (survey.azimuth[interval + 1] - survey.azimuth[interval])))
     planar = (np.abs(d_azi) < 1e-6) | (inc_top < 1e-7) | (inc_bottom < 1e-7)
     curved = survey.dogleg[interval + 1] >= 1e-7
-    kinds = np.full(interval.size, _kernels.GENERAL_CURVE, dtype=np.int64)
-    kinds[~curved] = _kernels.STRAIGHT
-    kinds[curved & planar & (inc_bottom > inc_top)] = _kernels.PLANAR_BUILD
+    kinds = np.full(interval.size, kernels.GENERAL_CURVE, dtype=np.int64)
+    kinds[~curved] = kernels.STRAIGHT
+    kinds[curved & planar & (inc_bottom > inc_top)] = kernels.PLANAR_BUILD
     return kinds
 
 
@@ -164,9 +157,10 @@ def _run_breaks(well: Well, grid: HoleGrid) -> NDArray[np.bool_]:
     return np.asarray(breaks)
 
 
-def _check_friction_values(values: NDArray[np.float64], what: str) -> None:
-    """Raise unless every friction factor of the C-contiguous ``values`` is finite and >= 0."""
-    if not _all_finite_non_negative(values.reshape(-1)):
+def _check_friction_values(compiled: Any, values: NDArray[np.float64], what: str) -> None:
+    """Raise unless every friction factor of the C-contiguous ``values`` is finite and >= 0
+    (``compiled``: the model's kernels module)."""
+    if not compiled.all_finite_non_negative(values.reshape(-1)):
         raise ModelError(f"{what} must be finite and >= 0")
 
 
@@ -195,8 +189,14 @@ class WellModel:
         self.component_radius = np.array([c.torque_radius for c in string.components],
                                          dtype=np.float64)
         self._section_mu: NDArray[np.float64] | None = None
-        # what every kernel call reads, packed once (see `_kernels.KernelWell`)
-        self.kernel_well = _kernels.kernel_well(
+        # the compiled kernels (ahead of time, or numba's JIT: `kernels.load`), typed loosely:
+        # mypy cannot see into an extension module or a numba dispatcher
+        self.kernels = kernels.load()
+        self._compiled: Any = self.kernels.module
+        self._march_one: Any = self._compiled.march_one
+        # what every kernel call reads, packed once (see `kernels.KernelWell`)
+        self.kernel_well = kernels.kernel_well(
+            self.kernels,
             node_md=self.node_md,
             tangents=tangent_vectors(grid.inclination, grid.azimuth),
             dogleg=grid.dogleg,
@@ -206,6 +206,7 @@ class WellModel:
             component_weight=self.component_weight,
             component_radius=self.component_radius,
         )
+        self._well_real, self._well_index = self.kernel_well
         self._max_nodes = grid.n_elements + len(string.components) + 2
         # `check_bit_depth`'s limits as floats, and uniform friction arrays by value: the
         # calibration calls `evaluate` thousands of times with the same few
@@ -236,7 +237,7 @@ class WellModel:
                 f"({self.n_elements}), got shape {values.shape}"
             )
         values = np.ascontiguousarray(values)
-        _check_friction_values(values, "per-element friction factors")
+        _check_friction_values(self._compiled, values, "per-element friction factors")
         return values
 
     def _uniform_friction(self, value: float) -> NDArray[np.float64]:
@@ -315,9 +316,10 @@ class WellModel:
             friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = _cached_terms(
             operation, wob, bit_torque, psi)
-        # positional: the fast path of numba's dispatch (keywords are folded in Python)
-        force, torque = _march_one(self.kernel_well, kernel_method, friction, depth, bit_force,
-                                   bit_torque_term, axial_factor, torque_factor)
+        # positional: the fast path of numba's dispatch, and all the ahead-of-time module takes
+        force, torque = self._march_one(self._well_real, self._well_index, kernel_method,
+                                        friction, depth, bit_force, bit_torque_term,
+                                        axial_factor, torque_factor)
         return force + self.well.block_weight, torque
 
     def evaluate_cases(
@@ -351,10 +353,11 @@ class WellModel:
                 f"friction cases must be an array (n_cases, {self.n_elements}) with one value "
                 f"per hole-grid element, got shape {cases.shape}"
             )
-        _check_friction_values(cases, "friction factors")
+        _check_friction_values(self._compiled, cases, "friction factors")
         terms = np.array(_cached_terms(operation, wob, bit_torque, psi))
-        forces, torques = _march_cases(self.kernel_well, kernel_method, cases, depth,
-                                       terms[0:1], terms[1:2], terms[2:3], terms[3:4])
+        forces, torques = self._compiled.march_cases(
+            *self.kernel_well, kernel_method, cases, depth, terms[0:1], terms[1:2], terms[2:3],
+            terms[3:4])
         return forces[:, 0] + self.well.block_weight, torques[:, 0]
 
     def evaluate_gradient(
@@ -413,12 +416,10 @@ class WellModel:
         friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = operation_terms(
             operation, wob=wob, bit_torque=bit_torque, psi=psi)
-        force, torque, gradient = _march_gradient(
-            well=self.kernel_well, method=kernel_method, mu=friction, bit_depth=depth,
-            bit_force=bit_force, bit_torque=bit_torque_term, axial_factor=axial_factor,
-            torque_factor=torque_factor, force_seed=1.0 - quantity_index,
-            torque_seed=float(quantity_index),
-        )
+        # the kernels take positional arguments only (the ahead-of-time module has no names)
+        force, torque, gradient = self._compiled.march_gradient(
+            *self.kernel_well, kernel_method, friction, depth, bit_force, bit_torque_term,
+            axial_factor, torque_factor, 1.0 - quantity_index, float(quantity_index))
         if quantity_index == 0:
             return float(force) + self.well.block_weight, gradient
         return float(torque), gradient
@@ -454,14 +455,11 @@ class WellModel:
         torque = np.empty((terms.shape[0], size))
         component = np.empty(size, dtype=np.int64)
         tangent = np.empty((size, 3))
-        count = _march_profile(
-            well=self.kernel_well, method=kernel_method, mu=friction, bit_depth=depth,
-            bit_forces=np.ascontiguousarray(terms[:, 0]),
-            bit_torques=np.ascontiguousarray(terms[:, 1]),
-            axial_factors=np.ascontiguousarray(terms[:, 2]),
-            torque_factors=np.ascontiguousarray(terms[:, 3]),
-            out_md=md, out_force=force, out_torque=torque, out_comp=component, out_tan=tangent,
-        )
+        count = self._compiled.march_profile(
+            *self.kernel_well, kernel_method, friction, depth,
+            np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
+            np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]),
+            md, force, torque, component, tangent)
         return (md[:count][::-1].copy(), force[:, :count][:, ::-1].copy(),
                 torque[:, :count][:, ::-1].copy(), component[:count][::-1].copy())
 

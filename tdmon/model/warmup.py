@@ -1,35 +1,42 @@
-"""Compile every numba kernel into numba's on-disk cache, on a small synthetic well.
+"""Prepare the model's kernels at set-up, so that no later command compiles them.
 
-The kernels are ``cache=True``: the first call in any process compiles them (about 10 s for
-all of them) and stores the machine code next to the source (``tdmon/model/__pycache__``, or
-numba's user-wide cache folder when that is not writable, or ``NUMBA_CACHE_DIR``). Later
-processes load it in a fraction of a second. Run by the set-up scripts (``tdmon model warmup``)
-so that the first real command does not pay the compilation.
+`warm_up` (``tdmon model warmup``, run by the set-up scripts) builds the kernels ahead of time
+(`tdmon.model.aot`, about 15 s) unless the build of the current source is already there, then
+runs every entry point once on a small synthetic well through the kernels `tdmon.model.kernels`
+loads. Without a C compiler, or when the build fails, or with ``TDMON_KERNELS=jit``, those are
+numba's JIT kernels (``cache=True``): the run compiles them (about 10 s) and numba stores the
+machine code next to the source (``tdmon/model/__pycache__``, or numba's user-wide cache folder
+when that is not writable, or ``NUMBA_CACHE_DIR``), where later processes load it.
 
 Every call below passes the same argument types as the model's own callers: numba keeps one
-machine code per signature, and a call with another type (an int for a float, a strided array)
-would compile again.
+machine code per signature (a call with another type would compile again), and the
+ahead-of-time module has exactly one per entry point.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from tdmon.model import _kernels
-from tdmon.model.broomstick import broomstick_from_model
+from tdmon.errors import ModelError
+from tdmon.model import aot, kernels
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.survey import minimum_curvature
-from tdmon.model.torque_drag import METHODS, WellModel
 from tdmon.model.well import Fluid, HoleSection, Well
 
-#: The compiled entry points (numba dispatchers) the model calls.
-ENTRY_POINTS: tuple[Any, ...] = (
-    _kernels._pack_well, _kernels.march_one, _kernels.march_cases, _kernels.march_profile,
-    _kernels.sweep, _kernels.march_gradient, _kernels.all_finite_non_negative,
-)
+
+@dataclass(frozen=True)
+class Warmup:
+    """What `warm_up` did: the ``kernels`` now loaded, the ahead-of-time build's time [s]
+    (None when none was run), the time of one call of every entry point [s], and why the JIT
+    is used when it is (``note``, one line, empty otherwise)."""
+
+    kernels: kernels.Kernels
+    build_seconds: float | None
+    call_seconds: float
+    note: str
 
 
 def _small_well() -> Well:
@@ -49,10 +56,11 @@ def _small_well() -> Well:
 
 
 def compile_kernels() -> float:
-    """Call every kernel once (loading it from numba's cache, or compiling and storing it).
+    """Call every entry point once through the loaded kernels (on the JIT: loading each from
+    numba's cache, or compiling and storing it). Returns the time it took [s]."""
+    from tdmon.model.broomstick import broomstick_from_model
+    from tdmon.model.torque_drag import METHODS, WellModel
 
-    Returns the time it took [s].
-    """
     start = time.perf_counter()
     model = WellModel(_small_well())
     depth = 900.0
@@ -66,7 +74,37 @@ def compile_kernels() -> float:
     return time.perf_counter() - start
 
 
+def warm_up() -> Warmup:
+    """Build the kernels ahead of time if needed (and possible), then run each once.
+
+    A failed build is not an error but a note (the JIT serves), unless ``TDMON_KERNELS=aot``
+    asks for the ahead-of-time kernels.
+    """
+    mode = kernels.mode()
+    build_seconds = None
+    note = ""
+    if mode == "jit":
+        note = f"{kernels.ENVIRONMENT}=jit"
+    else:
+        try:
+            build_seconds = aot.ensure_built()
+        except Exception as error:  # compilers and numba fail in many ways: each means the JIT
+            first_line = (str(error).strip().splitlines() or [""])[0]
+            reason = f"{type(error).__name__}: {first_line}"
+            if not aot.compiler_available():
+                reason = "no C compiler found"
+            if mode == "aot":
+                raise ModelError(f"{kernels.ENVIRONMENT}=aot but the ahead-of-time build "
+                                 f"failed ({reason})") from error
+            note = f"no ahead-of-time build ({reason})"
+    kernels.forget()
+    loaded = kernels.load()
+    return Warmup(loaded, build_seconds, compile_kernels(), note)
+
+
 def cache_folder() -> str:
-    """Where numba keeps the kernels' machine code (for messages)."""
+    """Where numba keeps the JIT kernels' machine code (for messages)."""
+    from tdmon.model import _kernels
+
     cache = getattr(_kernels.march_one, "_cache", None)
     return str(getattr(cache, "cache_path", "numba's cache folder"))

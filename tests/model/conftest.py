@@ -1,5 +1,6 @@
-"""Wells shared by the model tests, as fixtures (a helper module named conftest cannot be
-imported safely when several test folders have one)."""
+"""The model tests run on the ahead-of-time kernels (built here if the set-up did not, unless
+``TDMON_KERNELS=jit``); wells shared by the model tests, as fixtures (a helper module named
+conftest cannot be imported safely when several test folders have one)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from tdmon.model import aot, kernels
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.survey import minimum_curvature
 from tdmon.model.well import Fluid, HoleSection, Well
@@ -89,3 +91,14 @@ def three_d() -> Well:
 @pytest.fixture(scope="session")
 def three_d_survey_stations() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return three_d_stations()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def model_kernels() -> kernels.Kernels:
+    """The kernels every `WellModel` of the model tests runs: the ahead-of-time ones."""
+    if kernels.mode() != "jit":
+        aot.ensure_built()
+    kernels.forget()
+    loaded = kernels.load()
+    assert loaded.kind == ("jit" if kernels.mode() == "jit" else "aot"), loaded
+    return loaded
