@@ -8,7 +8,6 @@ the daemon's supervisor decides when to try again.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import socket
 import ssl
@@ -26,6 +25,7 @@ from paho.mqtt.reasoncodes import ReasonCode
 
 from tdmon.config.daemon import MqttConfig
 from tdmon.errors import IngestError
+from tdmon.ingest.result_json import encode_result
 from tdmon.ingest.types import RawMessage
 
 log = logging.getLogger(__name__)
@@ -377,7 +377,7 @@ class MqttPublisher:
             self.dropped += 1
             if self._on_drop is not None:
                 self._on_drop(1)
-        self._queue.append((topic, json.dumps(message).encode()))
+        self._queue.append((topic, encode_result(message)))
         self._idle.clear()
         self._wake.set()
 
