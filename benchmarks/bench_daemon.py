@@ -11,6 +11,13 @@ the comparison (``--recorder on`` skips that, ``off`` measures only without it).
     .venv/bin/python benchmarks/bench_daemon.py                       # everything, 10 min soak
     .venv/bin/python benchmarks/bench_daemon.py --soak-seconds 60     # shorter soak
     .venv/bin/python benchmarks/bench_daemon.py --transport zenoh --skip-soak
+    .venv/bin/python benchmarks/bench_daemon.py --skip-soak --baseline-tree /tmp/base --rounds 2
+
+``--baseline-tree`` runs the daemon also from another source tree (``git archive`` of an older
+commit), alternating with this one round after round, against the same rig and dashboard.
+The rig's messages are encoded before the throughput clock starts, and sent as fast as the
+transport takes them: Zenoh ``put`` in a loop, MQTT raw QoS 1 packets (:class:`RigPublisher`)
+with at most 1000 unacknowledged; one sample per message, as the payload contract says.
 
 Measures
 - latency: 10 Hz x 8 channels; time from publishing a row's hook load to receiving the
