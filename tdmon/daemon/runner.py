@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import signal
 from collections.abc import Callable, Iterator
@@ -38,9 +39,32 @@ async def run_daemon(config: DaemonConfig, stop: asyncio.Event | None = None,
                 built.pipeline.follow_input_time()
             log.info("tdmon daemon running: prefix %s, sources %s", config.prefix,
                      ", ".join(s.name for s in built.daemon.sources))
-            with reload_on_sighup(built):
+            with reload_on_sighup(built), _collections_for_a_stream():
                 await built.daemon.run(stop)
             return built.stats
+
+
+#: Allocations between young-generation garbage collections while the daemon runs (CPython's
+#: default is 700). Over MQTT each message leaves objects alive for a while (its
+#: acknowledgement until the recorder flushes, its key in the window of recent deliveries):
+#: at the default, 60 000 messages made 446 collections, 0.64 s (12 % of the run) with the
+#: built pipeline in the heap; with this and the freeze, 14 collections, 0.05 s.
+STREAM_GC_YOUNG = 10_000
+
+
+@contextlib.contextmanager
+def _collections_for_a_stream() -> Iterator[None]:
+    """While inside: what was built so far (well model, grids, filters) is moved out of the
+    collector's way (``gc.freeze()``, as the fleet does after each rig), and young collections
+    come every :data:`STREAM_GC_YOUNG` allocations. Both are undone on the way out."""
+    previous = gc.get_threshold()
+    gc.freeze()
+    gc.set_threshold(max(STREAM_GC_YOUNG, previous[0]), *previous[1:])
+    try:
+        yield
+    finally:
+        gc.set_threshold(*previous)
+        gc.unfreeze()
 
 
 def replays_only(config: DaemonConfig) -> bool:
