@@ -17,23 +17,25 @@ from typing import Any
 import orjson
 
 
-def _tolist(value: Any) -> Any:
-    # numpy scalars and arrays (float32, int64, ndarray): their Python numbers and lists
+def numpy_default(value: Any) -> Any:
+    """The ``default`` of a JSON encoder: numpy scalars and arrays (float32, int64, ndarray)
+    as their Python numbers and lists; ``TypeError`` for anything else."""
     tolist = getattr(value, "tolist", None)
     if tolist is None:
         raise TypeError(f"{type(value).__name__} is not JSON serialisable")
     return tolist()
 
 
-def _finite_or_none(value: Any) -> Any:
+def replace_nonfinite(value: Any) -> Any:
+    """``value`` with every NaN and infinity replaced by None (numpy values as Python ones)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, Mapping):
-        return {key: _finite_or_none(item) for key, item in value.items()}
+        return {key: replace_nonfinite(item) for key, item in value.items()}
     if isinstance(value, list | tuple):
-        return [_finite_or_none(item) for item in value]
+        return [replace_nonfinite(item) for item in value]
     if hasattr(value, "tolist"):
-        return _finite_or_none(value.tolist())
+        return replace_nonfinite(value.tolist())
     return value
 
 
@@ -45,7 +47,7 @@ def encode_result(message: Mapping[str, Any]) -> bytes:
     that is not JSON at all.
     """
     try:
-        return orjson.dumps(message, default=_tolist)
+        return orjson.dumps(message, default=numpy_default)
     except TypeError:  # orjson.JSONEncodeError
-        return json.dumps(_finite_or_none(message), separators=(",", ":"),
-                          allow_nan=False, default=_tolist).encode()
+        return json.dumps(replace_nonfinite(message), separators=(",", ":"),
+                          allow_nan=False, default=numpy_default).encode()

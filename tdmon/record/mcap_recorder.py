@@ -26,7 +26,6 @@ import fcntl
 import io
 import json
 import logging
-import math
 import os
 import re
 import shutil
@@ -47,6 +46,7 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions, MCAPWriter
 
 from tdmon import __version__
 from tdmon.errors import RecordError
+from tdmon.ingest.result_json import numpy_default, replace_nonfinite
 from tdmon.messages import alarm_message
 from tdmon.record import schemas
 from tdmon.record.sink import AlarmHook, Message, call_alarm_hook
@@ -74,37 +74,17 @@ COMPRESSIONS: Final[dict[str, MCAPCompression | None]] = {
 logging.getLogger("foxglove").setLevel(logging.ERROR)
 
 
-def _numpy_default(value: Any) -> Any:
-    # numpy scalars and arrays (float32, int64, ndarray) are not JSON-serialisable as such.
-    tolist = getattr(value, "tolist", None)
-    if tolist is None:
-        raise TypeError(f"{type(value).__name__} is not JSON serialisable")
-    return tolist()
-
-
-def _replace_nonfinite(value: Any) -> Any:
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, Mapping):
-        return {key: _replace_nonfinite(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [_replace_nonfinite(item) for item in value]
-    if hasattr(value, "tolist"):
-        return _replace_nonfinite(value.tolist())
-    return value
-
-
 # the stdlib encoder: for what orjson refuses (non-string keys, integers beyond 64 bits) and to
 # find whether a ``null`` in orjson's output was a NaN/inf (json refuses those, orjson writes
 # them as null). One encoder object: json.dumps with options builds a new one per call.
-_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=_numpy_default)
+_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=numpy_default)
 
 
 def _encode_slow(message: Any) -> tuple[bytes, bool]:
     try:
         return _ENCODER.encode(message).encode(), False
     except ValueError:
-        cleaned = _replace_nonfinite(message)
+        cleaned = replace_nonfinite(message)
         return _ENCODER.encode(cleaned).encode(), True
 
 
@@ -119,7 +99,7 @@ def encode_message(message: Message) -> tuple[bytes, bool]:
     try:
         # numpy values through ``default`` (``tolist``), not orjson's own numpy option: the
         # same numbers as the json module writes (float32 included)
-        data = orjson.dumps(message, default=_numpy_default)
+        data = orjson.dumps(message, default=numpy_default)
     except TypeError:  # orjson.JSONEncodeError: a key that is not a string, a huge integer...
         return _encode_slow(message)
     return data, b"null" in data and _has_nonfinite(message)
@@ -690,7 +670,7 @@ class McapRecorder:
         try:
             # the usual batch in one comprehension; pre-encoded messages (a flag) are bytes
             datas: list[bytes | None] = [
-                dumps(message, default=_numpy_default) if replaced is None else message
+                dumps(message, default=numpy_default) if replaced is None else message
                 for _, _, message, replaced in queue]
         except TypeError:  # one message orjson refuses: each alone, the json module's way
             datas = [self._encode_one(topic, message) if replaced is None else message
