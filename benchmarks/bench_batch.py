@@ -18,7 +18,7 @@ other work takes cores from the workers), with the machine's own ceiling measure
 each run: the throughput of two CPU-bound Python processes against one (2.0 on two idle
 cores). The cluster's start-up is printed apart, and one replay's CPU time in this process
 against on a worker (the same where the workers' environment is right; Dask's default
-MALLOC_TRIM_THRESHOLD_ made it about 1.35 x: ``--dask-default-environ`` runs the whole
+MALLOC_TRIM_THRESHOLD_ made it up to 1.39 x: ``--dask-default-environ`` runs the whole
 benchmark on such workers for comparison).
 
     .venv/bin/python benchmarks/bench_batch.py                    # 12 replays, 2 workers

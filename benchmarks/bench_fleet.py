@@ -59,31 +59,6 @@ def values(i: int, rig: int) -> dict[str, float]:
             "mud_temp_out": 45.0, "mud_density": 1200.0}
 
 
-class FleetBroker(Broker):
-    """bench_daemon's mosquitto with the shipped config/mosquitto/tdmon.conf's window of 1000
-    unacknowledged messages per client (bench_daemon's 200 suits one rig; the daemon holds
-    acknowledgements until the recorders flush, docs/daemon.md "At-least-once delivery")."""
-
-    def __init__(self, folder: Path) -> None:
-        import subprocess
-
-        super().__init__(folder)
-        self.stop()
-        conf = folder / "mosquitto.conf"
-        conf.write_text(conf.read_text().replace("max_inflight_messages 200",
-                                                 "max_inflight_messages 1000"))
-        self.process = subprocess.Popen(self.process.args, stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 10
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", self.port), 0.2).close()
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.05)
-
-
 class FleetDaemon(DaemonProcess):
     """``tdmon run`` on a fleet file."""
 
@@ -197,7 +172,7 @@ def mqtt_link(port: int, centre: Centre) -> tuple[Any, Any]:
 def run(transport: str, rigs: int, seconds: float, warmup: float,
         record: bool = True) -> dict[str, Any]:
     folder = Path(tempfile.mkdtemp(prefix="bench-fleet-"))
-    broker = FleetBroker(folder) if transport == "mqtt" else None
+    broker = Broker(folder) if transport == "mqtt" else None
     port = broker.port if broker is not None else free_port()
     daemon = FleetDaemon(folder, transport, port, rigs, record)
     centre = Centre()

@@ -184,7 +184,7 @@ def _client(scheduler: str | None, workers: int | None, jobs: int) -> Iterator[A
 
 #: Environment variables the Dask nanny sets in its workers by default that the batch's own
 #: cluster leaves out. ``MALLOC_TRIM_THRESHOLD_=65536`` fixes glibc's thresholds, so that every
-#: numpy array above 128 KiB is mmapped and unmapped afresh: a replay then took about 1.3 x the
+#: numpy array above 128 KiB is mmapped and unmapped afresh: a replay then took up to 1.39 x the
 #: CPU time it takes in a plain process (docs/replays.md, "Speed").
 _WORKER_ENVIRON_DROPPED = ("MALLOC_TRIM_THRESHOLD_",)
 

@@ -150,7 +150,7 @@ def _worker_environ() -> dict[str, str | None]:
 def test_the_local_cluster_leaves_glibc_malloc_to_tune_itself() -> None:
     """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers by default (and in this
     process's environment, which the workers inherit: the module's cluster above has left it
-    here), which made each replay cost about 1.3 x its CPU time in a plain process; the batch's
+    here), which made a replay cost up to 1.39 x its CPU time in a plain process; the batch's
     own cluster leaves it out, keeps the nanny's other settings (one OpenMP thread) and puts
     back this process's environment."""
     import os
