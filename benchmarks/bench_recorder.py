@@ -179,6 +179,7 @@ def daemon_replay(recording: Path, config: DaemonConfig, folder: Path | None,
     in ``folder`` (None: no recorder). Returns wall seconds, CPU seconds of this process (all
     its threads: the recorder's flusher too), input samples, recorded bytes."""
     from tdmon.daemon.build import build_daemon
+    from tdmon.daemon.runner import collections_for_a_stream
 
     run_config = config.model_copy(update={
         "sources": SourcesConfig(mcap=McapSourceConfig(path=recording, speed="max")),
@@ -196,7 +197,9 @@ def daemon_replay(recording: Path, config: DaemonConfig, folder: Path | None,
             built.daemon.tick_interval = _NO_TICKS  # no wall-clock frames: same work each run
             start = time.perf_counter()  # the model's start-up sweep is not the recorder's
             cpu = time.process_time()
-            await built.daemon.run(asyncio.Event())
+            # the garbage collector as `tdmon run` sets it while the daemon runs
+            with collections_for_a_stream():
+                await built.daemon.run(asyncio.Event())
             return (time.perf_counter() - start, time.process_time() - cpu,
                     built.stats.samples_in)
 

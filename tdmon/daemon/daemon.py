@@ -25,12 +25,16 @@ from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from tdmon.daemon.inbox import Inbox
 from tdmon.daemon.pipeline import Pipeline
 from tdmon.daemon.supervisor import Backoff, supervise
 from tdmon.ingest.types import RawMessage
 from tdmon.vocabulary import ConnectionState
 
 log = logging.getLogger(__name__)
+
+#: Queued messages handed to the pipeline in one call at most (a burst, docs/daemon.md).
+BURST = 256
 
 
 @dataclass(frozen=True, slots=True)
@@ -169,7 +173,7 @@ class Daemon:
         self.stop_when_sources_done = stop_when_sources_done
         self.drain_timeout = drain_timeout
         self.connections: dict[str, str] = {}
-        self.queue: asyncio.Queue[RawMessage | None] | None = None
+        self.queue: Inbox | None = None
         self.started = asyncio.Event()
         self.acks = AckWindow(())
         self._accepting = True
@@ -177,7 +181,7 @@ class Daemon:
 
     async def run(self, stop: asyncio.Event | None = None) -> None:
         stop = stop or asyncio.Event()
-        queue: asyncio.Queue[RawMessage | None] = asyncio.Queue(maxsize=self.queue_size)
+        queue = Inbox(self.queue_size)
         self.queue = queue
         self.acks = AckWindow(recorders_of(self.pipeline.sinks))
         self._accepting = True
@@ -212,9 +216,17 @@ class Daemon:
         finally:
             await self._shutdown(queue, source_tasks, publisher_tasks, consumer, housekeeping)
 
-    async def _supervise_source(self, spec: SourceSpec,
-                                queue: asyncio.Queue[RawMessage | None]) -> None:
+    async def _supervise_source(self, spec: SourceSpec, queue: Inbox) -> None:
         async def pump(source: AsyncIterator[RawMessage]) -> None:
+            batches = getattr(source, "batches", None)
+            if batches is not None:
+                # a source that hands over what it has at once: one entry per list
+                async for batch in batches():
+                    if not self._accepting:
+                        continue  # shutting down: left unacknowledged, the broker keeps it
+                    self._last_arrival = time.monotonic()
+                    await queue.put_many(batch)
+                return
             async for raw in source:
                 if not self._accepting:
                     continue  # shutting down: left unacknowledged, the broker keeps it
@@ -228,29 +240,28 @@ class Daemon:
         await supervise(spec.name, spec.open, pump, self.connections, self.backoff,
                         finite=spec.finite)
 
-    async def _consume(self, queue: asyncio.Queue[RawMessage | None]) -> None:
-        process = self.pipeline.process
+    async def _consume(self, queue: Inbox) -> None:
+        # A burst: what is queued, up to BURST messages, handed to the pipeline in one call
+        # (its raw input and samples are recorded together: docs/daemon.md, "Bursts").
+        process_burst = self.pipeline.process_burst
         stats = self.pipeline.stats
         acks: list[Callable[[], None]] = []
-        handled = 0
         while True:
-            raw = await queue.get()
-            while True:
-                if raw is None:
-                    self._settle(acks)
-                    return
+            burst = await queue.take(BURST)
+            if burst is None:  # ended (shutdown), after everything queued before
+                self._settle(acks)
+                return
+            fresh: list[RawMessage] = []
+            for raw in burst:
                 if raw.duplicate:
                     stats.duplicate_deliveries += 1  # already handed to the pipeline this run
                 else:
                     if raw.redelivered:
                         stats.redelivered += 1
-                    process(raw)
+                    fresh.append(raw)
                 if raw.ack is not None:
                     acks.append(raw.ack)
-                handled += 1
-                if handled % 256 == 0 or queue.empty():
-                    break
-                raw = queue.get_nowait()
+            process_burst(fresh)
             self._settle(acks)
             # give the sources and the housekeeping a turn between bursts
             await asyncio.sleep(0)
@@ -279,7 +290,7 @@ class Daemon:
 
     async def _shutdown(
         self,
-        queue: asyncio.Queue[RawMessage | None],
+        queue: Inbox,
         source_tasks: list[asyncio.Task[None]],
         publisher_tasks: list[asyncio.Task[None]],
         consumer: asyncio.Task[None],
@@ -291,7 +302,7 @@ class Daemon:
         housekeeping.cancel()
         await asyncio.gather(housekeeping, return_exceptions=True)
         if not consumer.done():
-            await queue.put(None)  # everything queued before this is still processed
+            queue.end()  # everything queued before this is still processed
             await asyncio.gather(consumer, return_exceptions=True)
         if len(self.acks):
             self.acks.release(time.monotonic(), 0.0, force=True)

@@ -267,20 +267,40 @@ class FleetPipeline:
             return None
         return self._add(prefix, None)
 
-    def process(self, raw: RawMessage) -> Any:
+    def _pipeline_of(self, topic: str) -> Pipeline | None:
+        """The rig pipeline of an input topic, remembered (None: counted as unrouted unless
+        it is a result)."""
         routes = self._routes
-        topic = raw.topic
         if topic in routes:
             pipeline = routes[topic]
         else:
             if len(routes) >= MAX_ROUTES:
                 routes.clear()
             pipeline = routes[topic] = self._route(topic)
-        if pipeline is None:
-            if "/tdmon/" not in topic:
-                self.unrouted += 1
-            return None
-        return pipeline.process(raw)
+        if pipeline is None and "/tdmon/" not in topic:
+            self.unrouted += 1
+        return pipeline
+
+    def process(self, raw: RawMessage) -> Any:
+        pipeline = self._pipeline_of(raw.topic)
+        return None if pipeline is None else pipeline.process(raw)
+
+    def process_burst(self, raws: Sequence[RawMessage]) -> None:
+        """``process`` for each message, each rig's share in one burst of its pipeline (the
+        rigs are independent: each keeps its own messages' order)."""
+        shares: dict[int, tuple[Pipeline, list[RawMessage]]] = {}
+        pipeline_of = self._pipeline_of
+        for raw in raws:
+            pipeline = pipeline_of(raw.topic)
+            if pipeline is None:
+                continue
+            share = shares.get(id(pipeline))
+            if share is None:
+                shares[id(pipeline)] = (pipeline, [raw])
+            else:
+                share[1].append(raw)
+        for pipeline, messages in shares.values():
+            pipeline.process_burst(messages)
 
     def tick(self) -> None:
         for rig in self.rigs.values():

@@ -126,6 +126,14 @@ class FrameSource(Protocol):
     def flush(self) -> list[Frame]: ...
 
 
+@dataclass(slots=True)
+class _HeldSamples:
+    """The ``sample`` messages of a burst, written to the sinks at its end."""
+
+    log_times: list[int]
+    messages: list[dict[str, Any]]
+
+
 class Pipeline:
     """Decode, record, align and run the steps for each raw message."""
 
@@ -196,18 +204,54 @@ class Pipeline:
 
     def process(self, raw: RawMessage) -> Sample | Rejected:
         """Handle one message completely; returns what the decoder made of it."""
+        routes = self._routes
+        sinks = routes.get("/tdmon/raw")
+        if sinks is None:
+            sinks = self._sinks_for("/tdmon/raw")
+        if sinks:
+            # the input's time first: an alarm the write raises (a recorder's) carries it
+            self._input_ns = log_ns = int(raw.receive_time * 1e9)
+            self._write_to(sinks, "/tdmon/raw", log_ns,
+                           raw_message(raw, self._recorded_payload_bytes))
+        return self._process(raw, None)
+
+    def process_burst(self, raws: Sequence[RawMessage]) -> None:
+        """Handle several messages completely, in order, as ``process`` does one by one, with
+        their ``raw`` and ``sample`` messages handed to the sinks together: every raw input
+        before the first is decoded, the samples after the last one's steps (one
+        ``write_many`` per sink and topic where the sink has it; docs/daemon.md, "Bursts")."""
+        if not raws:
+            return
+        sinks = self._routes.get("/tdmon/raw")
+        if sinks is None:
+            sinks = self._sinks_for("/tdmon/raw")
+        if sinks:
+            limit = self._recorded_payload_bytes
+            log_times = [int(raw.receive_time * 1e9) for raw in raws]
+            self._input_ns = log_times[0]
+            self._write_many(sinks, "/tdmon/raw", log_times,
+                             [raw_message(raw, limit) for raw in raws])
+        held = _HeldSamples([], [])
+        process = self._process
+        try:
+            for raw in raws:
+                process(raw, held)
+        finally:
+            if held.messages:
+                sinks = self._routes.get("/tdmon/sample")
+                if sinks is None:
+                    sinks = self._sinks_for("/tdmon/sample")
+                self._write_many(sinks, "/tdmon/sample", held.log_times, held.messages)
+
+    def _process(self, raw: RawMessage, held: _HeldSamples | None) -> Sample | Rejected:
+        """Everything after recording the raw input; a sample message goes to ``held`` when
+        given (a burst), else to the sinks at once."""
         # once per input message (a replay's whole cost is in here): routes, counters and the
         # loss detector's figures are read once, not through helper calls
         stats = self.stats
         stats.messages_in += 1
         self._input_ns = log_ns = int(raw.receive_time * 1e9)
         routes = self._routes
-        sinks = routes.get("/tdmon/raw")
-        if sinks is None:
-            sinks = self._sinks_for("/tdmon/raw")
-        if sinks:
-            self._write_to(sinks, "/tdmon/raw", log_ns,
-                           raw_message(raw, self._recorded_payload_bytes))
         decoded = self.decoder.decode(raw)
         if isinstance(decoded, Rejected):
             return self._reject(decoded, log_ns)
@@ -224,7 +268,11 @@ class Pipeline:
         if sinks is None:
             sinks = self._sinks_for("/tdmon/sample")
         if sinks:
-            self._write_to(sinks, "/tdmon/sample", log_ns, sample_message(decoded))
+            if held is None:
+                self._write_to(sinks, "/tdmon/sample", log_ns, sample_message(decoded))
+            else:
+                held.log_times.append(log_ns)
+                held.messages.append(sample_message(decoded))
         loss = self.loss
         if jump is not None:
             loss.reanchor()
@@ -351,7 +399,22 @@ class Pipeline:
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         self._write_to(self._sinks_for(topic), topic, log_time_ns, message)
 
-    def _write_to(self, sinks: list[Sink], topic: str, log_time_ns: int,
+    def _write_many(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
+                    messages: list[dict[str, Any]]) -> None:
+        for sink in sinks:
+            many = getattr(sink, "write_many", None)
+            if many is None:
+                for log_time_ns, message in zip(log_times_ns, messages, strict=True):
+                    self._write_to((sink,), topic, log_time_ns, message)
+                continue
+            try:
+                many(topic, log_times_ns, messages)
+            except Exception:
+                self.stats.sink_errors += 1
+                log.exception("sink %r failed writing %d messages on %s", sink, len(messages),
+                              topic)
+
+    def _write_to(self, sinks: Sequence[Sink], topic: str, log_time_ns: int,
                   message: dict[str, Any]) -> None:
         for sink in sinks:
             try:

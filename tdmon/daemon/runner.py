@@ -39,7 +39,7 @@ async def run_daemon(config: DaemonConfig, stop: asyncio.Event | None = None,
                 built.pipeline.follow_input_time()
             log.info("tdmon daemon running: prefix %s, sources %s", config.prefix,
                      ", ".join(s.name for s in built.daemon.sources))
-            with reload_on_sighup(built), _collections_for_a_stream():
+            with reload_on_sighup(built), collections_for_a_stream():
                 await built.daemon.run(stop)
             return built.stats
 
@@ -53,7 +53,7 @@ STREAM_GC_YOUNG = 10_000
 
 
 @contextlib.contextmanager
-def _collections_for_a_stream() -> Iterator[None]:
+def collections_for_a_stream() -> Iterator[None]:
     """While inside: what was built so far (well model, grids, filters) is moved out of the
     collector's way (``gc.freeze()``, as the fleet does after each rig), and young collections
     come every :data:`STREAM_GC_YOUNG` allocations. Both are undone on the way out."""

@@ -17,7 +17,8 @@ import binascii
 import json
 import logging
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import AsyncIterator, Iterable, Iterator
+from itertools import islice
 from pathlib import Path
 from types import TracebackType
 from typing import IO
@@ -204,6 +205,32 @@ class McapSource:
 
     def __aiter__(self) -> McapSource:
         return self
+
+    async def batches(self) -> AsyncIterator[list[RawMessage]]:
+        """The messages in lists: up to ``batch`` at a time at full speed (the daemon queues a
+        list as one entry), one at a time when paced."""
+        if self.speed is not None:
+            async for raw in self:
+                yield [raw]
+            return
+        records = self._records
+        assert records is not None, "not entered"
+        size = self.batch
+        while True:
+            batch: list[RawMessage] = []
+            try:
+                for _, raw in islice(records, size):
+                    batch.append(raw)
+            except Exception:
+                if batch:  # what came before an unreadable record is handed over first
+                    self._count += len(batch)
+                    yield batch
+                raise
+            if not batch:
+                return
+            self._count += len(batch)
+            yield batch
+            await asyncio.sleep(0)  # let the rest of the daemon run between batches
 
     async def __anext__(self) -> RawMessage:
         assert self._records is not None, "not entered"

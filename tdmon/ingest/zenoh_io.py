@@ -16,6 +16,7 @@ import asyncio
 import contextlib
 import json
 import time
+from collections.abc import AsyncIterator
 from types import TracebackType
 from typing import Any
 
@@ -25,6 +26,9 @@ from tdmon.config.daemon import ZenohConfig
 from tdmon.errors import IngestError
 from tdmon.ingest.result_json import encode_result
 from tdmon.ingest.types import RawMessage
+
+#: Samples taken from zenoh's channel and handed to the daemon at once, at most.
+BATCH = 256
 
 
 def zenoh_config(config: ZenohConfig) -> zenoh.Config:
@@ -107,6 +111,35 @@ class ZenohSource:
 
     def __aiter__(self) -> ZenohSource:
         return self
+
+    async def batches(self) -> AsyncIterator[list[RawMessage]]:
+        """What waits in zenoh's channel, up to ``BATCH`` samples at a time (the daemon queues
+        a list as one entry); when nothing waits, the next sample as it comes."""
+        handler = self._handler
+        assert handler is not None, "not entered"
+        ignore = self.ignore_prefixes
+        while True:
+            batch: list[RawMessage] = []
+            try:
+                sample = handler.try_recv()
+                if sample is None:
+                    # nothing waiting: block in a worker thread (recv releases the GIL)
+                    sample = await asyncio.to_thread(handler.recv)
+                while sample is not None:
+                    topic = str(sample.key_expr)
+                    if not topic.startswith(ignore):  # else our own results, another session
+                        batch.append(RawMessage("zenoh", topic, sample.payload.to_bytes(),
+                                                time.time()))
+                    if len(batch) >= BATCH:
+                        break
+                    sample = handler.try_recv()
+            except zenoh.ZError as exc:  # the channel was closed under us (session closed)
+                if batch:
+                    yield batch
+                raise IngestError(f"zenoh: subscription to '{self.key_expr}' ended: {exc}"
+                                  ) from exc
+            if batch:
+                yield batch
 
     async def __anext__(self) -> RawMessage:
         handler = self._handler

@@ -33,9 +33,11 @@ import threading
 import time
 import weakref
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from functools import partial
+from itertools import repeat
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
@@ -106,6 +108,10 @@ def encode_message(message: Message) -> tuple[bytes, bool]:
 
 
 _PLAIN: Final = (str, int, bool, type(None))
+
+# numpy values through ``default`` (``tolist``), not orjson's own numpy option: the same numbers
+# as the json module writes (float32 included)
+_dumps: Final = partial(orjson.dumps, default=numpy_default)
 
 
 def _has_nonfinite(message: Any) -> bool:
@@ -533,6 +539,21 @@ class McapRecorder:
         if self._pending_alarms:
             self._fire_alarms()
 
+    def write_many(self, topic: str, log_times_ns: Sequence[int],
+                   messages: Sequence[Message]) -> None:
+        """Record several messages of one topic, ``log_times_ns[i]`` for ``messages[i]``: as
+        many ``write`` calls, for a fraction of their cost (the daemon's raw input and samples
+        of a burst, docs/recording.md)."""
+        if len(log_times_ns) != len(messages):
+            raise ValueError(f"{len(log_times_ns)} log times for {len(messages)} messages")
+        with self._lock:
+            queue = self._queue
+            queue.extend(zip(repeat(topic), log_times_ns, messages, repeat(None)))
+            if len(queue) >= BATCH_SIZE:
+                self._write_queued()
+        if self._pending_alarms:
+            self._fire_alarms()
+
     def write_encoded(self, topic: str, log_time_ns: int, data: bytes,
                       replaced: bool = False) -> None:
         """Record one message already encoded as JSON bytes (``replaced``: a NaN/inf in it was
@@ -628,32 +649,31 @@ class McapRecorder:
         if current is None:
             stats.lost += len(queue)
             return
-        datas = self._encode(queue)
+        # one tuple per field: the loops below run over them in C (zip, map, Counter)
+        topics, times, messages, flags = zip(*queue, strict=True)
+        datas = self._encode(topics, messages, flags)
+        if None in datas:  # a message that is not JSON: counted by _encode, left out here
+            kept = [i for i, data in enumerate(datas) if data is not None]
+            topics = tuple(topics[i] for i in kept)
+            times = tuple(times[i] for i in kept)
+            datas = [datas[i] for i in kept]
         channels = self._channels
+        for topic in set(topics).difference(channels):
+            self._channel(topic)
         output = current.output
-        written = 0
-        try:
-            for (topic, log_time_ns, _, _), data in zip(queue, datas, strict=True):
-                if data is None:
-                    continue
-                log_message = channels.get(topic) or self._channel(topic)
-                log_message(data, log_time_ns)
-                if output.error is not None:
-                    raise output.error
-                written += 1
-        except OSError as exc:
-            # the message that met the error is lost, and so is what the file held unflushed
-            # (counted by _fail) and the rest of the batch
-            kept = [item for item, data in zip(queue, datas, strict=True) if data is not None]
-            self._count_topics(kept[:written])
-            current.unflushed += written
-            stats.written += written
-            stats.lost += len(kept) - written
-            self._fail(exc)
+        # The writer reports a failed write (only ever when a chunk goes to disk) through the
+        # output, and refuses every write after it: looked at once per batch, whose messages
+        # are then all lost with what the file held unflushed.
+        for topic, data, log_time_ns in zip(topics, datas, times, strict=True):
+            channels[topic](data, log_time_ns)
+        if output.error is not None:
+            stats.lost += len(datas)
+            self._fail(output.error)
             return
-        self._count_topics(queue if written == len(queue) else
-                           [item for item, data in zip(queue, datas, strict=True)
-                            if data is not None])
+        per_topic = stats.per_topic
+        for topic, count in Counter(topics).items():
+            per_topic[topic] = per_topic.get(topic, 0) + count
+        written = len(datas)
         current.unflushed += written
         stats.written += written
         if now - current.last_flush >= self.flush_interval_s:
@@ -663,25 +683,31 @@ class McapRecorder:
             except OSError as exc:
                 self._fail(exc)
 
-    def _encode(self, queue: list[tuple[str, int, Any, bool | None]]) -> list[bytes | None]:
-        """The JSON bytes of each queued message; None for one that is not JSON (counted)."""
+    def _encode(self, topics: Sequence[str], messages: Sequence[Any],
+                flags: Sequence[bool | None]) -> list[bytes | None]:
+        """The JSON bytes of each queued message (``flags``: None for a message to encode,
+        else it is bytes already and says whether a NaN/inf was replaced); None for one that
+        is not JSON (counted)."""
         stats = self._stats
-        dumps = orjson.dumps
+        encoded = flags.count(None)
         try:
-            # the usual batch in one comprehension; pre-encoded messages (a flag) are bytes
-            datas: list[bytes | None] = [
-                dumps(message, default=numpy_default) if replaced is None else message
-                for _, _, message, replaced in queue]
+            if encoded == len(flags):  # the usual batch: every message to encode, in C
+                datas: list[bytes | None] = list(map(_dumps, messages))
+            else:
+                datas = [_dumps(message) if flag is None else message
+                         for message, flag in zip(messages, flags, strict=True)]
         except TypeError:  # one message orjson refuses: each alone, the json module's way
-            datas = [self._encode_one(topic, message) if replaced is None else message
-                     for topic, _, message, replaced in queue]
-        # orjson writes NaN/inf as null without a word: messages holding a null are checked
-        for (_, _, message, replaced), data in zip(queue, datas, strict=True):
-            if replaced is None:
-                if data is not None and b"null" in data and _has_nonfinite(message):
+            datas = [self._encode_one(topic, message) if flag is None else message
+                     for topic, message, flag in zip(topics, messages, flags, strict=True)]
+        if encoded != len(flags):
+            stats.nonfinite_replaced += flags.count(True)
+        # orjson writes NaN/inf as null without a word: messages holding a null are checked,
+        # found in one search of the batch's bytes (most batches hold none)
+        if encoded and b"null" in b"".join(filter(None, datas)):
+            for message, flag, data in zip(messages, flags, datas, strict=True):
+                if (flag is None and data is not None and b"null" in data
+                        and _has_nonfinite(message)):
                     stats.nonfinite_replaced += 1
-            elif replaced:
-                stats.nonfinite_replaced += 1
         return datas
 
     def _encode_one(self, topic: str, message: Any) -> bytes | None:
@@ -692,11 +718,6 @@ class McapRecorder:
             self._stats.lost += 1
             log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
             return None
-
-    def _count_topics(self, items: list[tuple[str, int, Any, bool | None]]) -> None:
-        per_topic = self._stats.per_topic
-        for topic, count in Counter(item[0] for item in items).items():
-            per_topic[topic] = per_topic.get(topic, 0) + count
 
     def _channel(self, topic: str) -> Any:
         """The channel of ``topic`` (its ``log``), created on its first message."""

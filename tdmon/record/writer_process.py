@@ -42,7 +42,8 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from itertools import repeat
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
@@ -197,6 +198,22 @@ class RecorderProcess:
                 return
             batch = self._batch
             batch.append((topic, log_time_ns, message))
+            if len(batch) >= self.batch_size or time.monotonic() >= self._send_at:
+                self._send_batch()
+        if self._pending_alarms:
+            self._fire_alarms()
+
+    def write_many(self, topic: str, log_times_ns: Sequence[int],
+                   messages: Sequence[Message]) -> None:
+        """``write`` for several messages of one topic (see :meth:`McapRecorder.write_many`)."""
+        if len(log_times_ns) != len(messages):
+            raise ValueError(f"{len(log_times_ns)} log times for {len(messages)} messages")
+        with self._lock:
+            if self._closed or self._dead:
+                self._lost_here += len(messages)
+                return
+            batch = self._batch
+            batch.extend(zip(repeat(topic), log_times_ns, messages))
             if len(batch) >= self.batch_size or time.monotonic() >= self._send_at:
                 self._send_batch()
         if self._pending_alarms:

@@ -105,6 +105,10 @@ class FakePipeline:
         self.processed.append(raw.payload)
         self.recorder.write("/tdmon/raw", 0, {"payload": raw.payload})
 
+    def process_burst(self, raws: list[RawMessage]) -> None:
+        for raw in raws:
+            self.process(raw)
+
     def tick(self) -> None:
         pass
 
