@@ -1,0 +1,250 @@
+"""Bursts: the ingest queue bounded in messages, sources handing lists over, the pipeline and
+the recorder taking a burst's raw input and samples at once (docs/daemon.md, "Bursts")."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+from daemon_support import CollectSink, linear_model
+from mcap.writer import Writer
+
+from tdmon.config.daemon import ZenohConfig
+from tdmon.daemon.aligner import Aligner
+from tdmon.daemon.inbox import Inbox
+from tdmon.daemon.monitor import MonitorStep
+from tdmon.daemon.pipeline import Pipeline, Sink, Step
+from tdmon.daemon.steps.rig_state import RigStateStep
+from tdmon.errors import IngestError
+from tdmon.ingest.decode import ChannelSpec, Decoder
+from tdmon.ingest.mcap_source import McapSource
+from tdmon.ingest.types import RawMessage, raw_message
+from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for, open_session
+from tdmon.record.mcap_recorder import McapRecorder
+from tdmon.record.reader import read_messages
+
+
+def raw(i: int, topic: str = "rig/hookload") -> RawMessage:
+    return RawMessage("mqtt", topic, str(i).encode(), float(i))
+
+
+# -- the ingest queue ---------------------------------------------------------------------------
+
+
+async def test_the_inbox_counts_messages_keeps_order_and_ends() -> None:
+    inbox = Inbox(limit=5)
+    inbox.put_nowait(raw(0))
+    await inbox.put_many([raw(1), raw(2), raw(3)])
+    assert len(inbox) == 4 and not inbox.full()
+    await inbox.put_many([raw(4), raw(5), raw(6)])  # room for one: the list goes in whole
+    assert len(inbox) == 7 and inbox.full()
+
+    blocked = asyncio.create_task(inbox.put(raw(7)))
+    await asyncio.sleep(0.01)
+    assert not blocked.done()  # full: the source waits
+    first = await inbox.take(2)
+    assert [int(m.payload) for m in first] == [0, 1, 2, 3]  # a list is taken whole
+    await asyncio.sleep(0)  # 3 queued now, under the limit: the waiting put goes in
+    assert blocked.done() and len(inbox) == 4
+    inbox.end()
+    rest = await inbox.take(100)
+    assert rest is not None and [int(m.payload) for m in rest] == [4, 5, 6, 7]
+    assert await inbox.take(100) is None and inbox.empty()
+
+
+async def test_the_inbox_wakes_a_waiting_consumer() -> None:
+    inbox = Inbox(limit=10)
+    waiting = asyncio.create_task(inbox.take(10))
+    await asyncio.sleep(0.01)
+    assert not waiting.done()
+    await inbox.put_many([raw(1), raw(2)])
+    assert [int(m.payload) for m in await waiting] == [1, 2]
+    with pytest.raises(ValueError, match="at least 1"):
+        Inbox(0)
+
+
+# -- the pipeline ---------------------------------------------------------------------------------
+
+
+class ManySink(CollectSink):
+    """A sink taking bursts: remembers each write_many call."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[tuple[str, int]] = []
+
+    def write_many(self, topic: str, log_times_ns: list[int],
+                   messages: list[dict[str, Any]]) -> None:
+        self.calls.append((topic, len(messages)))
+        for log_time_ns, message in zip(log_times_ns, messages, strict=True):
+            self.write(topic, log_time_ns, message)
+
+
+def _pipeline(sinks: list[Sink]) -> Pipeline:
+    steps: list[Step] = [RigStateStep(), MonitorStep(linear_model())]
+    decoder = Decoder("rig", [ChannelSpec("hookload", "hookload", "N"),
+                              ChannelSpec("bit_depth", "bit_depth", "m")])
+    return Pipeline(decoder, Aligner(wait_for=("bit_depth",)), steps, sinks)
+
+
+def _rig_messages() -> list[RawMessage]:
+    messages = []
+    for i in range(30):
+        for channel, value in (("bit_depth", 1000.0 + i), ("hookload", 1e6 + 1e3 * i)):
+            body = json.dumps({"t": float(i), "value": value}).encode()
+            messages.append(RawMessage("mqtt", f"rig/{channel}", body, 100.0 + i))
+        if i % 11 == 5:
+            messages.append(RawMessage("mqtt", "rig/hookload", b"not json", 100.0 + i))
+        if i % 13 == 7:  # a duplicate sample: counted by the aligner
+            messages.append(messages[-1])
+    return messages
+
+
+def test_a_burst_records_and_computes_what_one_by_one_does() -> None:
+    messages = _rig_messages()
+    alone, plain = CollectSink(), ManySink()
+    single = _pipeline([alone])
+    for message in messages:
+        single.process(message)
+    batched = _pipeline([plain, together := ManySink()])
+    bursts = [messages[k:k + 7] for k in range(0, len(messages), 7)]
+    for burst in bursts:
+        batched.process_burst(burst)
+    for pipeline in (single, batched):
+        pipeline.flush()
+
+    for topic in ("raw", "sample", "rejected", "state", "model"):
+        assert alone[topic], topic
+        assert plain[topic] == alone[topic] == together[topic], topic
+    for name in ("messages_in", "samples_in", "rejected", "frames", "duplicates"):
+        assert getattr(batched.stats, name) == getattr(single.stats, name), name
+    assert batched.stats.samples_in == 62 and batched.stats.rejected == 3
+    assert batched.stats.duplicates == 2
+    # one call per burst and topic: a burst's raw input before anything else of it, its
+    # samples after everything else
+    raw_calls = [n for topic, n in together.calls if topic == "/tdmon/raw"]
+    assert raw_calls == [len(burst) for burst in bursts]
+    segments: list[list[str]] = []
+    for topic in together.order:
+        if topic == "/tdmon/raw" and (not segments or segments[-1][-1] != "/tdmon/raw"):
+            segments.append([])
+        segments[-1].append(topic)
+    assert [segment.count("/tdmon/raw") for segment in segments] == raw_calls
+    for segment in segments:
+        first_sample = segment.index("/tdmon/sample")
+        assert set(segment[first_sample:]) == {"/tdmon/sample"}
+
+
+def test_a_sink_failing_a_burst_is_counted_and_the_others_get_it() -> None:
+    class Broken(ManySink):
+        def write_many(self, topic: str, log_times_ns: list[int],
+                       messages: list[dict[str, Any]]) -> None:
+            raise RuntimeError("bug in a sink")
+
+    good = CollectSink()
+    pipeline = _pipeline([Broken(), good])
+    messages = _rig_messages()
+    pipeline.process_burst(messages)
+    assert len(good["raw"]) == len(messages) and len(good["sample"]) == 62
+    assert pipeline.stats.sink_errors == 2  # the raw and the sample burst
+
+
+# -- the recorder ---------------------------------------------------------------------------
+
+
+def test_write_many_records_what_write_does(tmp_path: Path) -> None:
+    messages = [{"channel": "hookload", "t": 1.0 + i, "value": 1e6 + i, "unit": "N",
+                 "source": "mqtt", "topic": "rig/hookload"} for i in range(700)]
+    times = [1_700_000_000_000_000_000 + i * 10**9 for i in range(700)]
+    with McapRecorder(tmp_path / "one", recover=False) as one:
+        for log_time_ns, message in zip(times, messages, strict=True):
+            one.write("/tdmon/sample", log_time_ns, message)
+    with McapRecorder(tmp_path / "many", recover=False) as many:
+        many.write_many("/tdmon/sample", times[:300], messages[:300])
+        many.write("/tdmon/alarm", times[300], {"t": 1.0, "kind": "k", "severity": "info",
+                                                "message": "m", "value": math.nan})
+        many.write_many("/tdmon/sample", times[300:], messages[300:])
+        with pytest.raises(ValueError, match="2 log times for 1 messages"):
+            many.write_many("/tdmon/sample", times[:2], messages[:1])
+    [path_one] = one.stats.files
+    [path_many] = many.stats.files
+    back_one = list(read_messages(path_one))
+    back_many = [m for m in read_messages(path_many) if m.topic == "/tdmon/sample"]
+    assert [(m.log_time_ns, m.message) for m in back_many] == [
+        (m.log_time_ns, m.message) for m in back_one]
+    assert back_many[0].message == messages[0] and len(back_many) == 700
+    assert many.stats.per_topic == {"/tdmon/sample": 700, "/tdmon/alarm": 1}
+    assert many.stats.nonfinite_replaced == 1 and many.stats.lost == 0
+
+
+# -- sources handing lists over -------------------------------------------------------------
+
+
+def _recording(path: Path, n: int, damaged_at: int | None = None) -> None:
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema("any", "jsonschema", b"{}")
+        channel = writer.register_channel("/tdmon/raw", "json", schema)
+        for i in range(n):
+            data = (b"{damaged" if i == damaged_at else
+                    json.dumps(raw_message(raw(i))).encode())
+            writer.add_message(channel, 10**9 * (i + 1), data, 10**9 * (i + 1))
+        writer.finish()
+
+
+async def test_the_recording_is_handed_over_in_lists(tmp_path: Path) -> None:
+    path = tmp_path / "rec.mcap"
+    _recording(path, 600)
+    async with McapSource(path, batch=256) as source:
+        batches = [batch async for batch in source.batches()]
+    assert [len(batch) for batch in batches] == [256, 256, 88]
+    assert [int(m.payload) for batch in batches for m in batch] == list(range(600))
+
+
+async def test_what_came_before_an_unreadable_record_is_handed_over(tmp_path: Path) -> None:
+    path = tmp_path / "rec.mcap"
+    _recording(path, 600, damaged_at=300)
+    got: list[int] = []
+    with pytest.raises(IngestError, match="unreadable"):
+        async with McapSource(path, batch=256) as source:
+            async for batch in source.batches():
+                got += [int(m.payload) for m in batch]
+    assert got == list(range(300))
+
+
+async def test_zenoh_hands_over_what_waits_in_lists(free_tcp_port: Callable[[], int]) -> None:
+    port = free_tcp_port()
+    session = open_session(ZenohConfig(listen=[f"tcp/127.0.0.1:{port}"]))
+    rig = open_session(ZenohConfig(connect=[f"tcp/127.0.0.1:{port}"]))
+    n = 1000
+    try:
+        async with ZenohSource(session, key_expr_for("rig/B"), ("rig/B/tdmon/",)) as source:
+            deadline = time.monotonic() + 10
+            while not list(rig.info.peers_zid()) and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+            await asyncio.sleep(0.3)
+            block = zenoh.CongestionControl.BLOCK
+            rig.put("rig/B/tdmon/model", b"{}", congestion_control=block)  # ignored
+            for i in range(n):
+                rig.put("rig/B/hookload", str(i).encode(), congestion_control=block)
+            sizes: list[int] = []
+            received: list[int] = []
+            async for batch in source.batches():
+                sizes.append(len(batch))
+                received += [int(m.payload) for m in batch]
+                if len(received) >= n:
+                    break
+        assert received == list(range(n))
+        assert max(sizes) <= 256 and max(sizes) > 1  # what waited came in lists
+        assert all(m.topic == "rig/B/hookload" for m in batch)
+    finally:
+        rig.close()
+        session.close()
