@@ -11,8 +11,11 @@ Plug-in points for other issues:
   None`` and ``close() -> None``, with ``topic`` = ``/tdmon/<name>``. A sink that only wants
   some topics may say so with a ``topics`` attribute (a collection of topics); messages nobody
   wants are then not even built, which matters for the per-message ``raw`` and ``sample``
-  dicts. Raw input, samples and rejections reach every sink before any later step sees the
-  sample (docs/daemon.md, the data flow at the top).
+  dicts. Raw input and rejections reach every sink before any later step sees the sample; so
+  do samples when messages come one at a time (``process``). The daemon hands queued
+  messages over in bursts (``process_burst``): a burst's raw input is written before any of
+  it is decoded, its samples after its last message's steps, each in one ``write_many`` of a
+  sink that has one (docs/daemon.md, "Bursts").
 * a **step** (rig state, monitor, back-calculation, alarms) sees each aligned frame in order:
   ``on_frame(frame, emit)`` and ``close(emit)``; ``emit(name, message)`` sends a result to all
   sinks and leaves it in ``frame.results[name]`` for the steps after it.
