@@ -32,12 +32,13 @@ import shutil
 import threading
 import time
 import weakref
+from bisect import bisect_right
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
-from itertools import repeat
+from itertools import accumulate, repeat
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
@@ -149,6 +150,24 @@ def _has_nonfinite(message: Any) -> bool:
             # str and int subclasses (the vocabulary's enums, bool) are never non-finite
             return _refused_by_json(message)
     return False
+
+
+def _holding_null(datas: list[bytes | None]) -> list[int]:
+    """The indices of the encoded messages whose bytes hold ``null`` (None: not encoded)."""
+    encoded: list[bytes] = ([data or b"" for data in datas] if None in datas
+                            else datas)  # type: ignore[assignment]  # no None in it
+    joined = b"".join(encoded)
+    found = joined.find(b"null")
+    if found < 0:
+        return []
+    ends = list(accumulate(map(len, encoded)))
+    indices: list[int] = []
+    while found >= 0:
+        # a null does not straddle two messages: each is a whole JSON value
+        index = bisect_right(ends, found)
+        indices.append(index)
+        found = joined.find(b"null", ends[index])
+    return indices
 
 
 def _refused_by_json(message: Any) -> bool:
@@ -701,12 +720,12 @@ class McapRecorder:
                      for topic, message, flag in zip(topics, messages, flags, strict=True)]
         if encoded != len(flags):
             stats.nonfinite_replaced += flags.count(True)
-        # orjson writes NaN/inf as null without a word: messages holding a null are checked,
-        # found in one search of the batch's bytes (most batches hold none)
-        if encoded and b"null" in b"".join(filter(None, datas)):
-            for message, flag, data in zip(messages, flags, datas, strict=True):
-                if (flag is None and data is not None and b"null" in data
-                        and _has_nonfinite(message)):
+        # orjson writes NaN/inf as null without a word: the messages holding a null are
+        # checked, found by searching the batch's joined bytes (a model message in most
+        # batches, one in several messages: not a look at every message)
+        if encoded:
+            for index in _holding_null(datas):
+                if flags[index] is None and _has_nonfinite(messages[index]):
                     stats.nonfinite_replaced += 1
         return datas
 

@@ -248,3 +248,24 @@ async def test_zenoh_hands_over_what_waits_in_lists(free_tcp_port: Callable[[], 
     finally:
         rig.close()
         session.close()
+
+
+def test_the_batch_search_for_nan_finds_every_one(tmp_path: Path) -> None:
+    """NaN and None are both written as null; a message is counted when a NaN made one, at
+    any place in a batch, and not for a None or the word inside a string."""
+    nan_at = {0, 17, 255, 256, 299}
+    messages: list[dict[str, Any]] = []
+    for i in range(300):
+        message: dict[str, Any] = {"t": float(i), "kind": "k", "severity": "info",
+                                   "message": "nullable" if i % 7 == 0 else "m"}
+        if i in nan_at:
+            message["value"] = math.nan
+        if i in {5, 17, 100, 298}:
+            message["extra"] = None
+        messages.append(message)
+    with McapRecorder(tmp_path, recover=False) as recorder:
+        recorder.write_many("/tdmon/alarm", list(range(300)), messages)
+    assert recorder.stats.nonfinite_replaced == len(nan_at)
+    [path] = recorder.stats.files
+    back = [m.message for m in read_messages(path)]
+    assert [i for i, m in enumerate(back) if m.get("value", 0) is None] == sorted(nan_at)
