@@ -35,6 +35,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import math
 import os
 import shutil
 import signal
@@ -128,6 +129,11 @@ class DaemonProcess:
         self.process = subprocess.Popen(
             [sys.executable, "-m", "tdmon", "run", "--config", str(config),
              "--log-level", "warning"], stderr=self.stream, cwd=tree, env=env)
+
+    def cpu_s(self) -> float:
+        """CPU time (user + system) of the daemon process so far [s], all its threads."""
+        fields = Path(f"/proc/{self.process.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
     def rss_mb(self) -> float:
         for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
@@ -373,7 +379,10 @@ async def latency(rig: Rig, seconds: float) -> dict[str, Any]:
             "max_ms": round(delays[-1], 2)}
 
 
-async def throughput(rig: Rig, samples: int) -> dict[str, Any]:
+async def throughput(rig: Rig, samples: int,
+                     cpu_s: Callable[[], float] = lambda: math.nan) -> dict[str, Any]:
+    """``cpu_s``: the daemon's CPU time so far [s] (its CPU per sample is the steadier figure
+    on a shared machine)."""
     await asyncio.sleep(0.3)
     base = int(rig.status.get("samples_in", 0))
     rows = samples // len(CHANNELS)
@@ -384,6 +393,7 @@ async def throughput(rig: Rig, samples: int) -> dict[str, Any]:
     # ahead)
     messages = [message for i in range(rows) for message in row(rig.next_t(1e-5), i)]
     started = time.perf_counter()
+    cpu_before = cpu_s()
     await rig.send_many(messages)
     sent_s = time.perf_counter() - started
     total = rows * len(CHANNELS)
@@ -396,10 +406,12 @@ async def throughput(rig: Rig, samples: int) -> dict[str, Any]:
             break  # lost or rejected: the count will not grow any more
         await asyncio.sleep(0.02)
     elapsed = (time.perf_counter() if now_in - base >= total else moved) - started
+    cpu = cpu_s() - cpu_before
     processed = int(rig.status.get("samples_in", 0)) - base
     return {"samples": total, "processed": processed, "seconds": round(elapsed, 2),
             "publish_seconds": round(sent_s, 2),
             "samples_per_s": round(processed / elapsed),
+            "daemon_cpu_us_per_sample": round(cpu / max(processed, 1) * 1e6, 1),
             "rejected": rig.status.get("rejected"), "dropped": rig.status.get("dropped"),
             "lost": total - processed}
 
@@ -467,7 +479,7 @@ def run_transport(transport: str, args: argparse.Namespace, folder: Path,
         out: dict[str, Any] = {}
         out["latency"] = await latency(rig, args.latency_seconds)
         print(label, "latency", out["latency"], flush=True)
-        out["throughput"] = await throughput(rig, samples)
+        out["throughput"] = await throughput(rig, samples, daemon.cpu_s)
         print(label, "throughput", out["throughput"], flush=True)
         if not args.skip_soak:
             out["soak"] = await soak(rig, daemon, args.soak_seconds)
@@ -493,8 +505,12 @@ def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for run in runs:
         key = f"{run['tree']}, recorder {run['recorder']}"
-        out.setdefault(key, []).append(run["throughput"]["samples_per_s"])
-    return {key: {"samples_per_s": rates, "best": max(rates)} for key, rates in out.items()}
+        out.setdefault(key, []).append((run["throughput"]["samples_per_s"],
+                                        run["throughput"]["daemon_cpu_us_per_sample"]))
+    return {key: {"samples_per_s": [rate for rate, _ in runs],
+                  "best": max(rate for rate, _ in runs),
+                  "daemon_cpu_us_per_sample": [cpu for _, cpu in runs]}
+            for key, runs in out.items()}
 
 
 def main() -> int:
@@ -534,7 +550,8 @@ def main() -> int:
                                      "round": run, **result})
             results[transport] = {"runs": runs, "summary": summary(runs)}
             for key, figures in results[transport]["summary"].items():
-                print(f"{transport}, {key}: {figures['samples_per_s']} samples/s", flush=True)
+                print(f"{transport}, {key}: {figures['samples_per_s']} samples/s, daemon CPU "
+                      f"{figures['daemon_cpu_us_per_sample']} us per sample", flush=True)
     print(json.dumps(results, indent=2))
     if args.json:
         args.json.write_text(json.dumps(results, indent=2) + "\n")
