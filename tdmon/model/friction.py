@@ -18,6 +18,7 @@ References
 from __future__ import annotations
 
 import inspect
+import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -228,6 +229,13 @@ FAMILIES: Mapping[str, Callable[..., Array]] = MappingProxyType({
 })
 """mu(T) families by name; each takes ``(temperature, **coefficients)``."""
 
+#: The coefficient names of each family but the polynomial's (whose names are a0, a1, ...),
+#: read once from the functions' signatures: a FrictionModel is built for every calibration
+#: step, and ``inspect.signature`` costs more than the rest of its checks together.
+_PARAMETERS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    name: tuple(inspect.signature(function).parameters)[1:]
+    for name, function in FAMILIES.items() if name != "polynomial"})
+
 
 @dataclass(frozen=True)
 class FrictionModel:
@@ -258,11 +266,11 @@ class FrictionModel:
         values: dict[str, float] = {}
         for name, value in self.coefficients.items():
             number = float(value)
-            if not np.isfinite(number):
+            if not math.isfinite(number):
                 raise ModelError(f"friction coefficient '{name}' must be finite, got {value}")
             values[name] = number
         if self.family != "polynomial":
-            parameters = list(inspect.signature(FAMILIES[self.family]).parameters)[1:]
+            parameters = _PARAMETERS[self.family]
             if set(values) != set(parameters):
                 raise ModelError(f"friction family '{self.family}' takes coefficients "
                                  f"{', '.join(parameters)}, got {', '.join(values) or 'none'}")
