@@ -50,15 +50,17 @@ Array = NDArray[np.float64]
 
 def _temperature(temperature: ArrayLike) -> Array:
     values = np.asarray(temperature, dtype=np.float64)
-    if not np.all(np.isfinite(values)):
+    # the array methods, not np.all/np.any: these checks run for every friction case the
+    # calibration evaluates, and the functions' dispatch costs more than the check
+    if not np.isfinite(values).all():
         raise ModelError("temperature contains non-finite values")
     return values
 
 
 def _finite(mu: Array, family: str, temperature: Array) -> Array:
-    bad = ~np.isfinite(mu)
-    if np.any(bad):
-        where = np.atleast_1d(temperature)[np.atleast_1d(bad)][0]
+    finite = np.isfinite(mu)
+    if not finite.all():
+        where = np.atleast_1d(temperature)[np.atleast_1d(~finite)][0]
         raise ModelError(f"friction model '{family}' is not defined at {where} degC")
     return mu
 
