@@ -106,11 +106,21 @@ class WindowAccumulator:
     velocities: tuple[float | None, ...] = ()
 
 
+def _median(values: list[float]) -> float:
+    """``np.median`` of finite values to the last bit (an even count averages the middle two
+    as ``(a + b) / 2``, which is what NumPy's mean of two values computes), without NumPy's
+    cost per call, which exceeds the sort of a window's values."""
+    ordered = sorted(values)
+    half = len(ordered) // 2
+    return ordered[half] if len(ordered) % 2 else (ordered[half - 1] + ordered[half]) / 2
+
+
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
-    median = np.median(values)
-    mad = 1.4826 * np.median(np.abs(values - median))
+    median = _median(values.tolist())
+    deviation = np.abs(values - median)
+    mad = 1.4826 * _median(deviation.tolist())
     tolerance = max(spike_mads * mad, spike_mads * floor)
-    return np.asarray(np.abs(values - median) <= tolerance)
+    return np.asarray(deviation <= tolerance)
 
 
 def _mean_se(values: np.ndarray, floor: float) -> tuple[float, float]:
@@ -139,13 +149,14 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
             and math.isfinite(s.hookload) and math.isfinite(s.bit_depth)]
     if not rows:
         return None
-    hookload = np.array([s.hookload for s, _ in rows], dtype=np.float64)
+    loads = [s.hookload for s, _ in rows]
+    hookload = np.array(loads, dtype=np.float64)
     depth = np.array([s.bit_depth for s, _ in rows], dtype=np.float64)
     flags: list[str] = []
     rejected: str | None = None
     floor = max(settings.noise_floor,
-                settings.noise_floor_fraction * float(np.median(np.abs(hookload))))
-    if hookload.size >= 3 and float(np.ptp(hookload)) == 0.0:
+                settings.noise_floor_fraction * _median([abs(x) for x in loads]))
+    if len(loads) >= 3 and max(loads) == min(loads):
         # a real load cell always shows some noise: identical readings mean a frozen value
         rejected = "hookload_stuck"
     keep = _robust_keep(hookload, settings.spike_mads, floor)
