@@ -107,6 +107,9 @@ class Aligner:
         # already reported while it lasted (see silence())
         self._arrived: dict[str, float] = {}
         self._reported: tuple[tuple[str, float], ...] = ()
+        # the channels _complete looks at, kept until a channel is first seen (or forgotten):
+        # worked out on every sample, the set of them cost more than the rest of the check
+        self._waited: tuple[str, ...] | None = None
 
     def push(self, sample: Sample, now: float) -> list[Frame]:
         """Take one sample (``now`` is monotonic seconds); return the frames it completes."""
@@ -172,6 +175,7 @@ class Aligner:
         late = list(self._late)
         self._times.clear()
         self._values.clear()
+        self._waited = None
         self._pending = None
         self._last_frame_t = float("-inf")
         self._first_t = None
@@ -211,6 +215,7 @@ class Aligner:
         if times is None:
             self._times[sample.channel] = [sample.t]
             self._values[sample.channel] = [sample.value]
+            self._waited = None
             return _STORED
         values = self._values[sample.channel]
         newest = times[-1]
@@ -238,26 +243,34 @@ class Aligner:
         return _STORED
 
     def _complete(self, t: float) -> bool:
-        if self.wait_for is not None:
-            channels: Iterable[str] = self.wait_for
-        elif len(self._times) > len(self.expected):
-            channels = self._times.keys()
-        else:
-            channels = {*self._times, *self.expected}
-        for channel in channels:
-            if channel == self.trigger:
-                continue
+        waited = self._waited
+        if waited is None:
+            waited = self._waited = self._waited_channels()
+        due = t - _SAME_TIME
+        kept_pace = self._last_frame_t - _SAME_TIME
+        for channel in waited:
             times = self._times.get(channel)
             if not times:
                 if self._first_t is not None and t - self._first_t > self.stale_timeout:
                     continue  # never seen in a while: the rig does not send it
                 return False
             newest = times[-1]
-            if newest >= t - _SAME_TIME:
+            if newest >= due:
                 continue
-            if newest >= self._last_frame_t - _SAME_TIME and t - newest <= self.stale_timeout:
+            if newest >= kept_pace and t - newest <= self.stale_timeout:
                 return False  # it kept pace so far: its sample for t is on the way
         return True
+
+    def _waited_channels(self) -> tuple[str, ...]:
+        """The channels a frame may wait for: ``wait_for``, else those seen and expected."""
+        channels: Iterable[str]
+        if self.wait_for is not None:
+            channels = self.wait_for
+        elif len(self._times) > len(self.expected):
+            channels = self._times.keys()
+        else:
+            channels = {*self._times, *self.expected}
+        return tuple(channel for channel in channels if channel != self.trigger)
 
     def _emit(self) -> Frame:
         pending = self._pending
