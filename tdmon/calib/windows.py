@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tdmon.calib.median import median
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
@@ -106,19 +107,11 @@ class WindowAccumulator:
     velocities: tuple[float | None, ...] = ()
 
 
-def _median(values: list[float]) -> float:
-    """``np.median`` of finite values to the last bit (an even count averages the middle two
-    as ``(a + b) / 2``, which is what NumPy's mean of two values computes), without NumPy's
-    cost per call, which exceeds the sort of a window's values."""
-    ordered = sorted(values)
-    half = len(ordered) // 2
-    return ordered[half] if len(ordered) % 2 else (ordered[half - 1] + ordered[half]) / 2
-
-
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
-    median = _median(values.tolist())
-    deviation = np.abs(values - median)
-    mad = 1.4826 * _median(deviation.tolist())
+    # medians in Python (tdmon.calib.median): NumPy's call costs more than a window's sort
+    middle = median(values.tolist())
+    deviation = np.abs(values - middle)
+    mad = 1.4826 * median(deviation.tolist())
     tolerance = max(spike_mads * mad, spike_mads * floor)
     return np.asarray(deviation <= tolerance)
 
@@ -149,13 +142,13 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
             and math.isfinite(s.hookload) and math.isfinite(s.bit_depth)]
     if not rows:
         return None
-    loads = [s.hookload for s, _ in rows]
-    hookload = np.array(loads, dtype=np.float64)
+    hookload = np.array([s.hookload for s, _ in rows], dtype=np.float64)
+    loads: list[float] = hookload.tolist()
     depth = np.array([s.bit_depth for s, _ in rows], dtype=np.float64)
     flags: list[str] = []
     rejected: str | None = None
     floor = max(settings.noise_floor,
-                settings.noise_floor_fraction * _median([abs(x) for x in loads]))
+                settings.noise_floor_fraction * median([abs(x) for x in loads]))
     if len(loads) >= 3 and max(loads) == min(loads):
         # a real load cell always shows some noise: identical readings mean a frozen value
         rejected = "hookload_stuck"

@@ -139,7 +139,7 @@ class Decoder:
                 raw, f"payload too large ({len(payload)} > {self.max_payload_bytes} bytes)"
             )
         parsed = parse_payload_seq(payload)
-        if type(parsed) is str:
+        if isinstance(parsed, str):
             return _reject(raw, parsed)
         t, value, unit, seq = parsed
         earliest = self._earliest

@@ -302,16 +302,3 @@ def test_stuck_torque_flags_only_windows_that_use_torque() -> None:
                 if w.state == "rotating_off_bottom"]
     assert rotating and all("torque_stuck" in w.flags and w.low_confidence for w in rotating)
 
-
-def test_window_median_is_numpys_to_the_last_bit() -> None:
-    # the windows' spike filter and noise floor take medians in Python (NumPy's call costs
-    # more than a window's sort); they must be NumPy's exactly, odd and even counts alike
-    from tdmon.calib.windows import _median
-
-    rng = np.random.default_rng(7)
-    for n in (1, 2, 3, 4, 7, 8, 119, 120):
-        for _ in range(50):
-            values = 1.4e6 + 3e3 * rng.standard_normal(n)
-            assert _median(values.tolist()) == np.median(values)
-            deviations = np.abs(values - np.median(values))
-            assert _median(deviations.tolist()) == np.median(deviations)
