@@ -117,9 +117,16 @@ def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndar
 
 
 def _mean_se(values: np.ndarray, floor: float) -> tuple[float, float]:
+    # np.mean and np.std(ddof=1) as NumPy computes them (the same pairwise sums, divisions and
+    # square root, so the same bits), without their wrappers' cost, which exceeds the sums
     n = values.size
-    spread = float(np.std(values, ddof=1)) if n > 1 else 0.0
-    return float(np.mean(values)), max(spread, floor) / math.sqrt(n)
+    mean = values.sum() / n
+    if n > 1:
+        deviation = values - mean
+        spread = math.sqrt((deviation * deviation).sum() / (n - 1))
+    else:
+        spread = 0.0
+    return float(mean), max(spread, floor) / math.sqrt(n)
 
 
 def summarise(state: RigState, samples: tuple[RigSample, ...],

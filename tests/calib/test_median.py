@@ -1,4 +1,5 @@
-"""The calibration's medians in Python are NumPy's to the last bit (recorded numbers rest on it)."""
+"""The calibration's medians, means and spreads in Python are NumPy's to the last bit (recorded
+numbers rest on it)."""
 
 from __future__ import annotations
 
@@ -34,3 +35,17 @@ def test_scatter_std_is_the_numpy_formula() -> None:
         got = scatter_std(Scatter(tuple(mu.tolist()), tuple(se.tolist())), prior=0.5)
         assert got == expected
         assert got != 0.5  # estimated, not the prior
+
+
+def test_window_mean_and_spread_are_numpys_to_the_last_bit() -> None:
+    # the windows' mean and sample standard deviation skip np.mean/np.std's wrappers
+    from tdmon.calib.windows import _mean_se
+
+    rng = np.random.default_rng(11)
+    for n in (2, 3, 7, 8, 9, 16, 17, 60, 119, 120, 300):
+        for _ in range(30):
+            values = 1.4e6 + 3e3 * rng.standard_normal(n)
+            mean, se = _mean_se(values, floor=0.0)
+            assert mean == float(np.mean(values))
+            assert se == float(np.std(values, ddof=1)) / math.sqrt(n)
+    assert _mean_se(np.array([5.0]), floor=2.0) == (5.0, 2.0)
