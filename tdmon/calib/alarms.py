@@ -276,6 +276,8 @@ def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.
         contrast[lo:hi] = 0.0
         contrast[first:first + width] = 1.0 / width
         excess = float(contrast @ mu)
+        if excess <= settings.min_step:
+            continue  # within the smallest step whatever the spread: c P c is not needed
         spread = math.sqrt(max(float(contrast @ covariance @ contrast), 0.0))
         limit = max(settings.min_step, settings.sigmas * spread)
         if excess > limit and not (frozenset(range(first, first + width)) & known) and (
