@@ -250,15 +250,20 @@ class Aligner:
         kept_pace = self._last_frame_t - _SAME_TIME
         for channel in waited:
             times = self._times.get(channel)
-            if not times:
-                if self._first_t is not None and t - self._first_t > self.stale_timeout:
-                    continue  # never seen in a while: the rig does not send it
-                return False
-            newest = times[-1]
-            if newest >= due:
-                continue
-            if newest >= kept_pace and t - newest <= self.stale_timeout:
-                return False  # it kept pace so far: its sample for t is on the way
+            if times:
+                newest = times[-1]
+                if newest >= due or not (newest >= kept_pace
+                                         and t - newest <= self.stale_timeout):
+                    continue  # here, or it lags and is used with its age
+                # it kept pace so far: its sample for t is on the way
+            elif self._first_t is not None and t - self._first_t > self.stale_timeout:
+                continue  # never seen in a while: the rig does not send it
+            if channel != waited[0]:
+                # looked at first from now on: a rig sends its channels in much the same
+                # order every time, and the one that held this frame back will hold the next
+                # ones back as well (the verdict does not depend on the order)
+                self._waited = (channel, *(c for c in waited if c != channel))
+            return False
         return True
 
     def _waited_channels(self) -> tuple[str, ...]:
