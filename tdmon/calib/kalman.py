@@ -86,7 +86,11 @@ def predict(state: S, process_std: ArrayLike) -> S:
         [units of the state]
     """
     q = np.broadcast_to(np.asarray(process_std, dtype=np.float64), state.mean.shape)
-    return replace(state, covariance=state.covariance + np.diag(q**2))
+    # P + diag(q^2) without the n x n diagonal matrix: adding 0.0 copies P as the zeros off the
+    # diagonal would (-0.0 becomes 0.0), then the diagonal takes q^2
+    covariance = state.covariance + 0.0
+    covariance.flat[::q.size + 1] += q**2
+    return replace(state, covariance=covariance)
 
 
 def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,

@@ -268,3 +268,16 @@ def test_noise_with_model_error() -> None:
     assert noise_with_model_error(3.0, 0.1, h, x) == pytest.approx(25.0, rel=1e-15)
     assert noise_with_model_error(3.0, 0.0, h, x) == 9.0
     assert noise_with_model_error(0.0, 0.0, h, x) == 1e-12
+
+
+def test_predict_adds_the_drift_to_the_diagonal_to_the_last_bit() -> None:
+    # P + diag(q^2) as NumPy adds the two matrices, a -0.0 off the diagonal included
+    for n, q in [(1, 0.01), (3, np.array([0.0, 0.01, 0.02])), (141, 0.003)]:
+        p = _spd(n, n, 0.01)
+        p[0, n - 1] = -0.0
+        state = KalmanState(np.zeros(n), p)
+        drifted = predict(state, q).covariance
+        expected = p + np.diag(np.broadcast_to(np.asarray(q, dtype=np.float64), (n,)) ** 2)
+        assert np.array_equal(drifted, expected)
+        assert np.array_equal(np.signbit(drifted), np.signbit(expected))
+        assert state.covariance is p and p[0, n - 1] == 0.0  # the prior is left alone
