@@ -287,17 +287,22 @@ class Aligner:
         values: dict[str, float] = {self.trigger: pending.value}
         ages: dict[str, float] = {self.trigger: 0.0}
         stale: list[str] = []
+        # once per frame and channel: the loop's constants in locals
+        trigger, timeout, held = self.trigger, self.stale_timeout, self._values
+        until = t + _SAME_TIME
         for channel, times in self._times.items():
-            if channel == self.trigger:
+            if channel == trigger:
                 continue
-            index = bisect.bisect_right(times, t + _SAME_TIME) - 1
+            # the usual case, nothing newer than t held: the newest sample, without a search
+            index = (len(times) - 1 if times[-1] <= until
+                     else bisect.bisect_right(times, until) - 1)
             if index < 0:
                 index = 0  # only newer data: the nearest one after t
             age = t - times[index]
-            if abs(age) > self.stale_timeout:
+            if abs(age) > timeout:
                 stale.append(channel)
                 continue
-            values[channel] = self._values[channel][index]
+            values[channel] = held[channel][index]
             ages[channel] = age
         reported, self._reported = self._reported, ()
         return Frame(t=t, log_time_ns=pending.log_time_ns, values=values, ages=ages,
