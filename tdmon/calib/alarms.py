@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tdmon.calib.median import median
 from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads
@@ -211,17 +212,18 @@ def friction_jump(history: tuple[float, ...], mu: float, mu_std: float, t: float
     The step must exceed ``min_step`` and ``sigmas`` times the combined spread
     ``sqrt(mu_std^2 + (1.4826 MAD)^2)`` of the history.
     """
-    recent = np.array([x for x in history[-settings.history:] if math.isfinite(x)])
-    if recent.size < settings.min_history or not (math.isfinite(mu) and math.isfinite(mu_std)):
+    recent = [x for x in history[-settings.history:] if math.isfinite(x)]
+    if len(recent) < settings.min_history or not (math.isfinite(mu) and math.isfinite(mu_std)):
         return None
-    median = float(np.median(recent))
-    spread = 1.4826 * float(np.median(np.abs(recent - median)))
-    limit = median + max(settings.min_step, settings.sigmas * math.hypot(mu_std, spread))
+    # a few values, once per window: medians in Python, NumPy's to the last bit
+    middle = median(recent)
+    spread = 1.4826 * median([abs(x - middle) for x in recent])
+    limit = middle + max(settings.min_step, settings.sigmas * math.hypot(mu_std, spread))
     if mu <= limit:
         return None
     return Alarm(t, AlarmKind.FRICTION_JUMP, Severity.WARNING,
                  f"{operation} friction {mu:.3f} at {bit_depth:.0f} m jumped above the recent "
-                 f"{median:.3f} (tight spot or cuttings bed?)", mu, limit)
+                 f"{middle:.3f} (tight spot or cuttings bed?)", mu, limit)
 
 
 def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.ndarray,
@@ -274,6 +276,8 @@ def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.
         contrast[lo:hi] = 0.0
         contrast[first:first + width] = 1.0 / width
         excess = float(contrast @ mu)
+        if excess <= settings.min_step:
+            continue  # within the smallest step whatever the spread: c P c is not needed
         spread = math.sqrt(max(float(contrast @ covariance @ contrast), 0.0))
         limit = max(settings.min_step, settings.sigmas * spread)
         if excess > limit and not (frozenset(range(first, first + width)) & known) and (

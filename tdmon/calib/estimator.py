@@ -52,6 +52,7 @@ from tdmon.calib.estimator_state import (
     put,
 )
 from tdmon.calib.joint import initial_joint, joint_fields, update_joint
+from tdmon.calib.median import median
 from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
@@ -357,7 +358,7 @@ class FrictionEstimator:
         """Median single-window friction at the modelled weight of each operation's recent
         windows [-]: pick-up and slack-off far apart at the same depth is a weight error."""
         recent = 8
-        return {kind: float(np.median(scatter.mu[-recent:]))
+        return {kind: median(scatter.mu[-recent:])
                 for kind, scatter in w.scatter.items() if scatter.mu}
 
     def _add_scatter(self, w: WindowState, window: Window,
@@ -491,7 +492,7 @@ def _profile_message(profile: FrictionProfile, window: Window) -> dict[str, Any]
     """The ``estimate`` message of kind ``profile`` after ``window``: the bin at the bit."""
     fields = profile.message_fields()
     grid = profile.grid
-    k = int(np.clip(np.searchsorted(grid.edges, window.bit_depth) - 1, 0, grid.n_bins - 1))
+    k = min(max(int(np.searchsorted(grid.edges, window.bit_depth)) - 1, 0), grid.n_bins - 1)
     operation = (window.state if window.state != RigState.ROTATING_OFF_BOTTOM
                  else Operation.ROTATING)
     return {"t": window.t_end, "kind": EstimateKind.PROFILE, "operation": operation,

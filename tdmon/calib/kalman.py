@@ -86,7 +86,11 @@ def predict(state: S, process_std: ArrayLike) -> S:
         [units of the state]
     """
     q = np.broadcast_to(np.asarray(process_std, dtype=np.float64), state.mean.shape)
-    return replace(state, covariance=state.covariance + np.diag(q**2))
+    # P + diag(q^2) without the n x n diagonal matrix: adding 0.0 copies P as the zeros off the
+    # diagonal would (-0.0 becomes 0.0), then the diagonal takes q^2
+    covariance = state.covariance + 0.0
+    covariance.flat[::q.size + 1] += q**2
+    return replace(state, covariance=covariance)
 
 
 def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
@@ -114,22 +118,34 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     where the short form ``(I - K H) P`` loses both to rounding), symmetrised.
     """
     h = np.asarray(jacobian, dtype=np.float64)
+    step = _mean_step(state, measured, predicted, h, noise_variance, bounds)
+    if step is None:
+        return state
+    mean, gain, innovation, s = step
+    a = np.eye(h.size) - np.outer(gain, h)
+    covariance = a @ state.covariance @ a.T + noise_variance * np.outer(gain, gain)
+    return replace(state, mean=mean, covariance=0.5 * (covariance + covariance.T),
+                   updates=state.updates + 1, innovation=innovation, innovation_variance=s)
+
+
+def _mean_step(state: KalmanState, measured: float, predicted: float, h: Array,
+               noise_variance: float, bounds: tuple[float, float] | None
+               ) -> tuple[Array, Array, float, float] | None:
+    """The first half of :func:`update`: (posterior mean, gain, innovation, its variance), or
+    None where :func:`update` keeps the prior. The covariance, the costly half (two products
+    of n x n matrices), is left to the caller: an iterate of :func:`iterated_update` before
+    the last needs the mean alone."""
     if not (math.isfinite(measured) and math.isfinite(predicted) and np.isfinite(h).all()
             and math.isfinite(noise_variance) and noise_variance > 0.0):
-        return state
-    p = state.covariance
-    ph = p @ h
+        return None
+    ph = state.covariance @ h
     s = float(h @ ph) + noise_variance
     gain = ph / s
     innovation = measured - predicted
     mean = state.mean + gain * innovation
     if bounds is not None:
         mean = np.clip(mean, *bounds)
-    a = np.eye(h.size) - np.outer(gain, h)
-    covariance = a @ p @ a.T + noise_variance * np.outer(gain, gain)
-    return replace(state, mean=mean, covariance=0.5 * (covariance + covariance.T),
-                   updates=state.updates + 1, innovation=float(innovation),
-                   innovation_variance=s)
+    return mean, gain, float(innovation), s
 
 
 def noise_with_model_error(standard_error: float, model_std_fraction: float, jacobian: Array,
@@ -224,20 +240,31 @@ def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], 
     estimate = prior.mean
     posterior = prior
     linearisation: L | None = None
-    for _ in range(max(1, iterations)):
+    last = max(1, iterations) - 1
+    for iterate in range(last + 1):
         linearisation = linearise(estimate)
         h = linearisation.jacobian
         if not np.any(h):
             return IteratedUpdate(prior, False, linearisation=linearisation)
         # linearise about the current iterate, not the prior mean
         predicted_at_prior = linearisation.predicted + float(h @ (prior.mean - estimate))
-        posterior = update(prior, measured, predicted_at_prior, h, linearisation.noise_variance,
-                           bounds=bounds)
-        if posterior is prior:
-            return IteratedUpdate(prior, False, linearisation=linearisation)
-        if gate is not None and posterior.innovation**2 > gate**2 * posterior.innovation_variance:
+        if iterate < last:
+            # only the last iterate's covariance is kept: the others need their mean (and the
+            # gate its innovation), which is update's own first half, so the same numbers
+            step = _mean_step(prior, measured, predicted_at_prior,
+                              np.asarray(h, dtype=np.float64), linearisation.noise_variance,
+                              bounds)
+            if step is None:
+                return IteratedUpdate(prior, False, linearisation=linearisation)
+            estimate, _, innovation, variance = step
+        else:
+            posterior = update(prior, measured, predicted_at_prior, h,
+                               linearisation.noise_variance, bounds=bounds)
+            if posterior is prior:
+                return IteratedUpdate(prior, False, linearisation=linearisation)
+            innovation, variance = posterior.innovation, posterior.innovation_variance
+        if gate is not None and innovation**2 > gate**2 * variance:
             return IteratedUpdate(prior, False, gated=True, linearisation=linearisation)
-        estimate = posterior.mean
     return IteratedUpdate(posterior, True, linearisation=linearisation)
 
 

@@ -196,22 +196,24 @@ def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Ar
     where = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
 
-    def friction(parameters: Array, extra: Array | float = 0.0) -> Array:
-        mu = np.where(where, parametrisation.mu(parameters, temperature) + extra, base)
+    def friction(law: Array, extra: Array | float = 0.0) -> Array:
+        mu = np.where(where, law + extra, base)
         return np.maximum(mu, 0.0)
 
+    # the law at theta once: three of the cases below bump it, not theta
+    at_theta = parametrisation.mu(theta, temperature)
     # every friction case of the finite differences marched together, in one call
-    cases = [friction(theta)]
+    cases = [friction(at_theta)]
     steps = np.empty(theta.size)
     for k in range(theta.size):
         steps[k] = max(abs(theta[k]) * relative_step, 1e-6)
         bumped = theta.copy()
         bumped[k] += steps[k]
-        cases.append(friction(bumped))
+        cases.append(friction(parametrisation.mu(bumped, temperature)))
     delta = 1e-3
     scale = max(float(np.max(np.abs(temperature))), 1.0)
-    cases.append(friction(theta, delta))
-    cases.append(friction(theta, delta * temperature / scale))
+    cases.append(friction(at_theta, delta))
+    cases.append(friction(at_theta, delta * temperature / scale))
     values = model.evaluate_cases(operation, bit_depth, np.stack(cases),
                                   method=method)[quantity_index]
     predicted = float(values[0])

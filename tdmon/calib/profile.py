@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from tdmon.calib import kalman
 from tdmon.calib.backcalc import window_measurement
@@ -231,14 +231,17 @@ def information(state: ProfileState, edges: Array, threshold: float = INFORMED_R
     seen = (state.windows_seen if state.windows_seen.size == variance.size
             else np.zeros(variance.size, np.int64))
     reasons: list[str | None] = []
+    # Python lists: indexing the arrays bin by bin cost more than the rest of this
+    informed_list, seen_list = informed.tolist(), seen.tolist()
+    edge_list = np.asarray(edges).tolist()
     for k in range(variance.size):
-        if informed[k]:
+        if informed_list[k]:
             reasons.append(None)
         elif state.updates == 0:
             reasons.append(NO_WINDOW_YET)
-        elif seen[k] > 0:
+        elif seen_list[k] > 0:
             reasons.append(NOT_SEPARATED)
-        elif edges[k] >= state.deepest:
+        elif edge_list[k] >= state.deepest:
             reasons.append(NOT_REACHED)
         else:
             reasons.append(NO_CONTACT)
@@ -383,13 +386,20 @@ class FrictionProfile:
         """
         std = self.state.std
         info = self.information()
+        # tolist: the same Python floats and bools as converting element by element
         return {
-            "md_m": [float(x) for x in self.grid.mid_md],
-            "mu_profile": [float(x) for x in self.state.mu],
-            "mu_profile_std": [float(x) for x in std],
-            "variance_ratio": [float(x) for x in info.variance_ratio],
-            "informed": [bool(x) for x in info.informed],
+            "md_m": _floats(self.grid.mid_md),
+            "mu_profile": _floats(self.state.mu),
+            "mu_profile_std": _floats(std),
+            "variance_ratio": _floats(info.variance_ratio),
+            "informed": np.asarray(info.informed, dtype=bool).tolist(),
             "uninformed_reason": list(info.reason),
             "innovation": float(self.state.innovation),
             "innovation_std": float(math.sqrt(max(self.state.innovation_variance, 0.0))),
         }
+
+
+def _floats(values: ArrayLike) -> list[float]:
+    """``[float(x) for x in values]`` at the cost of one NumPy call."""
+    listed: list[float] = np.asarray(values, dtype=np.float64).tolist()
+    return listed

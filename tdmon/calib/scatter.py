@@ -15,10 +15,11 @@ windows exist, the prior ``tau`` is used (docs/back-calculation.md, "Honest unce
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
-import numpy as np
+from tdmon.calib.median import median
 
 __all__ = ["MIN_WINDOWS", "Scatter", "add_window", "scatter_std"]
 
@@ -51,7 +52,8 @@ def scatter_std(scatter: Scatter | None, prior: float) -> float:
     """
     if scatter is None or len(scatter.mu) < MIN_WINDOWS:
         return prior
-    d = np.abs(np.diff(np.asarray(scatter.mu)))
-    s = 1.4826 * float(np.median(d)) / math.sqrt(2.0)
-    measurement = float(np.median(np.square(scatter.se)))
+    # in Python, once per window and operation: NumPy's calls cost more than these few
+    # values (the same differences, squares and medians, tdmon.calib.median)
+    s = 1.4826 * median([abs(b - a) for a, b in itertools.pairwise(scatter.mu)]) / math.sqrt(2.0)
+    measurement = median([se * se for se in scatter.se])
     return math.sqrt(max(0.0, s * s - measurement))

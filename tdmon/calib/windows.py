@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tdmon.calib.median import median
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
@@ -107,16 +108,25 @@ class WindowAccumulator:
 
 
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
-    median = np.median(values)
-    mad = 1.4826 * np.median(np.abs(values - median))
+    # medians in Python (tdmon.calib.median): NumPy's call costs more than a window's sort
+    middle = median(values.tolist())
+    deviation = np.abs(values - middle)
+    mad = 1.4826 * median(deviation.tolist())
     tolerance = max(spike_mads * mad, spike_mads * floor)
-    return np.asarray(np.abs(values - median) <= tolerance)
+    return np.asarray(deviation <= tolerance)
 
 
 def _mean_se(values: np.ndarray, floor: float) -> tuple[float, float]:
+    # np.mean and np.std(ddof=1) as NumPy computes them (the same pairwise sums, divisions and
+    # square root, so the same bits), without their wrappers' cost, which exceeds the sums
     n = values.size
-    spread = float(np.std(values, ddof=1)) if n > 1 else 0.0
-    return float(np.mean(values)), max(spread, floor) / math.sqrt(n)
+    mean = values.sum() / n
+    if n > 1:
+        deviation = values - mean
+        spread = math.sqrt((deviation * deviation).sum() / (n - 1))
+    else:
+        spread = 0.0
+    return float(mean), max(spread, floor) / math.sqrt(n)
 
 
 def summarise(state: RigState, samples: tuple[RigSample, ...],
@@ -140,12 +150,13 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
     if not rows:
         return None
     hookload = np.array([s.hookload for s, _ in rows], dtype=np.float64)
+    loads: list[float] = hookload.tolist()
     depth = np.array([s.bit_depth for s, _ in rows], dtype=np.float64)
     flags: list[str] = []
     rejected: str | None = None
     floor = max(settings.noise_floor,
-                settings.noise_floor_fraction * float(np.median(np.abs(hookload))))
-    if hookload.size >= 3 and float(np.ptp(hookload)) == 0.0:
+                settings.noise_floor_fraction * median([abs(x) for x in loads]))
+    if len(loads) >= 3 and max(loads) == min(loads):
         # a real load cell always shows some noise: identical readings mean a frozen value
         rejected = "hookload_stuck"
     keep = _robust_keep(hookload, settings.spike_mads, floor)

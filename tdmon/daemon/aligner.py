@@ -107,6 +107,9 @@ class Aligner:
         # already reported while it lasted (see silence())
         self._arrived: dict[str, float] = {}
         self._reported: tuple[tuple[str, float], ...] = ()
+        # the channels _complete looks at, kept until a channel is first seen (or forgotten):
+        # worked out on every sample, the set of them cost more than the rest of the check
+        self._waited: tuple[str, ...] | None = None
 
     def push(self, sample: Sample, now: float) -> list[Frame]:
         """Take one sample (``now`` is monotonic seconds); return the frames it completes."""
@@ -172,6 +175,7 @@ class Aligner:
         late = list(self._late)
         self._times.clear()
         self._values.clear()
+        self._waited = None
         self._pending = None
         self._last_frame_t = float("-inf")
         self._first_t = None
@@ -211,6 +215,7 @@ class Aligner:
         if times is None:
             self._times[sample.channel] = [sample.t]
             self._values[sample.channel] = [sample.value]
+            self._waited = None
             return _STORED
         values = self._values[sample.channel]
         newest = times[-1]
@@ -238,26 +243,39 @@ class Aligner:
         return _STORED
 
     def _complete(self, t: float) -> bool:
+        waited = self._waited
+        if waited is None:
+            waited = self._waited = self._waited_channels()
+        due = t - _SAME_TIME
+        kept_pace = self._last_frame_t - _SAME_TIME
+        for channel in waited:
+            times = self._times.get(channel)
+            if times:
+                newest = times[-1]
+                if newest >= due or not (newest >= kept_pace
+                                         and t - newest <= self.stale_timeout):
+                    continue  # here, or it lags and is used with its age
+                # it kept pace so far: its sample for t is on the way
+            elif self._first_t is not None and t - self._first_t > self.stale_timeout:
+                continue  # never seen in a while: the rig does not send it
+            if channel != waited[0]:
+                # looked at first from now on: a rig sends its channels in much the same
+                # order every time, and the one that held this frame back will hold the next
+                # ones back as well (the verdict does not depend on the order)
+                self._waited = (channel, *(c for c in waited if c != channel))
+            return False
+        return True
+
+    def _waited_channels(self) -> tuple[str, ...]:
+        """The channels a frame may wait for: ``wait_for``, else those seen and expected."""
+        channels: Iterable[str]
         if self.wait_for is not None:
-            channels: Iterable[str] = self.wait_for
+            channels = self.wait_for
         elif len(self._times) > len(self.expected):
             channels = self._times.keys()
         else:
             channels = {*self._times, *self.expected}
-        for channel in channels:
-            if channel == self.trigger:
-                continue
-            times = self._times.get(channel)
-            if not times:
-                if self._first_t is not None and t - self._first_t > self.stale_timeout:
-                    continue  # never seen in a while: the rig does not send it
-                return False
-            newest = times[-1]
-            if newest >= t - _SAME_TIME:
-                continue
-            if newest >= self._last_frame_t - _SAME_TIME and t - newest <= self.stale_timeout:
-                return False  # it kept pace so far: its sample for t is on the way
-        return True
+        return tuple(channel for channel in channels if channel != self.trigger)
 
     def _emit(self) -> Frame:
         pending = self._pending
@@ -269,17 +287,22 @@ class Aligner:
         values: dict[str, float] = {self.trigger: pending.value}
         ages: dict[str, float] = {self.trigger: 0.0}
         stale: list[str] = []
+        # once per frame and channel: the loop's constants in locals
+        trigger, timeout, held = self.trigger, self.stale_timeout, self._values
+        until = t + _SAME_TIME
         for channel, times in self._times.items():
-            if channel == self.trigger:
+            if channel == trigger:
                 continue
-            index = bisect.bisect_right(times, t + _SAME_TIME) - 1
+            # the usual case, nothing newer than t held: the newest sample, without a search
+            index = (len(times) - 1 if times[-1] <= until
+                     else bisect.bisect_right(times, until) - 1)
             if index < 0:
                 index = 0  # only newer data: the nearest one after t
             age = t - times[index]
-            if abs(age) > self.stale_timeout:
+            if abs(age) > timeout:
                 stale.append(channel)
                 continue
-            values[channel] = self._values[channel][index]
+            values[channel] = held[channel][index]
             ages[channel] = age
         reported, self._reported = self._reported, ()
         return Frame(t=t, log_time_ns=pending.log_time_ns, values=values, ages=ages,

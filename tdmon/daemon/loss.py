@@ -60,6 +60,18 @@ class LossDetector:
             alarm = self._check_seq(sample)
             if alarm is not None:
                 alarms.append(alarm)
+        # the usual sample, the next of a known channel without a gap, without a method call
+        # (once per sample)
+        state = self._sampling.get(sample.channel)
+        if state is not None and not state.rebase and state.median is not None:
+            interval = sample.t - state.last_t
+            if (0 < interval <= GAP_FACTOR * state.median
+                    and state.since_median + 1 < INTERVALS_KEPT // 4):
+                # what _check_sampling does with it: no gap, no new median yet
+                state.intervals.append(interval)
+                state.last_t = sample.t
+                state.since_median += 1
+                return alarms
         alarm = self._check_sampling(sample)
         if alarm is not None:
             alarms.append(alarm)

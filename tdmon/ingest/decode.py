@@ -41,10 +41,16 @@ _NUMBER = (int, float)
 
 #: The decoder ``json.loads`` uses (default settings), for its faster ``raw_decode``.
 _JSON = json.JSONDecoder()
-_NOT_PLAIN = object()  # what `_plain_json_object` returns when json.loads must look
-#: Payload fields whose type could differ between orjson and json (integers beyond 64 bits).
-_NUMERIC_KEYS = ("t", "value", "seq")
+_NOT_PLAIN = object()  # no object yet: the next, slower parser must look
+#: Payload fields whose type could differ between orjson and json (integers beyond 64 bits):
+#: ``t``, ``value`` and ``seq`` (see _beyond_int64).
 _INT64 = 2.0**63
+
+#: What :meth:`Decoder.decode` needs of a topic's channel: its name, SI unit, the configured
+#: unit's factor (None: none configured), the cache of payload units' factors, its bounds
+#: [SI] (None: none) and the well's limit with its reason (depth channels; else None).
+_Route = tuple[str, str, "tuple[float, float] | None", dict[str, tuple[float, float]],
+               "float | None", "float | None", "tuple[float, str] | None"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +116,12 @@ class Decoder:
             else:
                 # a bad configured unit is a configuration error, raised now and not per message
                 self._default_factor[spec.channel] = conversion(spec.unit, target)
+        # per topic, what decode needs of its channel in one lookup (once per message)
+        self._routes: dict[str, _Route] = {
+            topic: (spec.channel, CHANNEL_UNITS[spec.channel][1],
+                    self._default_factor[spec.channel], self._factors[spec.channel],
+                    spec.minimum, spec.maximum, self._beyond_well.get(spec.channel))
+            for topic, spec in self._by_topic.items()}
 
     @property
     def topics(self) -> list[str]:
@@ -118,45 +130,44 @@ class Decoder:
 
     def decode(self, raw: RawMessage) -> Sample | Rejected:
         """Decode one message (see :func:`parse_payload` for the rules)."""
-        spec = self._by_topic.get(raw.topic)
-        if spec is None:
+        route = self._routes.get(raw.topic)
+        if route is None:
             return _reject(raw, _source_error(raw) or f"unknown topic '{_clip(raw.topic)}'")
-        if len(raw.payload) > self.max_payload_bytes:
+        payload = raw.payload
+        if len(payload) > self.max_payload_bytes:
             return _reject(
-                raw, f"payload too large ({len(raw.payload)} > {self.max_payload_bytes} bytes)"
+                raw, f"payload too large ({len(payload)} > {self.max_payload_bytes} bytes)"
             )
-        parsed = parse_payload_seq(raw.payload)
+        parsed = parse_payload_seq(payload)
         if isinstance(parsed, str):
             return _reject(raw, parsed)
         t, value, unit, seq = parsed
-        if self._earliest is not None and t < self._earliest:
+        earliest = self._earliest
+        if earliest is not None and t < earliest:
             return _reject(raw, f"t before the earliest accepted time ({_utc(t)} < "
                                 f"{self._earliest_text}: a rig clock that was never set)")
-        channel = spec.channel
+        channel, si_unit, default, factors, minimum, maximum, beyond = route
         # the usual case, a unit seen before or the configured one, without a method call
-        factor = (self._default_factor[channel] if unit is None
-                  else self._factors[channel].get(unit))
+        factor = default if unit is None else factors.get(unit)
         if factor is None:
             looked_up = self._factor(channel, unit)
             if isinstance(looked_up, str):
                 return _reject(raw, looked_up)
             factor = looked_up
-        scale, offset = factor
-        si_value = value * scale + offset
+        si_value = value * factor[0] + factor[1]
         if not math.isfinite(si_value) or abs(si_value) > ABS_VALUE_MAX:
             return _reject(raw, f"value {value!r} out of range after unit conversion")
-        if spec.minimum is not None and si_value < spec.minimum:
-            return _reject(raw, f"value {si_value:g} below the {spec.channel} minimum "
-                                f"{spec.minimum:g} {CHANNEL_UNITS[spec.channel][1]}")
-        if spec.maximum is not None and si_value > spec.maximum:
-            return _reject(raw, f"value {si_value:g} above the {spec.channel} maximum "
-                                f"{spec.maximum:g} {CHANNEL_UNITS[spec.channel][1]}")
-        beyond = self._beyond_well.get(channel)
+        if minimum is not None and si_value < minimum:
+            return _reject(raw, f"value {si_value:g} below the {channel} minimum "
+                                f"{minimum:g} {si_unit}")
+        if maximum is not None and si_value > maximum:
+            return _reject(raw, f"value {si_value:g} above the {channel} maximum "
+                                f"{maximum:g} {si_unit}")
         if beyond is not None and si_value > beyond[0]:
             return _reject(raw, f"beyond the well: {channel} {si_value:g} m > {beyond[1]}")
         # positional: channel, t, value, source, topic, unit, receive_time
-        return Sample(channel, t, si_value, raw.source, raw.topic, CHANNEL_UNITS[channel][1],
-                      raw.receive_time, seq)
+        return Sample(channel, t, si_value, raw.source, raw.topic, si_unit, raw.receive_time,
+                      seq)
 
     def _factor(self, channel: str, unit: str | None) -> tuple[float, float] | str:
         if unit is None:
@@ -201,7 +212,17 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     message counter per topic, is a non-negative integer or None (anything else is ignored, never
     a rejection: the sample is good without it).
     """
-    obj = _orjson_object(payload)
+    # The usual payload, a JSON object, parsed by orjson (~4x faster than ``json``); only
+    # where the two agree: anything orjson refuses (invalid UTF-8, NaN, lone surrogates,
+    # errors of any kind) and any object where it may have read a number otherwise is left to
+    # the ``json`` path, whose results and messages stay the decoder's.
+    try:
+        obj = orjson.loads(payload)
+    except orjson.JSONDecodeError:
+        obj = _NOT_PLAIN
+    else:
+        if type(obj) is not dict or _beyond_int64(obj):
+            obj = _NOT_PLAIN
     if obj is _NOT_PLAIN:
         try:
             # decode explicitly: json.loads on bytes would also guess UTF-16/32 from the
@@ -249,24 +270,15 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     return t, value, unit, seq
 
 
-def _orjson_object(payload: bytes) -> object:
-    """The usual payload, a JSON object, parsed by orjson (~4x faster than ``json``), else
-    ``_NOT_PLAIN``. Only where the two agree: anything orjson refuses (invalid UTF-8, NaN,
-    lone surrogates, errors of any kind) and any object whose ``t``, ``value`` or ``seq`` is
-    a float beyond 2**63 in magnitude (orjson turns an integer too large for 64 bits into a
-    float, ``json`` keeps it an integer) is left to the ``json`` path, whose results and
-    messages stay the decoder's."""
-    try:
-        obj = orjson.loads(payload)
-    except orjson.JSONDecodeError:
-        return _NOT_PLAIN
-    if type(obj) is not dict:
-        return _NOT_PLAIN
-    for key in _NUMERIC_KEYS:
-        number = obj.get(key)
-        if type(number) is float and not -_INT64 < number < _INT64:
-            return _NOT_PLAIN
-    return obj
+def _beyond_int64(obj: dict[str, object]) -> bool:
+    """Whether orjson may have read one of the numbers that matter (``t``, ``value``, ``seq``)
+    otherwise than ``json``: a float beyond 2**63 in magnitude, which orjson makes of an
+    integer too large for 64 bits (``json`` keeps it an integer)."""
+    # the three keys written out: once per message, a loop over them cost a third of this
+    t, value, seq = obj.get("t"), obj.get("value"), obj.get("seq")
+    return ((type(t) is float and not -_INT64 < t < _INT64)
+            or (type(value) is float and not -_INT64 < value < _INT64)
+            or (type(seq) is float and not -_INT64 < seq < _INT64))
 
 
 def _plain_json_object(text: str) -> object:

@@ -18,6 +18,7 @@ References
 from __future__ import annotations
 
 import inspect
+import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -49,15 +50,17 @@ Array = NDArray[np.float64]
 
 def _temperature(temperature: ArrayLike) -> Array:
     values = np.asarray(temperature, dtype=np.float64)
-    if not np.all(np.isfinite(values)):
+    # the array methods, not np.all/np.any: these checks run for every friction case the
+    # calibration evaluates, and the functions' dispatch costs more than the check
+    if not np.isfinite(values).all():
         raise ModelError("temperature contains non-finite values")
     return values
 
 
 def _finite(mu: Array, family: str, temperature: Array) -> Array:
-    bad = ~np.isfinite(mu)
-    if np.any(bad):
-        where = np.atleast_1d(temperature)[np.atleast_1d(bad)][0]
+    finite = np.isfinite(mu)
+    if not finite.all():
+        where = np.atleast_1d(temperature)[np.atleast_1d(~finite)][0]
         raise ModelError(f"friction model '{family}' is not defined at {where} degC")
     return mu
 
@@ -228,6 +231,13 @@ FAMILIES: Mapping[str, Callable[..., Array]] = MappingProxyType({
 })
 """mu(T) families by name; each takes ``(temperature, **coefficients)``."""
 
+#: The coefficient names of each family but the polynomial's (whose names are a0, a1, ...),
+#: read once from the functions' signatures: a FrictionModel is built for every calibration
+#: step, and ``inspect.signature`` costs more than the rest of its checks together.
+_PARAMETERS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    name: tuple(inspect.signature(function).parameters)[1:]
+    for name, function in FAMILIES.items() if name != "polynomial"})
+
 
 @dataclass(frozen=True)
 class FrictionModel:
@@ -258,11 +268,11 @@ class FrictionModel:
         values: dict[str, float] = {}
         for name, value in self.coefficients.items():
             number = float(value)
-            if not np.isfinite(number):
+            if not math.isfinite(number):
                 raise ModelError(f"friction coefficient '{name}' must be finite, got {value}")
             values[name] = number
         if self.family != "polynomial":
-            parameters = list(inspect.signature(FAMILIES[self.family]).parameters)[1:]
+            parameters = _PARAMETERS[self.family]
             if set(values) != set(parameters):
                 raise ModelError(f"friction family '{self.family}' takes coefficients "
                                  f"{', '.join(parameters)}, got {', '.join(values) or 'none'}")

@@ -168,6 +168,56 @@ def test_iterated_ekf_converges_to_the_map_in_two_dimensions() -> None:
                         - solution.x).max()) > 1e-3
 
 
+def _full_iterated_update(prior: KalmanState, measured: float, linearise: object, *,
+                          iterations: int, gate: float | None,
+                          bounds: tuple[float, float] | None) -> tuple[KalmanState, bool]:
+    """The iterated EKF with a whole update (covariance too) at every iterate: what
+    iterated_update computed before it kept only the last iterate's covariance."""
+    estimate, posterior = prior.mean, prior
+    for _ in range(iterations):
+        lin = linearise(estimate)  # type: ignore[operator]
+        h = lin.jacobian
+        posterior = update(prior, measured, lin.predicted + float(h @ (prior.mean - estimate)),
+                           h, lin.noise_variance, bounds=bounds)
+        if posterior is prior:
+            return prior, False
+        if gate is not None and posterior.innovation**2 > gate**2 * posterior.innovation_variance:
+            return prior, False
+        estimate = posterior.mean
+    return posterior, True
+
+
+def test_iterated_update_is_the_whole_update_at_every_iterate_to_the_last_bit() -> None:
+    # 30 bins seen through a capstan-like nonlinear measurement, bounded, with and without a
+    # gate: the iterates before the last skip their covariance, nothing else may change
+    n = 30
+    p0 = _spd(n, 5, 0.01)
+    x0 = np.full(n, 0.25)
+    weights = np.linspace(0.2, 1.0, n) / 18.0  # the string's mean friction at the prior: 0.25
+
+    def linearise(x: Array) -> Linearisation:
+        friction = float(weights @ x)
+        value = 1e6 * math.exp(0.8 * friction)
+        return Linearisation(value, 0.8 * value * weights, 1e8 + (0.02 * value) ** 2)
+
+    outcomes = []
+    for measured, gate, iterations in [(1.25e6, None, 2), (1.28e6, 3.0, 3), (1.26e6, 3.0, 5),
+                                       (1e9, 3.0, 2), (1e9, 3.0, 1), (1.3e6, None, 1)]:
+        prior = KalmanState(x0, p0, updates=3)
+        got = iterated_update(prior, measured, linearise, iterations=iterations, gate=gate,
+                              bounds=(0.0, 1.0))
+        want, accepted = _full_iterated_update(prior, measured, linearise,
+                                               iterations=iterations, gate=gate,
+                                               bounds=(0.0, 1.0))
+        assert got.accepted == accepted
+        outcomes.append((got.accepted, got.gated))
+        assert np.array_equal(got.state.mean, want.mean)
+        assert np.array_equal(got.state.covariance, want.covariance)
+        assert (got.state.innovation, got.state.innovation_variance, got.state.updates) == (
+            want.innovation, want.innovation_variance, want.updates)
+    assert outcomes.count((False, True)) == 2 and outcomes.count((True, False)) == 4
+
+
 def _linear(value: float) -> Linearisation:
     return Linearisation(value, np.array([1.0]), 1.0)
 
@@ -218,3 +268,16 @@ def test_noise_with_model_error() -> None:
     assert noise_with_model_error(3.0, 0.1, h, x) == pytest.approx(25.0, rel=1e-15)
     assert noise_with_model_error(3.0, 0.0, h, x) == 9.0
     assert noise_with_model_error(0.0, 0.0, h, x) == 1e-12
+
+
+def test_predict_adds_the_drift_to_the_diagonal_to_the_last_bit() -> None:
+    # P + diag(q^2) as NumPy adds the two matrices, a -0.0 off the diagonal included
+    for n, q in [(1, 0.01), (3, np.array([0.0, 0.01, 0.02])), (141, 0.003)]:
+        p = _spd(n, n, 0.01)
+        p[0, n - 1] = -0.0
+        state = KalmanState(np.zeros(n), p)
+        drifted = predict(state, q).covariance
+        expected = p + np.diag(np.broadcast_to(np.asarray(q, dtype=np.float64), (n,)) ** 2)
+        assert np.array_equal(drifted, expected)
+        assert np.array_equal(np.signbit(drifted), np.signbit(expected))
+        assert state.covariance is p and p[0, n - 1] == 0.0  # the prior is left alone

@@ -82,6 +82,23 @@ class TestAligner:
         [frame] = aligner.push(s("hookload", 1.0, 1.0), 0.0)  # bit depth already past 1.0
         assert frame.values["bit_depth"] == 100.0  # the value at or before t, not after
 
+    def test_frame_comes_with_the_last_channel_whatever_the_order(self) -> None:
+        # the aligner looks first at the channel that held the last frame back; the order the
+        # channels come in changes from frame to frame here, and each frame must still come
+        # exactly with the last of its channels, never before
+        others = ["bit_depth", "torque", "rpm", "spp"]
+        orders = [others, others[::-1], ["rpm", "spp", "bit_depth", "torque"], others]
+        aligner = Aligner(expected=["hookload", *others])
+        emitted: list[float] = []
+        for k, order in enumerate(orders * 3):
+            t = float(k)
+            emitted += [f.t for f in aligner.push(s("hookload", t, 1e6), t)]
+            for index, channel in enumerate(order):
+                frames = aligner.push(s(channel, t, 1.0), t)
+                assert [f.t for f in frames] == ([t] if index == len(order) - 1 else [])
+                emitted += [f.t for f in frames]
+        assert emitted == [float(k) for k in range(12)]
+
 
 def _rig_frames(rows: list[tuple[float, dict[str, float]]]) -> list[Frame]:
     return [Frame(t, 0, values, {}) for t, values in rows]

@@ -21,6 +21,7 @@ from tdmon.calib.joint import initial_joint
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
+from tdmon.calib.rigstate import with_block_weight
 from tdmon.calib.windows import Window
 from tdmon.daemon.pipeline import Emit, Frame
 from tdmon.daemon.steps.rig_state import RigStateStep
@@ -74,7 +75,7 @@ class CalibrationStep:
             learnt = self.estimator.learnt_block_weight(self.state)
             thresholds = self.rig_state.thresholds
             if learnt is not None and thresholds.block_weight != learnt:
-                self.rig_state.thresholds = replace(thresholds, block_weight=learnt)
+                self.rig_state.thresholds = with_block_weight(thresholds, learnt)
         if outputs:
             _send(outputs, emit)
 
