@@ -25,11 +25,11 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from statistics import median
 from typing import Any
 
 import numpy as np
 
-from tdmon.calib.median import median
 from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads

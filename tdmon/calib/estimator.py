@@ -33,6 +33,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from statistics import median
 from typing import Any
 
 import numpy as np
@@ -52,7 +53,6 @@ from tdmon.calib.estimator_state import (
     put,
 )
 from tdmon.calib.joint import initial_joint, joint_fields, update_joint
-from tdmon.calib.median import median
 from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile

@@ -18,8 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-
-from tdmon.calib.median import median
+from statistics import median
 
 __all__ = ["MIN_WINDOWS", "Scatter", "add_window", "scatter_std"]
 
@@ -53,7 +52,7 @@ def scatter_std(scatter: Scatter | None, prior: float) -> float:
     if scatter is None or len(scatter.mu) < MIN_WINDOWS:
         return prior
     # in Python, once per window and operation: NumPy's calls cost more than these few
-    # values (the same differences, squares and medians, tdmon.calib.median)
+    # values (the same differences, squares and medians, statistics.median)
     s = 1.4826 * median([abs(b - a) for a, b in itertools.pairwise(scatter.mu)]) / math.sqrt(2.0)
     measurement = median([se * se for se in scatter.se])
     return math.sqrt(max(0.0, s * s - measurement))

@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import median
 
 import numpy as np
 
-from tdmon.calib.median import median
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
@@ -108,7 +108,8 @@ class WindowAccumulator:
 
 
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
-    # medians in Python (tdmon.calib.median): NumPy's call costs more than a window's sort
+    # medians with the standard library, np.median's to the last bit for finite floats
+    # (tests/calib/test_median.py): NumPy's call costs more than a window's sort
     middle = median(values.tolist())
     deviation = np.abs(values - middle)
     mad = 1.4826 * median(deviation.tolist())

@@ -1,17 +1,17 @@
-"""The calibration's medians, means and spreads in Python are NumPy's to the last bit (recorded
-numbers rest on it)."""
+"""The calibration's medians (the standard library's), means and spreads in Python are NumPy's
+to the last bit (recorded numbers rest on it)."""
 
 from __future__ import annotations
 
 import math
+from statistics import median
 
 import numpy as np
 
-from tdmon.calib.median import median
 from tdmon.calib.scatter import Scatter, scatter_std
 
 
-def test_median_is_numpys_to_the_last_bit() -> None:
+def test_the_standard_librarys_median_is_numpys_to_the_last_bit() -> None:
     # odd and even counts, hook loads and their absolute deviations (many ties near zero)
     rng = np.random.default_rng(7)
     for n in (1, 2, 3, 4, 7, 8, 119, 120, 400):
