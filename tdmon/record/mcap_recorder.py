@@ -69,9 +69,9 @@ FILE_PATTERN: Final = re.compile(r"^(?P<prefix>.+)_(?P<seq>\d{5,})_(?P<start>\d{
 BATCH_SIZE: Final = 256
 
 #: Uncompressed bytes per MCAP chunk by default. The writer fills a chunk, then compresses it:
-#: at 1 MiB the chunk stays in a core's second-level cache while the pipeline runs beside it
-#: (measured in a replay: the recorder's share of the daemon 14-18 % against 17-25 % with
-#: 4 MiB chunks, files 1-2 % larger; docs/benchmarks.md).
+#: at 1 MiB the chunk fits a core's second-level cache beside the pipeline (with another job
+#: on the machine the recorder's share was 14-18 % against 17-25 % with 4 MiB chunks; on a
+#: quiet machine the two are within the noise; files 1-2 % larger: docs/benchmarks.md).
 CHUNK_SIZE: Final = 1 * MIB
 
 #: Chunk compression by name (``compression=`` of :class:`McapRecorder`).
