@@ -288,18 +288,13 @@ class FleetPipeline:
     def process_burst(self, raws: Sequence[RawMessage]) -> None:
         """``process`` for each message, each rig's share in one burst of its pipeline (the
         rigs are independent: each keeps its own messages' order)."""
-        shares: dict[int, tuple[Pipeline, list[RawMessage]]] = {}
+        shares: dict[Pipeline, list[RawMessage]] = {}
         pipeline_of = self._pipeline_of
         for raw in raws:
             pipeline = pipeline_of(raw.topic)
-            if pipeline is None:
-                continue
-            share = shares.get(id(pipeline))
-            if share is None:
-                shares[id(pipeline)] = (pipeline, [raw])
-            else:
-                share[1].append(raw)
-        for pipeline, messages in shares.values():
+            if pipeline is not None:
+                shares.setdefault(pipeline, []).append(raw)
+        for pipeline, messages in shares.items():
             pipeline.process_burst(messages)
 
     def tick(self) -> None:

@@ -225,9 +225,7 @@ class Pipeline:
         ``write_many`` per sink and topic where the sink has it; docs/daemon.md, "Bursts")."""
         if not raws:
             return
-        sinks = self._routes.get("/tdmon/raw")
-        if sinks is None:
-            sinks = self._sinks_for("/tdmon/raw")
+        sinks = self._sinks_for("/tdmon/raw")
         if sinks:
             limit = self._recorded_payload_bytes
             log_times = [int(raw.receive_time * 1e9) for raw in raws]
@@ -241,10 +239,8 @@ class Pipeline:
                 process(raw, held)
         finally:
             if held.messages:
-                sinks = self._routes.get("/tdmon/sample")
-                if sinks is None:
-                    sinks = self._sinks_for("/tdmon/sample")
-                self._write_many(sinks, "/tdmon/sample", held.log_times, held.messages)
+                self._write_many(self._sinks_for("/tdmon/sample"), "/tdmon/sample",
+                                 held.log_times, held.messages)
 
     def _process(self, raw: RawMessage, held: _HeldSamples | None) -> Sample | Rejected:
         """Everything after recording the raw input; a sample message goes to ``held`` when

@@ -37,6 +37,9 @@ class Sink(Protocol):
     The pipeline hands each sink the dict it built (a fresh one per message); a sink that does
     network I/O queues inside ``write``. A sink that only wants some topics may say so with a
     ``topics`` attribute (a collection of topics): messages nobody wants are then not built.
+    A sink may also have ``write_many(topic, log_times_ns, messages)`` for several messages of
+    one topic at once; the daemon then hands it a burst's raw input and samples that way
+    (docs/daemon.md, "Bursts"), and one ``write`` per message otherwise.
     """
 
     def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
