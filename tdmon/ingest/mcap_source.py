@@ -14,8 +14,10 @@ from __future__ import annotations
 import asyncio
 import base64
 import binascii
+import io
 import json
 import logging
+import struct
 import time
 from collections.abc import AsyncIterator, Iterable, Iterator
 from itertools import islice
@@ -24,10 +26,12 @@ from types import TracebackType
 from typing import IO
 
 import orjson
+import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, McapRecord, Message
+from mcap.records import Channel, Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.summary import Summary
 
@@ -109,19 +113,85 @@ def _all_in_indexed_chunks(summary: Summary) -> bool:
     return indexed == statistics.message_count
 
 
-def _indexed_records(stream: IO[bytes], summary: Summary) -> Iterator[McapRecord]:
-    """The records of each chunk, chunk by chunk in file order (the summary's channels first).
+#: A record's opcode and length; a message record's channel id, sequence, log and publish time.
+_RECORD = struct.Struct("<BQ")
+_MESSAGE = struct.Struct("<HIQQ")
 
-    The ``mcap`` package's own chunk parsing (``Chunk.read``, ``breakup_chunk``), reached
-    through the summary's chunk indexes as its seeking reader does, but in file order and one
-    chunk at a time (that reader's file-order mode decodes every chunk before the first
-    message). It skips the message-index records after each chunk, which the stream reader
-    parses entry by entry in Python: a third less time reading a replay.
+
+def _chunk_data(chunk: Chunk) -> bytes | None:
+    """A chunk's records, decompressed (None: a compression this reader leaves to ``mcap``)."""
+    if chunk.compression == "zstd":
+        return zstandard.decompress(chunk.data, chunk.uncompressed_size)
+    if chunk.compression == "":
+        return chunk.data
+    return None
+
+
+def _chunk_records(data: bytes) -> Iterator[Channel | tuple[int, int, bytes]]:
+    """The channel records and messages of a chunk's decompressed records, messages as
+    ``(channel id, log time [ns], data)``.
+
+    The message record's layout (MCAP specification: opcode 0x05, a 64-bit length, then
+    channel id u16, sequence u32, log time u64, publish time u64 and the data) read with one
+    ``struct`` call, where ``breakup_chunk`` builds a ``Message`` from a field-by-field
+    stream: about five times faster on a replay's small messages. Other records (channel
+    records, rare in chunks) are read by the ``mcap`` package; the rest are skipped, as there.
+    A record that runs past the chunk's end raises ``McapError``.
+    """
+    offset, end = 0, len(data)
+    record, message = _RECORD.unpack_from, _MESSAGE.unpack_from
+    try:
+        while offset < end:
+            opcode, length = record(data, offset)
+            start = offset + 9
+            offset = start + length
+            if offset > end:
+                raise McapError(f"a chunk's record runs {offset - end} bytes past its end")
+            if opcode == Opcode.MESSAGE:
+                channel_id, _, log_time, _ = message(data, start)
+                yield channel_id, log_time, data[start + 22:offset]
+            elif opcode == Opcode.CHANNEL:
+                yield Channel.read(ReadDataStream(io.BytesIO(data[start:offset])))
+    except struct.error as exc:
+        raise McapError(f"a chunk's record is cut short: {exc}") from exc
+
+
+def _indexed_messages(stream: IO[bytes], summary: Summary
+                      ) -> Iterator[Channel | tuple[int, int, bytes]]:
+    """The channels and messages of the file, chunk by chunk in file order (the summary's
+    channels first); messages as ``(channel id, log time [ns], data)``.
+
+    Each chunk is reached through the summary's chunk indexes, as the ``mcap`` package's
+    seeking reader does, but in file order and one chunk at a time (that reader's file-order
+    mode decodes every chunk before the first message), and the message-index records after
+    each chunk are skipped (the stream reader parses them entry by entry). The chunk's
+    records are read by :func:`_chunk_records`; a chunk compressed otherwise than zstd or
+    not at all goes through the package's ``breakup_chunk``.
     """
     yield from summary.channels.values()
     for index in sorted(summary.chunk_indexes, key=lambda chunk: chunk.chunk_start_offset):
         stream.seek(index.chunk_start_offset + 1 + 8)  # past the opcode and record length
-        yield from breakup_chunk(Chunk.read(ReadDataStream(stream)))
+        chunk = Chunk.read(ReadDataStream(stream))
+        data = _chunk_data(chunk)
+        if data is not None:
+            yield from _chunk_records(data)
+            continue
+        for item in breakup_chunk(chunk):
+            if isinstance(item, Message):
+                yield item.channel_id, item.log_time, item.data
+            elif isinstance(item, Channel):
+                yield item
+
+
+def _streamed_messages(stream: IO[bytes]) -> Iterator[Channel | tuple[int, int, bytes]]:
+    """Every channel and message record in turn (``mcap``'s stream reader), messages as
+    :func:`_indexed_messages` gives them: for a file without a summary (a killed writer) or
+    with messages outside indexed chunks."""
+    for record in StreamReader(stream, skip_magic=False).records:
+        if isinstance(record, Message):
+            yield record.channel_id, record.log_time, record.data
+        elif isinstance(record, Channel):
+            yield record
 
 
 def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
@@ -130,33 +200,31 @@ def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
     summary = _summary(stream)
     has_raw = summary is not None and any(
         channel.topic == RAW_TOPIC for channel in summary.channels.values())
-    records: Iterable[McapRecord]
+    records: Iterable[Channel | tuple[int, int, bytes]]
     if summary is not None and _all_in_indexed_chunks(summary):
-        records = _indexed_records(stream, summary)
+        records = _indexed_messages(stream, summary)
     else:
-        # no summary (a killed writer) or messages outside indexed chunks: every record in
-        # turn; a channel's record comes with its first message, so other topics
-        # (``/truth/...``) may come before the first /tdmon/raw one
-        records = StreamReader(stream, skip_magic=False).records
+        # a channel's record comes with its first message, so other topics (``/truth/...``)
+        # may come before the first /tdmon/raw one
+        records = _streamed_messages(stream)
     truncated = 0
     try:
         for record in records:
-            if isinstance(record, Channel):
-                channels[record.id] = record.topic
-                has_raw = has_raw or record.topic == RAW_TOPIC
-            elif isinstance(record, Message):
-                topic = channels.get(record.channel_id)
-                if topic is None:
-                    continue
-                if has_raw and topic != RAW_TOPIC:
+            if type(record) is tuple:
+                channel_id, log_time, data = record
+                topic = channels.get(channel_id)
+                if topic is None or (has_raw and topic != RAW_TOPIC):
                     continue
                 try:
-                    raw = raw_from_record(topic, record.data, record.log_time)
+                    raw = raw_from_record(topic, data, log_time)
                 except _Truncated:
                     truncated += 1
                     continue
                 if raw is not None:
-                    yield record.log_time, raw
+                    yield log_time, raw
+            elif isinstance(record, Channel):
+                channels[record.id] = record.topic
+                has_raw = has_raw or record.topic == RAW_TOPIC
     except (McapError, EOFError, ValueError) as exc:
         # a truncated file ends in the middle of a record: what came before is good
         if "magic" in str(exc).lower() and not channels:

@@ -7,8 +7,9 @@ import json
 from pathlib import Path
 
 import pytest
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.writer import IndexType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 from tdmon.ingest import mcap_source
 from tdmon.ingest.mcap_source import _all_in_indexed_chunks, iter_raw
@@ -17,12 +18,14 @@ from tdmon.ingest.types import RawMessage, raw_message
 T0 = 1_700_000_000_000_000_000
 
 
-def _write(path: Path, *, chunking: bool, chunk_size: int = 2000, index: bool = True) -> None:
+def _write(path: Path, *, chunking: bool, chunk_size: int = 2000, index: bool = True,
+           compression: CompressionType = CompressionType.ZSTD) -> None:
     """Raw input (every third message from an earlier receive time: file order is not log
     time order) with a derived topic between, in small chunks so that there are several."""
     with path.open("wb") as stream:
         kwargs = {} if index else {"index_types": IndexType.CHUNK}
-        writer = Writer(stream, use_chunking=chunking, chunk_size=chunk_size, **kwargs)
+        writer = Writer(stream, use_chunking=chunking, chunk_size=chunk_size,
+                        compression=compression, **kwargs)
         writer.start()
         schema = writer.register_schema("any", "jsonschema", b"{}")
         derived = writer.register_channel("/truth/hookload", "json", schema)
@@ -83,3 +86,63 @@ def test_a_file_cut_short_is_read_up_to_the_cut(tmp_path: Path) -> None:
         read = list(iter_raw(stream))
     assert 0 < len(read) < 300
     assert read == _read(path)[: len(read)]
+
+
+def _library_messages(path: Path) -> list[tuple[int, int, bytes]]:
+    """(channel id, log time, data) of every message, in file order, by the mcap package."""
+    with path.open("rb") as stream:
+        return [(message.channel_id, message.log_time, message.data)
+                for _, _, message in make_reader(stream).iter_messages(log_time_order=False)]
+
+
+def _own_messages(path: Path) -> list[tuple[int, int, bytes]]:
+    with path.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+        assert summary is not None and _all_in_indexed_chunks(summary)
+        stream.seek(0)
+        return [item for item in mcap_source._indexed_messages(stream, summary)
+                if isinstance(item, tuple)]
+
+
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4,
+                                         CompressionType.NONE])
+def test_the_chunk_reader_gives_the_library_s_messages(tmp_path: Path,
+                                                       compression: CompressionType) -> None:
+    # the struct-based reading of zstd and uncompressed chunks, and lz4 through the package
+    path = tmp_path / "chunked.mcap"
+    _write(path, chunking=True, compression=compression)
+    own = _own_messages(path)
+    assert len(own) == 600
+    assert own == _library_messages(path)
+
+
+def test_the_chunk_reader_reads_the_recorder_s_files(tmp_path: Path) -> None:
+    # foxglove-sdk's writer (the recorder's), and every bundled replay
+    from tdmon.record.mcap_recorder import McapRecorder
+
+    path = tmp_path / "recorded.mcap"
+    with McapRecorder(path=path, recover=False) as recorder:
+        for i in range(5000):
+            recorder.write("/tdmon/sample", T0 + i * 10**9,
+                           {"channel": "hookload", "t": T0 / 1e9 + i, "value": 1e6 + i,
+                            "unit": "N", "source": "mqtt", "topic": "rig/F4/hookload"})
+    assert len(_own_messages(path)) == 5000
+    assert _own_messages(path) == _library_messages(path)
+    replays = sorted((Path(__file__).parents[2] / "replays").glob("*.mcap"))
+    assert replays
+    for replay in replays:
+        assert _own_messages(replay) == _library_messages(replay), replay
+
+
+def test_a_record_running_past_its_chunk_stops_the_reading_there() -> None:
+    good = mcap_source._RECORD.pack(5, 22 + 3) + mcap_source._MESSAGE.pack(7, 0, 11, 11) + b"abc"
+    # a second message whose length says more than the chunk holds
+    bad = mcap_source._RECORD.pack(5, 500) + mcap_source._MESSAGE.pack(7, 1, 12, 12) + b"x"
+    records = mcap_source._chunk_records(good + bad)
+    assert next(records) == (7, 11, b"abc")
+    with pytest.raises(McapError, match="past its end"):
+        next(records)
+    cut = mcap_source._chunk_records(good + bad[:5])  # not even a whole record header
+    assert next(cut) == (7, 11, b"abc")
+    with pytest.raises(McapError, match="cut short"):
+        next(cut)
