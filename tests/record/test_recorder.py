@@ -213,3 +213,9 @@ def test_non_finite_walk_of_long_lists_and_enums() -> None:
     # a long list of numpy values: the json module decides
     assert _has_nonfinite({"x": list(np.array([1.0] * 20 + [np.nan]))})
     assert not _has_nonfinite({"x": list(np.array([1.0] * 21))})
+    # a long list of texts and nulls is passed over by its element types; a number among
+    # them, a container or an enum (a str subclass) sends it to the walk
+    assert not _has_nonfinite({"reasons": ["no window used yet", None] * 20 + [EstimateKind.JOINT]})
+    for odd in (math.nan, [math.inf], {"x": -math.inf}):
+        assert _has_nonfinite({"reasons": ["no window used yet", None] * 20 + [odd]})
+    assert not _has_nonfinite({"reasons": ["no window used yet"] * 40 + [1.5, [2.0]]})
