@@ -33,7 +33,7 @@ import numpy as np
 from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads
-from tdmon.model.well import Well
+from tdmon.model.well import HoleGrid, Well
 from tdmon.vocabulary import AlarmKind, Operation, Severity
 
 __all__ = [
@@ -138,8 +138,8 @@ def update_band_trend(state: BandTrendState, t: float, measured: float, low: flo
 
 # -- limits ---------------------------------------------------------------------------------
 
-def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: float = 0.8
-                 ) -> list[Alarm]:
+def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: float = 0.8,
+                 grid: HoleGrid | None = None) -> list[Alarm]:
     """Loads of ``operation`` nearing or beyond the tensile, buckling and make-up limits.
 
     Parameters
@@ -149,6 +149,7 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
     operation : which operation's profile to check (``pick_up``, ``slack_off``, ``rotating``)
     t : time [s]
     warn : utilisation that raises a warning [-]
+    grid : ``hole_grid(well)``, when the caller has it (see `operating_window`)
 
     Returns
     -------
@@ -161,7 +162,7 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
     compression with the sinusoidal and helical buckling loads (eq 30, 31); torque with the
     connections' make-up torque.
     """
-    window = operating_window(well, loads, torque_operation=Operation.ROTATING)
+    window = operating_window(well, loads, torque_operation=Operation.ROTATING, grid=grid)
     force = loads.axial_force[operation]
     torque = np.abs(loads.torque[operation])
     checks = (

@@ -426,7 +426,7 @@ class FrictionEstimator:
             loads = self.model.loads(window.bit_depth, self._friction_of(w, estimate),
                                      method=self.settings.method)
             alarms = limit_alarms(self.model.well, loads, estimate.operation, window.t_end,
-                                  warn=self.settings.limit_warn)
+                                  warn=self.settings.limit_warn, grid=self.model.grid)
         except (ModelError, ValueError):
             return w  # the model does not reach this depth: no check, the memory stays
         out.extend(_alarm(a) for a in alarms if a.kind not in w.active_limits)

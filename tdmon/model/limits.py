@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from tdmon.model.string import GRAVITY
 from tdmon.model.survey import interpolate_survey
 from tdmon.model.torque_drag import Loads
-from tdmon.model.well import Well, hole_grid
+from tdmon.model.well import HoleGrid, Well, hole_grid
 from tdmon.vocabulary import Operation
 
 __all__ = [
@@ -245,7 +245,7 @@ class _NodeProperties:
     sinusoidal: FloatArray
 
 
-def _node_properties(well: Well, loads: Loads) -> _NodeProperties:
+def _node_properties(well: Well, loads: Loads, grid: HoleGrid | None) -> _NodeProperties:
     components = well.string.components
     index = loads.component
 
@@ -253,7 +253,8 @@ def _node_properties(well: Well, loads: Loads) -> _NodeProperties:
         array = np.array([np.nan if v is None else v for v in values], dtype=np.float64)
         return np.asarray(array[index])
 
-    grid = hole_grid(well)
+    if grid is None:
+        grid = hole_grid(well)
     element = np.clip(np.searchsorted(grid.md, loads.md, side="left") - 1, 0, grid.n_elements - 1)
     hole_diameter = grid.element_hole_diameter[element]
     weight = per_node([c.buoyed_weight_in(well.fluid.density, well.fluid.inside_density)
@@ -275,8 +276,8 @@ def _node_properties(well: Well, loads: Loads) -> _NodeProperties:
     )
 
 
-def operating_window(well: Well, loads: Loads, *,
-                     torque_operation: str = Operation.ROTATING) -> OperatingWindow:
+def operating_window(well: Well, loads: Loads, *, torque_operation: str = Operation.ROTATING,
+                     grid: HoleGrid | None = None) -> OperatingWindow:
     """Limit lines along the string at the bit depth of ``loads``.
 
     Parameters
@@ -284,12 +285,14 @@ def operating_window(well: Well, loads: Loads, *,
     well : the well (string properties, hole diameters, fluid, limit settings)
     loads : from `tdmon.model.torque_drag.torque_drag`; gives the nodes and the torque
     torque_operation : operation whose torque profile enters the combined limit
+    grid : ``hole_grid(well)`` when the caller has it (a `WellModel`'s ``grid``): building it
+        is half the cost of a call
 
     Returns
     -------
     OperatingWindow
     """
-    nodes = _node_properties(well, loads)
+    nodes = _node_properties(well, loads, grid)
     safety = well.limits.safety_factor
     return OperatingWindow(
         md=loads.md,
@@ -334,7 +337,7 @@ def check_limits(well: Well, loads: Loads) -> tuple[LimitFlag, ...]:
     -------
     tuple of LimitFlag, one per (limit, operation) crossed, empty when all is within limits
     """
-    nodes = _node_properties(well, loads)
+    nodes = _node_properties(well, loads, None)
     safety = well.limits.safety_factor
     inside = well.fluid.inside_density
     inside_density = well.fluid.density if inside is None else inside

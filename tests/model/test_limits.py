@@ -179,3 +179,17 @@ def test_no_flags_within_limits(example_71: Well) -> None:
     assert {f.limit for f in check_limits(well, torque_drag(well, TOTAL_DEPTH, 0.15,
                                                                wob=400e3))} >= {
         Limit.SINUSOIDAL_BUCKLING, Limit.HELICAL_BUCKLING}
+
+
+def test_operating_window_on_a_model_s_grid(example_71: Well) -> None:
+    # the hole grid a WellModel holds gives the limit lines that building it anew gives
+    from tdmon.model.torque_drag import WellModel
+
+    model = WellModel(example_71)
+    loads = model.loads(3000.0, np.full(model.n_elements, 0.25))
+    built = operating_window(example_71, loads)
+    given = operating_window(example_71, loads, grid=model.grid)
+    for name in ("tensile", "combined", "sinusoidal_buckling", "helical_buckling",
+                 "makeup_torque"):
+        np.testing.assert_array_equal(getattr(given, name), getattr(built, name))
+    assert built.tensile.shape == loads.md.shape and np.isfinite(built.sinusoidal_buckling).any()
