@@ -170,7 +170,9 @@ def test_write_many_records_what_write_does(tmp_path: Path) -> None:
         many.write_many("/tdmon/sample", times[:300], messages[:300])
         many.write("/tdmon/alarm", times[300], {"t": 1.0, "kind": "k", "severity": "info",
                                                 "message": "m", "value": math.nan})
-        many.write_many("/tdmon/sample", times[300:], messages[300:])
+        # a short list goes through the queue, a long one straight to the file: same order
+        many.write_many("/tdmon/sample", times[300:310], messages[300:310])
+        many.write_many("/tdmon/sample", times[310:], messages[310:])
         with pytest.raises(ValueError, match="2 log times for 1 messages"):
             many.write_many("/tdmon/sample", times[:2], messages[:1])
     [path_one] = one.stats.files
@@ -182,6 +184,19 @@ def test_write_many_records_what_write_does(tmp_path: Path) -> None:
     assert back_many[0].message == messages[0] and len(back_many) == 700
     assert many.stats.per_topic == {"/tdmon/sample": 700, "/tdmon/alarm": 1}
     assert many.stats.nonfinite_replaced == 1 and many.stats.lost == 0
+
+
+def test_a_message_that_is_not_json_leaves_its_list_s_others_recorded(tmp_path: Path) -> None:
+    messages: list[dict[str, Any]] = [{"t": float(i), "value": float(i)} for i in range(40)]
+    messages[13] = {"t": 13.0, "value": {1, 2}}  # a set: neither orjson nor json writes it
+    with McapRecorder(tmp_path, recover=False) as recorder:
+        recorder.write_many("/tdmon/sample", list(range(40)), messages)
+    assert recorder.stats.unencodable == 1 and recorder.stats.lost == 1
+    assert recorder.stats.per_topic == {"/tdmon/sample": 39}
+    [path] = recorder.stats.files
+    back = list(read_messages(path))
+    assert [m.log_time_ns for m in back] == [i for i in range(40) if i != 13]
+    assert [m.message for m in back] == [m for i, m in enumerate(messages) if i != 13]
 
 
 # -- sources handing lists over -------------------------------------------------------------
