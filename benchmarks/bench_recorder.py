@@ -233,14 +233,18 @@ def daemon_cost(recording: Path, config: DaemonConfig, repeat: int, label: str
     fast, slow, with_messages = rate(bare, 0), rate(recorded, 0), rate(null, 0)
     cost = 1.0 - slow / fast
     cpu_cost = 1.0 - rate(recorded, 1) / rate(bare, 1)
+    # the same in absolute terms: what each input sample costs more with the recorder
+    per_sample_us = (1.0 / slow - 1.0 / fast) * 1e6
     print(f"daemon replay, {label} ({samples} samples): {fast:,.0f} samples/s without the "
           f"recorder, {with_messages:,.0f} with a do-nothing sink taking every message, "
           f"{slow:,.0f} with the recorder; the recorder costs {cost * 100:.1f} % of the "
-          f"throughput (CPU time: {cpu_cost * 100:.1f} %; target <= 15 %); "
+          f"throughput (CPU time: {cpu_cost * 100:.1f} %; target <= 15 %), "
+          f"{per_sample_us:.1f} us per input sample; "
           f"{size / samples:.1f} B per input sample, all topics")
     return {"samples": samples, "bare_samples_per_s": fast,
             "null_sink_samples_per_s": with_messages, "recorded_samples_per_s": slow,
-            "cost": cost, "cpu_cost": cpu_cost, "bytes_per_sample": size / samples}
+            "cost": cost, "cpu_cost": cpu_cost, "recorder_us_per_sample": per_sample_us,
+            "bytes_per_sample": size / samples}
 
 
 def main() -> None:
