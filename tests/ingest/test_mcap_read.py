@@ -11,6 +11,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
+from tdmon.errors import IngestError
 from tdmon.ingest import mcap_source
 from tdmon.ingest.mcap_source import _all_in_indexed_chunks, iter_raw
 from tdmon.ingest.types import RawMessage, raw_message
@@ -23,9 +24,9 @@ def _write(path: Path, *, chunking: bool, chunk_size: int = 2000, index: bool = 
     """Raw input (every third message from an earlier receive time: file order is not log
     time order) with a derived topic between, in small chunks so that there are several."""
     with path.open("wb") as stream:
-        kwargs = {} if index else {"index_types": IndexType.CHUNK}
         writer = Writer(stream, use_chunking=chunking, chunk_size=chunk_size,
-                        compression=compression, **kwargs)
+                        compression=compression,
+                        index_types=IndexType.ALL if index else IndexType.CHUNK)
         writer.start()
         schema = writer.register_schema("any", "jsonschema", b"{}")
         derived = writer.register_channel("/truth/hookload", "json", schema)
@@ -146,3 +147,31 @@ def test_a_record_running_past_its_chunk_stops_the_reading_there() -> None:
     assert next(cut) == (7, 11, b"abc")
     with pytest.raises(McapError, match="cut short"):
         next(cut)
+
+
+@pytest.mark.parametrize(("record", "expected"), [
+    # tdmon's own record (the fast path)
+    ({"source": "mqtt", "topic": "rig/a", "receive_time": 12.5, "payload": '{"v":1}',
+      "payload_encoding": "utf-8"}, RawMessage("mqtt", "rig/a", b'{"v":1}', 12.5)),
+    # another writer's: an integer time, no encoding, no source, no time, base64
+    ({"source": "mqtt", "topic": "rig/a", "receive_time": 12, "payload": "x"},
+     RawMessage("mqtt", "rig/a", b"x", 12.0)),
+    ({"topic": "rig/a", "receive_time": 12.5, "payload": "x"},
+     RawMessage("mcap", "rig/a", b"x", 12.5)),
+    ({"source": "mqtt", "topic": "rig/a", "payload": "x"}, RawMessage("mqtt", "rig/a", b"x", 3.0)),
+    ({"source": "mqtt", "topic": "rig/a", "receive_time": 12.5, "payload": "/w==",
+      "payload_encoding": "base64"}, RawMessage("mqtt", "rig/a", b"\xff", 12.5)),
+])
+def test_a_recorded_raw_message_becomes_its_raw_message(record: dict[str, object],
+                                                        expected: RawMessage) -> None:
+    raw = mcap_source.raw_from_record("/tdmon/raw", json.dumps(record).encode(), 3 * 10**9)
+    assert raw == expected and raw is not None and type(raw.receive_time) is float
+
+
+def test_a_recorded_raw_message_kept_in_part_or_damaged_is_refused() -> None:
+    truncated = {"source": "mqtt", "topic": "rig/a", "receive_time": 12.5, "payload": "x",
+                 "payload_encoding": "utf-8", "payload_truncated": True}
+    with pytest.raises(mcap_source._Truncated):
+        mcap_source.raw_from_record("/tdmon/raw", json.dumps(truncated).encode(), 0)
+    with pytest.raises(IngestError, match="unreadable"):
+        mcap_source.raw_from_record("/tdmon/raw", b'{"source": "mqtt", "payload": "x"}', 0)
