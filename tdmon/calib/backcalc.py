@@ -177,7 +177,10 @@ def back_calculate(
     def modelled(mu: float) -> float:
         nonlocal calls
         calls += 1
-        friction = np.where(mask, mu, base)
+        # every element free: the model's own uniform array of the same value (no array built
+        # and checked per call); -0.0 keeps its array (the model's keeps one zero per value)
+        friction: float | NDArray[np.float64] = (
+            float(mu) if free is None and mu != 0.0 else np.where(mask, mu, base))
         return model.evaluate(operation, bit_depth, friction, method=method, psi=psi)[index]
 
     def modelled_pair(mu_a: float, mu_b: float) -> tuple[float, float]:
@@ -240,6 +243,7 @@ def back_calculate_window(
     min_open_length: float = 30.0,
     bracket: tuple[float, float] = (0.0, 1.0),
     method: str = "soft-string",
+    shoe: float | None = None,
 ) -> FrictionEstimate:
     """Back-calculate the friction factor of one window, cased hole first.
 
@@ -254,6 +258,7 @@ def back_calculate_window(
     min_open_length : string length below the shoe needed for an open-hole solve [m]
     bracket : [-]
     method : torque-and-drag method
+    shoe : `shoe_depth` of ``model`` when the caller keeps it [m] (None: found here)
 
     Returns
     -------
@@ -283,7 +288,8 @@ def back_calculate_window(
     else:
         measured, se = window.hookload, window.hookload_se
     kind = model.grid.element_kind
-    shoe = shoe_depth(model)
+    if shoe is None:
+        shoe = shoe_depth(model)
     below_shoe = window.bit_depth - shoe
     if mu_cased is not None and below_shoe > min_open_length and (kind == "open").any():
         return back_calculate(model, operation, window.bit_depth, measured, se,

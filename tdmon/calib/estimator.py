@@ -288,7 +288,7 @@ class FrictionEstimator:
         s = self.settings
         return back_calculate_window(self.model, window, mu_cased=mu_cased,
                                      min_open_length=s.min_open_length, bracket=s.bracket,
-                                     method=s.method)
+                                     method=s.method, shoe=self.shoe)
 
     def _cased_or_pending(self, w: WindowState, block: BlockWeightWindow, window: Window,
                           estimate: FrictionEstimate, out: list[Output]) -> WindowState:

@@ -333,6 +333,9 @@ class FrictionProfile:
         self.process_std = process_std
         self.model_std_fraction = model_std_fraction
         self.method = method
+        # `information` of the last state asked about: the estimator's message and the profile
+        # step's both ask after an update (a copy of this object shares it, keyed by the state)
+        self._information: tuple[ProfileState, BinInformation] | None = None
 
     def add_window(self, window: Window, *, iterations: int = 2) -> bool:
         """Update with one window; False when the window cannot be used (state unchanged).
@@ -375,8 +378,14 @@ class FrictionProfile:
         return result.accepted
 
     def information(self) -> BinInformation:
-        """The information per bin now (:func:`information`)."""
-        return information(self.state, self.grid.edges)
+        """The information per bin now (:func:`information`; the same object until the state
+        changes: its arrays are not to be changed)."""
+        known = self._information
+        if known is not None and known[0] is self.state:
+            return known[1]
+        info = information(self.state, self.grid.edges)
+        self._information = (self.state, info)
+        return info
 
     def message_fields(self) -> dict[str, object]:
         """``estimate`` message fields of kind ``profile`` (finite numbers only).

@@ -260,7 +260,9 @@ def _node_properties(well: Well, loads: Loads, grid: HoleGrid | None) -> _NodePr
     weight = per_node([c.buoyed_weight_in(well.fluid.density, well.fluid.inside_density)
                        for c in components])
     clearance = radial_clearance(hole_diameter, per_node([c.contact_diameter for c in components]))
-    inclination = interpolate_survey(well.survey, loads.md).inclination
+    # the loads carry it when they come from `WellModel.loads` (the same interpolation)
+    inclination = (loads.inclination if loads.inclination is not None
+                   else interpolate_survey(well.survey, loads.md).inclination)
     sinusoidal = sinusoidal_buckling_load(
         per_node([c.youngs_modulus for c in components]),
         per_node([c.moment_of_inertia for c in components]),

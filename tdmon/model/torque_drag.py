@@ -62,6 +62,8 @@ class Loads:
     torque : per operation, torque at the nodes [N m]
     tvd : TVD of the nodes [m]
     component : index (bit-up) of the string component just below each node
+    inclination : inclination of the nodes [rad], from the same survey interpolation as
+        ``tvd`` (None when the maker did not give it; the limits then interpolate it again)
     """
 
     bit_depth: float
@@ -73,6 +75,7 @@ class Loads:
     torque: dict[str, NDArray[np.float64]]
     tvd: NDArray[np.float64]
     component: NDArray[np.int64]
+    inclination: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)
@@ -478,6 +481,8 @@ class WellModel:
         md, force, torque, component = self.profiles(
             operations, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi)
         names = [op.value for op in operations]
+        # one interpolation for both: the limit check needs the nodes' inclination too
+        nodes = interpolate_survey(self.well.survey, md)
         return Loads(
             bit_depth=float(bit_depth), method=str(method),
             hookload={name: float(force[i, 0]) + self.well.block_weight
@@ -486,8 +491,9 @@ class WellModel:
             md=md,
             axial_force={name: force[i] for i, name in enumerate(names)},
             torque={name: torque[i] for i, name in enumerate(names)},
-            tvd=interpolate_survey(self.well.survey, md).tvd,
+            tvd=nodes.tvd,
             component=component,
+            inclination=nodes.inclination,
         )
 
 

@@ -101,6 +101,9 @@ def test_cased_first_then_open(model_cased: WellModel, trip: Any, windows_of: An
     for window in _friction_windows(windows):
         mu_cased = float(np.mean(cased)) if len(cased) >= 3 else None
         estimate = back_calculate_window(model_cased, window, mu_cased=mu_cased)
+        # the shoe a caller keeps (the estimator's) gives the same estimate, to the last bit
+        assert back_calculate_window(model_cased, window, mu_cased=mu_cased,
+                                     shoe=shoe) == estimate
         if estimate.section == "cased":
             cased.append(estimate.mu)
         elif estimate.section == "open":

@@ -4,6 +4,7 @@ located within +/-50 m after the bit passed it once."""
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 from typing import Any
@@ -19,6 +20,7 @@ from tdmon.calib.profile import (
     FrictionProfile,
     ProfileState,
     describe_information,
+    information,
     initial_state,
     measurement_jacobian,
     predict,
@@ -204,3 +206,12 @@ def test_information_per_bin(model_open: WellModel, trip: Any, windows_of: Any) 
     assert text.startswith(f"{int(info.informed.sum())} of {md.size} points informed")
     assert text.endswith(f"; {md[-1]:.0f} m {NOT_REACHED}")  # the one bin below 4200 m
     assert f"{md[0]:.0f}-{md[vertical][-1]:.0f} m {NO_CONTACT}" in text
+    # kept until the state changes; a copy (the estimator's) updated apart gets its own
+    assert profile.information() is info
+    later = copy.copy(profile)
+    assert any(later.add_window(w) for w in windows)
+    moved = later.information()
+    assert moved is not info and profile.information() is info
+    np.testing.assert_array_equal(moved.variance_ratio,
+                                  information(later.state, profile.grid.edges).variance_ratio)
+    assert not np.array_equal(moved.variance_ratio, info.variance_ratio)

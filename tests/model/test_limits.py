@@ -193,3 +193,21 @@ def test_operating_window_on_a_model_s_grid(example_71: Well) -> None:
                  "makeup_torque"):
         np.testing.assert_array_equal(getattr(given, name), getattr(built, name))
     assert built.tensile.shape == loads.md.shape and np.isfinite(built.sinusoidal_buckling).any()
+
+
+def test_loads_carry_the_nodes_inclination(example_71: Well) -> None:
+    # WellModel.loads interpolates the survey once for TVD and inclination; the limit lines
+    # from that inclination equal those from interpolating the survey again
+    import dataclasses
+
+    from tdmon.model.survey import interpolate_survey
+
+    loads = torque_drag(example_71, 3000.0, 0.25)
+    assert loads.inclination is not None
+    np.testing.assert_array_equal(loads.inclination,
+                                  interpolate_survey(example_71.survey, loads.md).inclination)
+    assert np.ptp(loads.inclination) > 1.0  # vertical, build and tangent nodes: not a constant
+    without = dataclasses.replace(loads, inclination=None)
+    given, again = operating_window(example_71, loads), operating_window(example_71, without)
+    np.testing.assert_array_equal(given.sinusoidal_buckling, again.sinusoidal_buckling)
+    np.testing.assert_array_equal(given.helical_buckling, again.helical_buckling)

@@ -1,0 +1,122 @@
+"""The calibration's per-window work, method by method, on the windows of one replay.
+
+A simulated session (``--hours`` of rig time, `bench_replay`'s programme: trips out and in
+with connections) is replayed once through the whole pipeline, in one process; every call of
+the friction estimator's per-window methods (`FrictionEstimator._update` and the steps it
+runs: the window's root solve, the joint estimate, the load-limit check, the friction profile
+and mu(T) filters) is kept with its arguments. Each method is then run again on all its calls,
+``--repeat`` times, and the best time per call is printed; the whole replay's best of
+``--replays`` beside it. The estimator's state is a value (its filters are copied before an
+update), so a call can be run again on the same arguments.
+
+To compare two trees, run it with ``PYTHONPATH`` on each, alternately, on the same session
+(``--session``): only ratios taken in the same minutes mean much on a shared machine.
+
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python benchmarks/bench_calibration.py \\
+        --session /tmp/session.mcap --hours 3.3
+
+Not part of the test suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+#: the estimator's per-window methods timed (`_update` runs the others)
+METHODS = ("_update", "_solve", "_joint", "_limits", "_feed_profile", "_feed_mu_t")
+
+
+def replay_once(src: Path, dst: Path) -> float:
+    """One replay of ``src`` in this process [s]."""
+    from bench_replay import CONFIG
+
+    from tdmon.config.daemon import load_daemon_config
+    from tdmon.replay.driver import replay
+
+    config = load_daemon_config(CONFIG)
+    started = time.perf_counter()
+    asyncio.run(replay(src, config, dst, separate_writer=False))
+    return time.perf_counter() - started
+
+
+def kept_calls(src: Path, dst: Path) -> dict[str, list[tuple[Any, ...]]]:
+    """The arguments of every call of `METHODS` during one replay of ``src``."""
+    from tdmon.calib.estimator import FrictionEstimator
+
+    calls: dict[str, list[tuple[Any, ...]]] = {name: [] for name in METHODS}
+    originals = {name: getattr(FrictionEstimator, name) for name in METHODS}
+
+    def keeping(name: str) -> Any:
+        def method(*args: Any) -> Any:
+            calls[name].append(args)
+            return originals[name](*args)
+        return method
+
+    for name in METHODS:
+        setattr(FrictionEstimator, name, keeping(name))
+    try:
+        replay_once(src, dst)
+    finally:
+        for name, original in originals.items():
+            setattr(FrictionEstimator, name, original)
+    return calls
+
+
+def time_calls(name: str, calls: list[tuple[Any, ...]], repeat: int) -> float:
+    """Best total time of running ``name`` on all ``calls`` [s]."""
+    from tdmon.calib.estimator import FrictionEstimator
+    from tdmon.errors import FitError, ModelError
+
+    method = getattr(FrictionEstimator, name)
+    best = float("inf")
+    for _ in range(repeat):
+        started = time.perf_counter()
+        for args in calls:
+            # a window the solve rejects costs what it costs in the replay
+            with contextlib.suppress(FitError, ModelError):
+                method(*args)
+        best = min(best, time.perf_counter() - started)
+    return best
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--hours", type=float, default=3.3,
+                        help="rig time simulated when the session file does not exist [h]")
+    parser.add_argument("--session", type=Path,
+                        help="session MCAP (made here when missing; a temporary one if not given)")
+    parser.add_argument("--repeat", type=int, default=9, help="runs of each method's calls")
+    parser.add_argument("--replays", type=int, default=3, help="whole replays timed")
+    args = parser.parse_args(argv)
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from bench_replay import make_session
+
+    with tempfile.TemporaryDirectory() as folder:
+        src = args.session or Path(folder) / "session.mcap"
+        if not src.exists():
+            make_session(src, args.hours * 3600)
+        dst = Path(folder) / "replayed.mcap"
+        calls = kept_calls(src, dst)
+        replay_s = min(replay_once(src, dst) for _ in range(args.replays))
+    print(f"replay in one process: {replay_s:.3f} s (best of {args.replays})")
+    for name in METHODS:
+        if not calls[name]:
+            continue
+        total = time_calls(name, calls[name], args.repeat)
+        print(f"{name:14s} {len(calls[name]):5d} calls  {total * 1e3:8.2f} ms  "
+              f"{total / len(calls[name]) * 1e6:7.0f} us per call")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
