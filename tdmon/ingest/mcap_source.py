@@ -146,7 +146,8 @@ def _chunk_records(data: bytes) -> Iterator[Channel | tuple[int, int, bytes]]:
     ``struct`` call, where ``breakup_chunk`` builds a ``Message`` from a field-by-field
     stream: about five times faster on a replay's small messages. Other records (channel
     records, rare in chunks) are read by the ``mcap`` package; the rest are skipped, as there.
-    A record that runs past the chunk's end raises ``McapError``.
+    A record that runs past the chunk's end, or a message record too short for its fields,
+    raises ``McapError``.
     """
     offset, end = 0, len(data)
     record, message = _RECORD.unpack_from, _MESSAGE.unpack_from
@@ -158,6 +159,8 @@ def _chunk_records(data: bytes) -> Iterator[Channel | tuple[int, int, bytes]]:
             if offset > end:
                 raise McapError(f"a chunk's record runs {offset - end} bytes past its end")
             if opcode == Opcode.MESSAGE:
+                if length < 22:
+                    raise McapError(f"a chunk's message record of {length} bytes is too short")
                 channel_id, _, log_time, _ = message(data, start)
                 yield channel_id, log_time, data[start + 22:offset]
             elif opcode == Opcode.CHANNEL:

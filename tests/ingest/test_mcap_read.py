@@ -143,6 +143,10 @@ def test_a_record_running_past_its_chunk_stops_the_reading_there() -> None:
     assert next(records) == (7, 11, b"abc")
     with pytest.raises(McapError, match="past its end"):
         next(records)
+    short = mcap_source._chunk_records(good + mcap_source._RECORD.pack(5, 4) + b"abcd")
+    assert next(short) == (7, 11, b"abc")
+    with pytest.raises(McapError, match="too short"):
+        next(short)
     cut = mcap_source._chunk_records(good + bad[:5])  # not even a whole record header
     assert next(cut) == (7, 11, b"abc")
     with pytest.raises(McapError, match="cut short"):
