@@ -16,7 +16,8 @@ import asyncio
 import contextlib
 import json
 import time
-from collections.abc import AsyncIterator
+from collections import deque
+from collections.abc import AsyncGenerator
 from types import TracebackType
 from typing import Any
 
@@ -81,6 +82,8 @@ class ZenohSource:
         self.max_buffer = max_buffer
         self._subscriber: Any = None
         self._handler: Any = None
+        self._batches: AsyncGenerator[list[RawMessage], None] | None = None
+        self._held: deque[RawMessage] = deque()
 
     async def __aenter__(self) -> ZenohSource:
         try:
@@ -108,11 +111,16 @@ class ZenohSource:
             with contextlib.suppress(zenoh.ZError):
                 await asyncio.to_thread(self._subscriber.undeclare)
             self._subscriber = None
+        if self._batches is not None:
+            # __anext__'s generator; still running only in a task that was cancelled mid-wait
+            with contextlib.suppress(RuntimeError):
+                await self._batches.aclose()
+            self._batches = None
 
     def __aiter__(self) -> ZenohSource:
         return self
 
-    async def batches(self) -> AsyncIterator[list[RawMessage]]:
+    async def batches(self) -> AsyncGenerator[list[RawMessage], None]:
         """What waits in zenoh's channel, up to ``BATCH`` samples at a time (the daemon queues
         a list as one entry); when nothing waits, the next sample as it comes."""
         handler = self._handler
@@ -142,22 +150,12 @@ class ZenohSource:
                 yield batch
 
     async def __anext__(self) -> RawMessage:
-        handler = self._handler
-        assert handler is not None, "not entered"
-        ignore = self.ignore_prefixes
-        while True:
-            try:
-                sample = handler.try_recv()
-                if sample is None:
-                    # nothing waiting: block in a worker thread (recv releases the GIL)
-                    sample = await asyncio.to_thread(handler.recv)
-            except zenoh.ZError as exc:  # the channel was closed under us (session closed)
-                raise IngestError(f"zenoh: subscription to '{self.key_expr}' ended: {exc}"
-                                  ) from exc
-            topic = str(sample.key_expr)
-            if topic.startswith(ignore):
-                continue  # our own results published on the same prefix by another session
-            return RawMessage("zenoh", topic, sample.payload.to_bytes(), time.time())
+        # one at a time out of `batches` (what waits in zenoh's channel, taken in one go)
+        if not self._held:
+            if self._batches is None:
+                self._batches = self.batches()
+            self._held.extend(await anext(self._batches))
+        return self._held.popleft()
 
 
 class ZenohPublisher:
