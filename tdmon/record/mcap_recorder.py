@@ -34,7 +34,7 @@ import time
 import weakref
 from bisect import bisect_right
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
@@ -123,8 +123,8 @@ def encode_message(message: Message) -> tuple[bytes, bool]:
     return data, b"null" in data and _has_nonfinite(message)
 
 
-_PLAIN: Final = (str, int, bool, type(None))
-_NEVER_NONFINITE: Final = frozenset(_PLAIN)
+#: the types of the values that are never a NaN or an infinity
+_NEVER_NONFINITE: Final = frozenset((str, int, bool, type(None)))
 
 # numpy values through ``default`` (``tolist``), not orjson's own numpy option: the same numbers
 # as the json module writes (float32 included)
@@ -137,37 +137,47 @@ def _has_nonfinite(message: Any) -> bool:
     Walks plain dicts, lists, tuples, floats and strings (the daemon's messages; a model
     message with a null took ~5x longer through the json module); anything else (numpy values,
     other types) is left to :func:`_refused_by_json`, which encodes the whole message again.
+    Recursive: orjson refuses a message nested deeper than 255 levels, long before Python's
+    recursion limit, so no message that reaches this check is too deep for it.
     """
-    stack = [message]
-    pop, many = stack.pop, stack.extend
-    while stack:
-        item = pop()
+    try:
+        return _nonfinite_in((message,))
+    except _NotPlain:
+        return _refused_by_json(message)
+
+
+class _NotPlain(Exception):
+    """A value the walk leaves to the json module (a numpy value, an object)."""
+
+
+def _nonfinite_in(values: Iterable[Any]) -> bool:
+    for item in values:
         kind = type(item)
         if kind is float:
             if item - item != 0.0:  # nan - nan and inf - inf are nan
                 return True
         elif kind is dict:
-            many(item.values())
+            if _nonfinite_in(item.values()):
+                return True
         elif kind is list or kind is tuple:
-            if len(item) < 16:
-                many(item)
-                continue
-            # a long list of plain numbers (a profile's bins) in one C loop: a finite float
-            # sum means every element is finite; a NaN or an infinity makes it non-finite,
-            # and so may an overflow, hence the walk then, as for anything else
+            # a list of plain numbers (a model's band, a profile's bins) in one C loop: a
+            # finite float sum means every element is finite; a NaN or an infinity makes it
+            # non-finite, and so may an overflow, hence the walk then
             try:
                 total = sum(item, 0.0)
             except (TypeError, OverflowError):
                 # a long list of texts and nulls (a profile's reasons per bin): its element
                 # types gathered in one C loop, not each element walked
-                if not set(map(type, item)) <= _NEVER_NONFINITE:
-                    many(item)
-                continue
-            if type(total) is not float or total - total != 0.0:
-                many(item)
-        elif kind not in _PLAIN and not isinstance(item, (str, int)):
+                if len(item) >= 16 and set(map(type, item)) <= _NEVER_NONFINITE:
+                    continue
+            else:
+                if type(total) is float and total - total == 0.0:
+                    continue
+            if _nonfinite_in(item):
+                return True
+        elif kind not in _NEVER_NONFINITE and not isinstance(item, (str, int)):
             # str and int subclasses (the vocabulary's enums, bool) are never non-finite
-            return _refused_by_json(message)
+            raise _NotPlain
     return False
 
 

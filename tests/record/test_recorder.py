@@ -219,3 +219,14 @@ def test_non_finite_walk_of_long_lists_and_enums() -> None:
     for odd in (math.nan, [math.inf], {"x": -math.inf}):
         assert _has_nonfinite({"reasons": ["no window used yet", None] * 20 + [odd]})
     assert not _has_nonfinite({"reasons": ["no window used yet"] * 40 + [1.5, [2.0]]})
+    # short lists (a model message's band) and nested dicts, as orjson nests them at most
+    band = {"mu": [0.1, 0.2, 0.3, 0.4], "pick_up_N": [1.6e6, 1.8e6, 2.1e6, 2.4e6]}
+    assert not _has_nonfinite({"band": band, "residual": {"torque_Nm": None}})
+    for bad in (math.nan, math.inf):
+        assert _has_nonfinite({"band": {**band, "mu": [0.1, bad, 0.3, 0.4]}})
+        assert _has_nonfinite({"residual": {"torque_Nm": None, "hookload_N": (1.0, bad)}})
+    assert not _has_nonfinite({"big": [1e308, 1e308, -1e308]})  # an overflowing sum, finite
+    deep: Any = [math.nan]
+    for _ in range(250):
+        deep = {"x": [deep]}
+    assert _has_nonfinite(deep) and not _has_nonfinite({"x": [[[None]]] * 3})
