@@ -584,13 +584,7 @@ class McapRecorder:
         or ``flush_interval_s`` later): it must not be changed after ``write``. Never raises for
         I/O problems: see ``error``/``stats``/``on_alarm``.
         """
-        with self._lock:
-            queue = self._queue
-            queue.append((topic, log_time_ns, message, None))
-            if len(queue) >= BATCH_SIZE:
-                self._write_queued()
-        if self._pending_alarms:
-            self._fire_alarms()
+        self._enqueue(((topic, log_time_ns, message, None),))
 
     def write_many(self, topic: str, log_times_ns: Sequence[int],
                    messages: Sequence[Message]) -> None:
@@ -599,16 +593,13 @@ class McapRecorder:
         of a burst, docs/recording.md)."""
         if len(log_times_ns) != len(messages):
             raise ValueError(f"{len(log_times_ns)} log times for {len(messages)} messages")
+        if len(messages) < DIRECT_BATCH:
+            self._enqueue(zip(repeat(topic), log_times_ns, messages, repeat(None)))
+            return
         with self._lock:
-            queue = self._queue
-            if len(messages) < DIRECT_BATCH:
-                queue.extend(zip(repeat(topic), log_times_ns, messages, repeat(None)))
-                if len(queue) >= BATCH_SIZE:
-                    self._write_queued()
-            else:
-                # a batch already: written as one, after what was queued before it
-                self._write_queued()
-                self._write_batch(topic, log_times_ns, messages)
+            # a batch already: written as one, after what was queued before it
+            self._write_queued()
+            self._write_batch(topic, log_times_ns, messages)
         if self._pending_alarms:
             self._fire_alarms()
 
@@ -616,13 +607,7 @@ class McapRecorder:
                       replaced: bool = False) -> None:
         """Record one message already encoded as JSON bytes (``replaced``: a NaN/inf in it was
         written as ``null``). Never raises for I/O problems, like ``write``."""
-        with self._lock:
-            queue = self._queue
-            queue.append((topic, log_time_ns, data, replaced))
-            if len(queue) >= BATCH_SIZE:
-                self._write_queued()
-        if self._pending_alarms:
-            self._fire_alarms()
+        self._enqueue(((topic, log_time_ns, data, replaced),))
 
     def retry(self) -> bool:
         """In the failure state, try a new file now (not waiting for ``retry_s``).
@@ -682,6 +667,17 @@ class McapRecorder:
         self.close()
 
     # -- internals ---------------------------------------------------------------------------
+
+    def _enqueue(self, entries: Iterable[tuple[str, int, Any, bool | None]]) -> None:
+        """Queue ``(topic, log time, message or its bytes, replaced flag or None)`` entries;
+        the queue is written once it holds ``BATCH_SIZE``."""
+        with self._lock:
+            queue = self._queue
+            queue.extend(entries)
+            if len(queue) >= BATCH_SIZE:
+                self._write_queued()
+        if self._pending_alarms:
+            self._fire_alarms()
 
     def _write_queued(self) -> None:
         """Encode the queued messages and hand them to the file (call with the lock held)."""

@@ -192,16 +192,7 @@ class RecorderProcess:
 
     def write(self, topic: str, log_time_ns: int, message: Message) -> None:
         """Queue one message for the child; never raises for recording problems."""
-        with self._lock:
-            if self._closed or self._dead:
-                self._lost_here += 1
-                return
-            batch = self._batch
-            batch.append((topic, log_time_ns, message))
-            if len(batch) >= self.batch_size or time.monotonic() >= self._send_at:
-                self._send_batch()
-        if self._pending_alarms:
-            self._fire_alarms()
+        self.write_many(topic, (log_time_ns,), (message,))
 
     def write_many(self, topic: str, log_times_ns: Sequence[int],
                    messages: Sequence[Message]) -> None:
