@@ -217,12 +217,13 @@ class BareWriter:
 
 
 def daemon_replay(recording: Path, config: DaemonConfig, folder: Path | None,
-                  null_sink: bool = False, bare_writer: Path | None = None
-                  ) -> tuple[float, float, int, int]:
+                  null_sink: bool = False, bare_writer: Path | None = None,
+                  process: str = "inline") -> tuple[float, float, int, int]:
     """Replay ``recording`` flat out through the daemon built from ``config``; with a recorder
-    in ``folder`` (None: no recorder), a do-nothing sink (``null_sink``) or a `BareWriter` to
-    ``bare_writer``. Returns wall seconds, CPU seconds of this process (all its threads: the
-    recorder's flusher too), input samples, recorded bytes."""
+    in ``folder`` (None: no recorder; ``process``: its ``[recorder] process``, ``inline`` or
+    ``child``), a do-nothing sink (``null_sink``) or a `BareWriter` to ``bare_writer``.
+    Returns wall seconds, CPU seconds of this process (all its threads: the recorder's
+    flusher too; not the child's), input samples, recorded bytes."""
     from tdmon.daemon.build import build_daemon
     from tdmon.daemon.runner import collections_for_a_stream
 
@@ -231,7 +232,8 @@ def daemon_replay(recording: Path, config: DaemonConfig, folder: Path | None,
         "publish": PublishConfig(),
         "recorder": RecorderConfig(enabled=folder is not None,
                                    output=folder or Path("unused"),
-                                   flush_interval=config.recorder.flush_interval),
+                                   flush_interval=config.recorder.flush_interval,
+                                   process=process),
         "rerun": RerunConfig(),
     })
 
@@ -255,15 +257,17 @@ def daemon_replay(recording: Path, config: DaemonConfig, folder: Path | None,
     return elapsed, cpu, samples, size
 
 
-def daemon_cost(recording: Path, config: DaemonConfig, repeat: int, label: str
-                ) -> dict[str, float]:
-    """Best of ``repeat`` alternated runs without and with the recorder; prints one line.
+def daemon_cost(recording: Path, config: DaemonConfig, repeat: int, label: str,
+                places: tuple[str, ...] = ("child", "inline")) -> dict[str, Any]:
+    """Best of ``repeat`` alternated runs without and with the recorder (in each of
+    ``places``: ``[recorder] process``); prints a line per place.
 
     Wall time is the figure; CPU time of the process (best of the runs too) is printed beside
-    it because on a shared machine it is the steadier of the two."""
+    it because on a shared machine it is the steadier of the two (for the child recorder it
+    leaves out the child's, which runs on the other core)."""
     bare: list[tuple[float, float]] = []
     null: list[tuple[float, float]] = []
-    recorded: list[tuple[float, float]] = []
+    recorded: dict[str, list[tuple[float, float]]] = {place: [] for place in places}
     floor: list[tuple[float, float]] = []
     samples = size = 0
     daemon_replay(recording, config, None)  # a first run pays the imports and caches: not timed
@@ -272,9 +276,11 @@ def daemon_cost(recording: Path, config: DaemonConfig, repeat: int, label: str
         bare.append((elapsed, cpu))
         elapsed, cpu, samples, _ = daemon_replay(recording, config, None, null_sink=True)
         null.append((elapsed, cpu))
-        with tempfile.TemporaryDirectory() as folder:
-            elapsed, cpu, samples, size = daemon_replay(recording, config, Path(folder))
-        recorded.append((elapsed, cpu))
+        for place in places:
+            with tempfile.TemporaryDirectory() as folder:
+                elapsed, cpu, samples, size = daemon_replay(recording, config, Path(folder),
+                                                            process=place)
+            recorded[place].append((elapsed, cpu))
         with tempfile.TemporaryDirectory() as folder:
             elapsed, cpu, samples, _ = daemon_replay(recording, config, None,
                                                      bare_writer=Path(folder) / "bare.mcap")
@@ -283,30 +289,36 @@ def daemon_cost(recording: Path, config: DaemonConfig, repeat: int, label: str
     def rate(runs: list[tuple[float, float]], which: int) -> float:
         return samples / min(run[which] for run in runs)
 
-    fast, slow, with_messages = rate(bare, 0), rate(recorded, 0), rate(null, 0)
-    cost = 1.0 - slow / fast
-    cpu_cost = 1.0 - rate(recorded, 1) / rate(bare, 1)
-    # the same in absolute terms: what each input sample costs more with the recorder
-    per_sample_us = (1.0 / slow - 1.0 / fast) * 1e6
-    # each round's own share (its run with the recorder against its run without, a few
-    # seconds apart): their median is less at the mercy of one lucky run than the best-of
-    paired = statistics.median(1.0 - off[0] / on[0] for off, on in zip(bare, recorded,
-                                                                        strict=True))
+    fast, with_messages = rate(bare, 0), rate(null, 0)
     bare_writer = rate(floor, 0)
     floor_cost = 1.0 - bare_writer / fast
     print(f"daemon replay, {label} ({samples} samples): {fast:,.0f} samples/s without the "
-          f"recorder, {with_messages:,.0f} with a do-nothing sink taking every message, "
-          f"{slow:,.0f} with the recorder; the recorder costs {cost * 100:.1f} % of the "
-          f"throughput (CPU time: {cpu_cost * 100:.1f} %; median of the rounds' own "
-          f"{paired * 100:.1f} %; target <= 15 %), {per_sample_us:.1f} us per input sample; "
-          f"a bare orjson + foxglove writer in its place (the floor): {bare_writer:,.0f} "
-          f"samples/s, {floor_cost * 100:.1f} %, {(1.0 / bare_writer - 1.0 / fast) * 1e6:.1f} "
-          f"us per input sample; {size / samples:.1f} B per input sample, all topics")
-    return {"samples": samples, "bare_samples_per_s": fast,
-            "null_sink_samples_per_s": with_messages, "recorded_samples_per_s": slow,
-            "cost": cost, "cpu_cost": cpu_cost, "paired_cost_median": paired,
-            "recorder_us_per_sample": per_sample_us, "bare_writer_samples_per_s": bare_writer,
-            "bare_writer_cost": floor_cost, "bytes_per_sample": size / samples}
+          f"recorder, {with_messages:,.0f} with a do-nothing sink taking every message; "
+          f"a bare orjson + foxglove writer in the daemon's process (the floor of recording "
+          f"there): {bare_writer:,.0f} samples/s, {floor_cost * 100:.1f} %, "
+          f"{(1.0 / bare_writer - 1.0 / fast) * 1e6:.1f} us per input sample; "
+          f"{size / samples:.1f} B per input sample, all topics")
+    figures: dict[str, Any] = {
+        "samples": samples, "bare_samples_per_s": fast,
+        "null_sink_samples_per_s": with_messages, "bare_writer_samples_per_s": bare_writer,
+        "bare_writer_cost": floor_cost, "bytes_per_sample": size / samples}
+    for place, runs in recorded.items():
+        slow = rate(runs, 0)
+        cost = 1.0 - slow / fast
+        cpu_cost = 1.0 - rate(runs, 1) / rate(bare, 1)
+        # the same in absolute terms: what each input sample costs more with the recorder
+        per_sample_us = (1.0 / slow - 1.0 / fast) * 1e6
+        # each round's own share (its run with the recorder against its run without, a few
+        # seconds apart): their median is less at the mercy of one lucky run than the best-of
+        paired = statistics.median(1.0 - off[0] / on[0] for off, on in zip(bare, runs,
+                                                                            strict=True))
+        print(f"  recorder {place:6s}: {slow:,.0f} samples/s; it costs {cost * 100:.1f} % of "
+              f"the throughput (CPU time of the daemon's process: {cpu_cost * 100:.1f} %; "
+              f"median of the rounds' own {paired * 100:.1f} %; target <= 15 %), "
+              f"{per_sample_us:.1f} us per input sample")
+        figures[place] = {"recorded_samples_per_s": slow, "cost": cost, "cpu_cost": cpu_cost,
+                          "paired_cost_median": paired, "recorder_us_per_sample": per_sample_us}
+    return figures
 
 
 def main() -> None:
@@ -322,17 +334,22 @@ def main() -> None:
                         help="daemon config for it (its source, publishing, recorder and "
                              "Rerun settings are replaced)")
     parser.add_argument("--daemon-only", action="store_true", help="only item 4")
+    parser.add_argument("--process", choices=("both", "child", "inline"), default="both",
+                        help="item 4: the recorder in a child process ([recorder] process = "
+                             "'child', what 'auto' picks on two cores or more), in the "
+                             "daemon's own ('inline'), or both in the same rounds")
     parser.add_argument("--json", type=Path, help="write the daemon figures here")
     args = parser.parse_args()
 
     config = load_daemon_config(args.config)
+    places = ("child", "inline") if args.process == "both" else (args.process,)
     figures = {"calibration_on": daemon_cost(args.recording.resolve(), config, args.repeat,
-                                             "calibration as configured")}
+                                             "calibration as configured", places)}
     if config.calibration.enabled:
         monitor_only = config.model_copy(update={
             "calibration": config.calibration.model_copy(update={"enabled": False})})
         figures["monitor_only"] = daemon_cost(args.recording.resolve(), monitor_only,
-                                              args.repeat, "rig state and monitor only")
+                                              args.repeat, "rig state and monitor only", places)
     if args.json is not None:
         args.json.write_text(json.dumps(figures, indent=2) + "\n")
     if args.daemon_only:

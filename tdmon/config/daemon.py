@@ -269,6 +269,11 @@ class RecorderConfig(_Model):
     output: Path = Path("recordings")
     rotation: Seconds = Field(default=3600.0, gt=0)
     flush_interval: Seconds = Field(default=2.0, gt=0)
+    process: Literal["auto", "child", "inline"] = Field(
+        default="auto",
+        description="where the recorder encodes and writes: 'child' in a process of its own "
+                    "(on another core), 'inline' in the daemon's; 'auto' is 'child' when the "
+                    "daemon may use two cores or more (docs/daemon.md)")
 
 
 class RerunConfig(_Model):

@@ -27,19 +27,24 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Protocol, runtime_checkable
 
 from tdmon.daemon.clock import ClockGuard, ClockJump
 from tdmon.daemon.loss import LossDetector
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
+    RAW_ROW,
     RECORDED_PAYLOAD_BYTES,
+    SAMPLE_ROW,
     RawMessage,
     Rejected,
     Sample,
     raw_message,
+    raw_row_message,
     rejected_message,
     sample_message,
+    sample_row_message,
 )
 from tdmon.messages import alarm_message, status_message
 from tdmon.record.sink import Sink
@@ -131,10 +136,10 @@ class FrameSource(Protocol):
 
 @dataclass(slots=True)
 class _HeldSamples:
-    """The ``sample`` messages of a burst, written to the sinks at its end."""
+    """The samples of a burst, whose ``sample`` messages go to the sinks at its end."""
 
     log_times: list[int]
-    messages: list[dict[str, Any]]
+    samples: list[Sample]
 
 
 class Pipeline:
@@ -227,20 +232,19 @@ class Pipeline:
             return
         sinks = self._sinks_for("/tdmon/raw")
         if sinks:
-            limit = self._recorded_payload_bytes
             log_times = [int(raw.receive_time * 1e9) for raw in raws]
             self._input_ns = log_times[0]
-            self._write_many(sinks, "/tdmon/raw", log_times,
-                             [raw_message(raw, limit) for raw in raws])
+            self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
+                             partial(raw_row_message, max_bytes=self._recorded_payload_bytes))
         held = _HeldSamples([], [])
         process = self._process
         try:
             for raw in raws:
                 process(raw, held)
         finally:
-            if held.messages:
-                self._write_many(self._sinks_for("/tdmon/sample"), "/tdmon/sample",
-                                 held.log_times, held.messages)
+            if held.samples:
+                self._write_rows(self._sinks_for("/tdmon/sample"), "/tdmon/sample",
+                                 held.log_times, held.samples, SAMPLE_ROW, sample_row_message)
 
     def _process(self, raw: RawMessage, held: _HeldSamples | None) -> Sample | Rejected:
         """Everything after recording the raw input; a sample message goes to ``held`` when
@@ -271,7 +275,7 @@ class Pipeline:
                 self._write_to(sinks, "/tdmon/sample", log_ns, sample_message(decoded))
             else:
                 held.log_times.append(log_ns)
-                held.messages.append(sample_message(decoded))
+                held.samples.append(decoded)
         loss = self.loss
         if jump is not None:
             loss.reanchor()
@@ -397,6 +401,31 @@ class Pipeline:
 
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         self._write_to(self._sinks_for(topic), topic, log_time_ns, message)
+
+    def _write_rows(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
+                    items: Sequence[Any], row_of: Callable[[Any], tuple[Any, ...]],
+                    make: Callable[[Any], dict[str, Any]]) -> None:
+        """A burst's messages of one topic: a sink with ``write_rows`` gets each item's row
+        (``row_of``) and the function that makes its message of a row (``make``), the others
+        the messages (docs/daemon.md, "Bursts"); each made once for all sinks."""
+        rows: list[tuple[Any, ...]] | None = None
+        plain: list[Sink] = []
+        for sink in sinks:
+            write_rows = getattr(sink, "write_rows", None)
+            if write_rows is None:
+                plain.append(sink)
+                continue
+            if rows is None:
+                rows = list(map(row_of, items))
+            try:
+                write_rows(topic, log_times_ns, make, rows)
+            except Exception:
+                self.stats.sink_errors += 1
+                log.exception("sink %r failed writing %d messages on %s", sink, len(rows),
+                              topic)
+        if plain:
+            made = map(make, rows) if rows is not None else map(make, map(row_of, items))
+            self._write_many(plain, topic, log_times_ns, list(made))
 
     def _write_many(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
                     messages: list[dict[str, Any]]) -> None:

@@ -8,6 +8,8 @@ and row here.
 
 from __future__ import annotations
 
+import os
+
 from tdmon.config.daemon import DaemonConfig, MqttConfig, RecorderConfig, RerunConfig, ZenohConfig
 from tdmon.daemon.wiring import Entry, Table, Wiring
 from tdmon.ingest.mqtt import MqttPublisher
@@ -16,11 +18,15 @@ from tdmon.record.sink import Recorder
 
 
 async def folder_recorder(wiring: Wiring, section: RecorderConfig) -> None:
-    """Record everything to rotating MCAP files in the configured folder; its health alarms
-    go through the pipeline like any other alarm."""
+    """Record everything to rotating MCAP files in the configured folder, from a child process
+    or this one (``process``); its health alarms go through the pipeline like any other
+    alarm."""
     from tdmon.record.mcap_recorder import McapRecorder
+    from tdmon.record.writer_process import RecorderProcess
 
-    recorder: Recorder = McapRecorder(
+    in_child = section.process == "child" or (section.process == "auto" and usable_cores() > 1)
+    recorder_type = RecorderProcess if in_child else McapRecorder
+    recorder: Recorder = recorder_type(
         wiring.config.resolve(section.output),
         rotate_s=section.rotation,
         flush_interval_s=section.flush_interval,
@@ -53,6 +59,14 @@ async def mqtt_publisher(wiring: Wiring, section: MqttConfig) -> None:
                               qos=config.publish.qos, queue_size=config.queues.publish,
                               on_drop=wiring.stats.count_drop, base=wiring.base)
     wiring.add_publisher(publisher, publisher)
+
+
+def usable_cores() -> int:
+    """CPUs this process may run on (its affinity, e.g. a container's or ``taskset``'s)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # no affinity on this platform
+        return os.cpu_count() or 1
 
 
 def _enabled_recorder(config: DaemonConfig) -> RecorderConfig | None:

@@ -797,10 +797,17 @@ class McapRecorder:
         try:
             return encode_message(message)[0]
         except (TypeError, ValueError, RecursionError) as exc:
+            self.count_unencodable(f"message on {topic} is not JSON: {exc}")
+            return None
+
+    def count_unencodable(self, why: str) -> None:
+        """Count one message that could not be recorded at all (``stats.unencodable`` and
+        ``lost``), e.g. one :class:`~tdmon.record.writer_process.RecorderProcess` could not
+        make of its row; ``why`` goes to the log."""
+        with self._lock:
             self._stats.unencodable += 1
             self._stats.lost += 1
-            log.error("message on %s is not JSON and was not recorded: %s", topic, exc)
-            return None
+        log.error("%s; not recorded", why)
 
     def _channel(self, topic: str) -> Any:
         """The channel of ``topic`` (its ``log``), created on its first message."""
@@ -910,6 +917,11 @@ class McapRecorder:
         self._pending_alarms.append(alarm_message(
             time.time(), AlarmKind.RECORDER_RESUMED, Severity.INFO,
             f"recording resumed in {self._file.path}; {lost} messages lost so far", value=lost))
+
+    def send_alarms(self) -> None:
+        """Hand the alarms waiting so far (e.g. ``recording_recovered`` from start-up) to
+        ``on_alarm`` now rather than at the next write."""
+        self._fire_alarms()
 
     def _fire_alarms(self) -> None:
         with self._lock:

@@ -39,7 +39,10 @@ class Sink(Protocol):
     ``topics`` attribute (a collection of topics): messages nobody wants are then not built.
     A sink may also have ``write_many(topic, log_times_ns, messages)`` for several messages of
     one topic at once; the daemon then hands it a burst's raw input and samples that way
-    (docs/daemon.md, "Bursts"), and one ``write`` per message otherwise.
+    (docs/daemon.md, "Bursts"), and one ``write`` per message otherwise. A sink with
+    ``write_rows(topic, log_times_ns, make, rows)`` gets those two as rows of plain values
+    instead, with ``make`` (a picklable function) that makes each row's message (the recorder
+    in a child process makes them there).
     """
 
     def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:

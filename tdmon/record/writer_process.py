@@ -42,7 +42,7 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from itertools import repeat
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -117,6 +117,7 @@ class RecorderProcess:
         **options: Any,
     ) -> None:
         self.on_alarm = on_alarm
+        self.folder = None if folder is None else Path(folder)  # as McapRecorder's
         self.flush_interval_s = float(options.get("flush_interval_s", 1.0))
         if not self.flush_interval_s > 0:
             raise RecordError(f"flush interval must be positive, got {self.flush_interval_s}")
@@ -124,7 +125,9 @@ class RecorderProcess:
         self.close_timeout_s = close_timeout_s
         self._send_every = self.flush_interval_s / 2
         self._lock = threading.RLock()
-        self._batch: list[tuple[str, int, Message]] = []
+        # in order: (topic, log time, message) and (topic, log times, make, rows) entries
+        self._batch: list[tuple[Any, ...]] = []
+        self._batched = 0  # messages in the batch
         self._send_at = time.monotonic() + self._send_every
         self._pending_alarms: list[dict[str, Any]] = []
         self._error: RecordError | None = None
@@ -152,6 +155,7 @@ class RecorderProcess:
             raise RecordError(f"the recorder's process did not start: {exc}") from exc
         self._path = None if ready[0] is None else Path(ready[0])
         self.recovered = list(ready[1])
+        self._pending_alarms.extend(ready[2])
         _OPEN.add(self)
 
         self._stop = threading.Event()
@@ -203,9 +207,30 @@ class RecorderProcess:
             if self._closed or self._dead:
                 self._lost_here += len(messages)
                 return
-            batch = self._batch
-            batch.extend(zip(repeat(topic), log_times_ns, messages))
-            if len(batch) >= self.batch_size or time.monotonic() >= self._send_at:
+            self._batch.extend(zip(repeat(topic), log_times_ns, messages))
+            self._batched += len(messages)
+            if self._batched >= self.batch_size or time.monotonic() >= self._send_at:
+                self._send_batch()
+        if self._pending_alarms:
+            self._fire_alarms()
+
+    def write_rows(self, topic: str, log_times_ns: Sequence[int],
+                   make: Callable[[Any], Message], rows: Sequence[tuple[Any, ...]]) -> None:
+        """``write_many(topic, log_times_ns, [make(row) for row in rows])``, with the messages
+        made in the child: only the rows (tuples of plain values) are pickled here, and
+        ``make`` by its name (a module-level function, or a ``functools.partial`` of one).
+
+        The pipeline hands a burst's raw input and samples this way (docs/daemon.md,
+        "Bursts"): their dicts are then never built in the daemon's process."""
+        if len(log_times_ns) != len(rows):
+            raise ValueError(f"{len(log_times_ns)} log times for {len(rows)} rows")
+        with self._lock:
+            if self._closed or self._dead:
+                self._lost_here += len(rows)
+                return
+            self._batch.append((topic, log_times_ns, make, rows))
+            self._batched += len(rows)
+            if self._batched >= self.batch_size or time.monotonic() >= self._send_at:
                 self._send_batch()
         if self._pending_alarms:
             self._fire_alarms()
@@ -235,7 +260,9 @@ class RecorderProcess:
         return recording
 
     def close(self) -> None:
-        """Send what is queued, let the child finish its file, wait for it; idempotent."""
+        """Send what is queued and let the child finish its file; idempotent. Returns once the
+        file is finished (the child's own exit, ~30 ms of interpreter shutdown, is waited for
+        by a background thread)."""
         with self._lock:
             if self._closed:
                 return
@@ -243,6 +270,7 @@ class RecorderProcess:
         self._stop.set()
         if threading.current_thread() is not self._flusher:
             self._flusher.join()
+        finished = False
         with self._lock:
             self._send_batch()
             if not self._dead:
@@ -250,11 +278,12 @@ class RecorderProcess:
                     self._conn.send((_Tag.CLOSE,))
                     final = self._wait_for(_Tag.CLOSED, self.close_timeout_s)
                     self._final_stats = final[0]
+                    finished = True
                 except RecordError as exc:
                     self._child_gone(str(exc))
                 except (OSError, ValueError) as exc:
                     self._child_gone(f"the recorder process could not be reached: {exc}")
-            self._stop_child()
+            self._stop_child(wait=not finished)
             self._path = None
         _OPEN.discard(self)
         self._fire_alarms()
@@ -278,35 +307,38 @@ class RecorderProcess:
         if not batch:
             self._drain()
             return
-        self._batch = []
+        count, self._batch, self._batched = self._batched, [], 0
         if self._dead:
-            self._lost_here += len(batch)
+            self._lost_here += count
             return
         try:
             payload = pickle.dumps(batch, protocol=_PICKLE)
         except Exception:
-            payload = self._picklable(batch)
+            payload, count = self._picklable(batch)
         try:
             self._conn.send_bytes(payload)
         except (OSError, ValueError) as exc:
-            self._lost_here += len(batch)
+            self._lost_here += count
             self._child_gone(f"the recorder process stopped taking messages ({exc})")
             return
         self._drain()
 
-    def _picklable(self, batch: list[tuple[str, int, Message]]) -> bytes:
-        # one message in the batch is not data at all: keep the others, count that one
-        kept = []
+    def _picklable(self, batch: list[tuple[Any, ...]]) -> tuple[bytes, int]:
+        """The batch without the entries that are not data at all, pickled, and the number
+        of messages kept; the others counted."""
+        kept, count = [], 0
         for item in batch:
+            size = _size(item)
             try:
                 pickle.dumps(item, protocol=_PICKLE)
             except Exception as exc:
-                self._unencodable_here += 1
-                self._lost_here += 1
-                log.error("message on %s cannot be recorded: %s", item[0], exc)
+                self._unencodable_here += size
+                self._lost_here += size
+                log.error("%d message(s) on %s cannot be recorded: %s", size, item[0], exc)
             else:
                 kept.append(item)
-        return pickle.dumps(kept, protocol=_PICKLE)
+                count += size
+        return pickle.dumps(kept, protocol=_PICKLE), count
 
     def _drain(self) -> None:
         """Take in the events the child sent (alarms, file and error changes)."""
@@ -373,8 +405,8 @@ class RecorderProcess:
         if self._dead:
             return
         self._dead = True
-        self._lost_here += len(self._batch)
-        self._batch = []
+        self._lost_here += self._batched
+        self._batch, self._batched = [], 0
         error = RecordError(f"{why}; messages are counted as lost from now on")
         first = self._error is None
         self._error = error
@@ -384,16 +416,14 @@ class RecorderProcess:
                 time.time(), AlarmKind.RECORDER_FAILED, Severity.CRITICAL, str(error),
                 value=self._lost_here))
 
-    def _stop_child(self) -> None:
+    def _stop_child(self, wait: bool = True) -> None:
         with contextlib.suppress(OSError):
             self._conn.close()
-        try:
-            self._process.wait(timeout=self.close_timeout_s)
-        except subprocess.TimeoutExpired:
-            log.error("the recorder process did not stop; terminating it")
-            self._process.terminate()
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                self._process.wait(timeout=5.0)
+        if wait:
+            _reap(self._process, self.close_timeout_s)
+        else:
+            threading.Thread(target=_reap, args=(self._process, self.close_timeout_s),
+                             name="tdmon-recorder-reap", daemon=True).start()
 
     def _fire_alarms(self) -> None:
         with self._lock:
@@ -409,6 +439,22 @@ class RecorderProcess:
                     return
                 if self._batch and time.monotonic() >= self._send_at:
                     self._send_batch()
+
+
+def _reap(process: subprocess.Popen[bytes], timeout: float) -> None:
+    """Wait for the recorder's process to exit; terminate it after ``timeout`` [s]."""
+    try:
+        process.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        log.error("the recorder process did not stop; terminating it")
+        process.terminate()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            process.wait(timeout=5.0)
+
+
+def _size(entry: tuple[Any, ...]) -> int:
+    """Messages in one entry of a batch: one, or a ``write_rows`` entry's rows."""
+    return 1 if len(entry) == 3 else len(entry[3])
 
 
 #: recorders not closed yet: closed at interpreter exit (the child then finishes its file)
@@ -476,7 +522,12 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
         conn.close()
         return
     path = recorder.path
-    conn.send((_Tag.READY, None if path is None else str(path), recorder.recovered))
+    # the recovery alarms go with the answer: the parent fires them at its first write, as the
+    # recorder in its own process would
+    recorder.send_alarms()
+    conn.send((_Tag.READY, None if path is None else str(path), recorder.recovered,
+               list(alarms)))
+    alarms.clear()
     state: tuple[str | None, str | None] = (None, None if path is None else str(path))
 
     def report() -> None:
@@ -499,9 +550,7 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
                 break  # the parent is gone: finish the file with what arrived
             item = pickle.loads(data)
             if type(item) is list:
-                write = recorder.write
-                for topic, log_time_ns, message in item:
-                    write(topic, log_time_ns, message)
+                _write_entries(recorder, item)
                 report()
             elif item[0] == _Tag.CLOSE:
                 break
@@ -515,6 +564,28 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
             report()
             conn.send((_Tag.CLOSED, recorder.stats))
         conn.close()
+
+
+def _write_entries(recorder: McapRecorder, entries: list[tuple[Any, ...]]) -> None:
+    """One batch from the parent into the recorder, in order."""
+    write = recorder.write
+    for entry in entries:
+        if len(entry) == 3:
+            write(*entry)
+            continue
+        topic, log_times_ns, make, rows = entry
+        try:
+            messages = list(map(make, rows))
+        except Exception:  # not from the pipeline's rows: each alone, the bad ones left out
+            messages, kept = [], []
+            for log_time_ns, row in zip(log_times_ns, rows, strict=True):
+                try:
+                    messages.append(make(row))
+                    kept.append(log_time_ns)
+                except Exception as exc:
+                    recorder.count_unencodable(f"a row on {topic} makes no message: {exc}")
+            log_times_ns = kept
+        recorder.write_many(topic, log_times_ns, messages)
 
 
 def _command(recorder: McapRecorder, item: tuple[Any, ...]) -> Any:

@@ -18,7 +18,7 @@ from tdmon.config.daemon import (
 from tdmon.daemon.build import build_daemon
 from tdmon.daemon.daemon import SourceSpec
 from tdmon.daemon.pipeline import Stats
-from tdmon.daemon.sinks import PUBLISHERS, SINKS
+from tdmon.daemon.sinks import PUBLISHERS, SINKS, usable_cores
 from tdmon.daemon.sources import SOURCES
 from tdmon.daemon.wiring import Entry, Table, Wiring, wire
 from tdmon.errors import ConfigError, IngestError
@@ -27,6 +27,7 @@ from tdmon.ingest.mqtt import MqttPublisher
 from tdmon.ingest.zenoh_io import ZenohPublisher, ZenohSource
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import is_finished
+from tdmon.record.writer_process import RecorderProcess
 
 MCAP = {"mcap": {"path": "replay.mcap"}}
 MQTT = {"mqtt": {"host": "127.0.0.1", "port": 1883, "client_id": "t"}}
@@ -67,6 +68,23 @@ def test_every_config_section_has_a_row() -> None:
     assert set(SINKS) <= set(DaemonConfig.model_fields)
 
 
+@pytest.mark.parametrize(("process", "cores", "expected"), [
+    ("auto", {0}, McapRecorder), ("auto", {0, 1}, RecorderProcess),
+    ("child", {0}, RecorderProcess), ("inline", {0, 1, 2, 3}, McapRecorder)])
+async def test_where_the_recorder_writes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                         process: str, cores: set[int],
+                                         expected: type) -> None:
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: cores)
+    config = make_config({"sources": MCAP, "recorder": {
+        "enabled": True, "output": "recordings", "process": process}}, tmp_path)
+    async with build_daemon(config, model=linear_model()) as built:
+        [recorder] = built.sinks
+        assert type(recorder) is expected
+        assert recorder.folder == tmp_path / "recordings"
+        built.pipeline.close_sinks()
+    assert [p.suffix for p in (tmp_path / "recordings").iterdir()] == [".mcap"]
+
+
 async def test_sources_and_sinks_in_table_order(tmp_path: Path) -> None:
     config = make_config({"sources": {**MQTT, **MCAP}, "publish": {"mqtt": True},
                           "recorder": {"enabled": True, "output": "recordings"}}, tmp_path)
@@ -74,7 +92,8 @@ async def test_sources_and_sinks_in_table_order(tmp_path: Path) -> None:
     async with build_daemon(config, model=linear_model(), extra_sinks=[probe]) as built:
         daemon = built.daemon
         recorder, caller, publisher = built.sinks
-        assert isinstance(recorder, McapRecorder)
+        # [recorder] process = "auto": in a child process where two cores are free
+        assert isinstance(recorder, RecorderProcess if usable_cores() > 1 else McapRecorder)
         assert recorder.folder == tmp_path / "recordings"
         assert caller is probe
         assert isinstance(publisher, MqttPublisher)

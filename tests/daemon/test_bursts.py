@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import pickle
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -140,6 +141,46 @@ def test_a_burst_records_and_computes_what_one_by_one_does() -> None:
     for segment in segments:
         first_sample = segment.index("/tdmon/sample")
         assert set(segment[first_sample:]) == {"/tdmon/sample"}
+
+
+class RowsSink(CollectSink):
+    """A sink taking a burst as rows, as the recorder in a child process does: it makes the
+    messages itself, with ``make`` sent by name as to another process."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.row_calls: list[tuple[str, int]] = []
+
+    def write_rows(self, topic: str, log_times_ns: list[int],
+                   make: Callable[[Any], dict[str, Any]], rows: list[tuple[Any, ...]]) -> None:
+        assert all(type(row) is tuple for row in rows)
+        make = pickle.loads(pickle.dumps(make))
+        self.row_calls.append((topic, len(rows)))
+        for log_time_ns, row in zip(log_times_ns, rows, strict=True):
+            self.write(topic, log_time_ns, make(row))
+
+
+def test_a_sink_taking_rows_gets_the_messages_the_others_get() -> None:
+    messages = _rig_messages()
+    # a payload longer than the recorded limit: its raw message is cut (bounded_payload)
+    messages.insert(9, RawMessage("mqtt", "rig/hookload", b'{"t": 4.5, "value": 1}' + b" " * 5000,
+                                  104.5))
+    alone = CollectSink()
+    single = _pipeline([alone])
+    for message in messages:
+        single.process(message)
+    rows, plain = RowsSink(), ManySink()
+    batched = _pipeline([rows, plain])
+    for k in range(0, len(messages), 7):
+        batched.process_burst(messages[k:k + 7])
+    for pipeline in (single, batched):
+        pipeline.flush()
+    for topic in ("raw", "sample", "rejected", "state", "model"):
+        assert alone[topic], topic
+        assert rows[topic] == plain[topic] == alone[topic], topic
+    assert any(m.get("payload_truncated") for m in rows["raw"])
+    assert {topic for topic, _ in rows.row_calls} == {"/tdmon/raw", "/tdmon/sample"}
+    assert sum(n for topic, n in rows.row_calls if topic == "/tdmon/raw") == len(messages)
 
 
 def test_a_sink_failing_a_burst_is_counted_and_the_others_get_it() -> None:

@@ -1,7 +1,8 @@
-"""A real ``tdmon run`` process, fed over Zenoh, killed with SIGKILL mid-stream: the file it
-leaves recovers with at most one second of data lost, the restarted daemon recovers it by
-itself and starts a new file, and every message written validates against its channel's
-JSON Schema.
+"""A real ``tdmon run`` process, fed over Zenoh, killed with SIGKILL mid-stream. With its
+recorder in its own process (``[recorder] process = "inline"``) the file it leaves recovers with
+at most one second of data lost, the restarted daemon recovers it by itself and starts a new
+file, and every message written validates against its channel's JSON Schema; with the recorder
+in a child process (``"child"``) the child finishes the file itself, with no more lost.
 
 Counting: the test is the rig. It publishes hook load, torque and bit depth at 20 rows per
 second (60 samples/s) with ``CongestionControl.BLOCK`` and kills the daemon right after a put,
@@ -35,7 +36,9 @@ CHANNELS = (("hookload", "kN", 1e3), ("torque", "kN*m", 1e3), ("bit_depth", "m",
 SAMPLES_PER_S = ROWS_PER_S * len(CHANNELS)
 
 
-def _config(folder: Path, port: int) -> Path:
+def _config(folder: Path, port: int, process: str = "inline") -> Path:
+    """The daemon's config; ``process``: where its recorder writes (``inline``: killed with
+    the daemon, leaving a cut file; ``child``: in a process of its own)."""
     path = folder / "daemon.toml"
     path.write_text(f"""
 prefix = "rig/K1"
@@ -46,6 +49,7 @@ listen = ["tcp/127.0.0.1:{port}"]
 enabled = true
 output = "{folder / 'rec'}"
 flush_interval = "0.5 s"
+process = "{process}"
 [monitor]
 grid_step = "50 m"
 """)
@@ -171,15 +175,13 @@ def test_sigkilled_daemon_loses_at_most_one_second(
     assert main(["recover", str(left)]) == 0
 
 
-def test_tdmon_recover_on_a_killed_daemon_file(tmp_path: Path,
-                                               free_tcp_port: Callable[[], int]) -> None:
-    """The same crash without a restart: ``tdmon recover`` makes the file readable."""
-    port = free_tcp_port()
-    config = _config(tmp_path, port)
-    log = tmp_path / "daemon.log"
+def _feed_and_kill(config: Path, log: Path, port: int, seconds: int
+                   ) -> list[tuple[str, float]]:
+    """Start ``tdmon run``, publish ``seconds`` of rows to it, SIGKILL it right after a put;
+    returns (channel, value in SI) of every sample published before the kill."""
     daemon = _start(config, log)
     rig = _rig(port)
-    published = 0
+    published: list[tuple[str, float]] = []
     try:
         _wait_for(log, "daemon running")
         deadline = time.monotonic() + 20
@@ -189,20 +191,55 @@ def test_tdmon_recover_on_a_killed_daemon_file(tmp_path: Path,
         time.sleep(0.5)
         t0 = time.time()
         started = time.monotonic()
-        for row in range(3 * ROWS_PER_S):
-            published += len(_publish(rig, row, t0))
+        for row in range(seconds * ROWS_PER_S):
+            published += _publish(rig, row, t0)
             time.sleep(max(0.0, started + (row + 1) / ROWS_PER_S - time.monotonic()))
         os.kill(daemon.pid, signal.SIGKILL)
-        daemon.wait(10)
+        assert daemon.wait(10) == -signal.SIGKILL
     finally:
         if daemon.poll() is None:
             daemon.kill()
             daemon.wait(10)
         rig.close()
+    return published
+
+
+def test_tdmon_recover_on_a_killed_daemon_file(tmp_path: Path,
+                                               free_tcp_port: Callable[[], int]) -> None:
+    """The same crash without a restart: ``tdmon recover`` makes the file readable."""
+    port = free_tcp_port()
+    published = _feed_and_kill(_config(tmp_path, port), tmp_path / "daemon.log", port, 3)
     [left] = sorted((tmp_path / "rec").glob("*.mcap"))
     assert not is_finished(left)
     assert main(["recover", str(left)]) == 0
     assert is_finished(left)
     samples = sum(1 for _ in read_messages(left, "/tdmon/sample"))
-    assert 0 <= published - samples <= SAMPLES_PER_S
+    assert 0 <= len(published) - samples <= SAMPLES_PER_S
     _validate_all(left)
+
+
+def test_sigkilled_daemon_with_its_recorder_in_a_child(
+        tmp_path: Path, free_tcp_port: Callable[[], int]) -> None:
+    """With ``process = "child"`` the recorder outlives the killed daemon: it sees the pipe
+    close and finishes the file itself (summary and footer) with everything it was sent, so
+    nothing needs recovering, and at most the daemon's unsent batch (half a flush interval)
+    and what was in flight are missing."""
+    port = free_tcp_port()
+    published = _feed_and_kill(_config(tmp_path, port, "child"), tmp_path / "daemon.log",
+                               port, 3)
+    [left] = sorted((tmp_path / "rec").glob("*.mcap"))
+    deadline = time.monotonic() + 30
+    while not is_finished(left):  # the orphaned recorder finishing the file
+        assert time.monotonic() < deadline, "the recorder's process never finished the file"
+        time.sleep(0.05)
+    samples = [(m.message["channel"], m.message["value"])
+               for m in read_messages(left, "/tdmon/sample")]
+    assert [c for c, _ in samples] == [c for c, _ in published[:len(samples)]]
+    for (_, value), (_, sent) in zip(samples, published, strict=False):
+        assert value == pytest.approx(sent, rel=1e-12)
+    lost = len(published) - len(samples)
+    print(f"published {len(published)} samples before SIGKILL, recorded {len(samples)}, "
+          f"lost {lost} ({lost / SAMPLES_PER_S:.2f} s)")
+    assert 0 <= lost <= SAMPLES_PER_S
+    assert _validate_all(left) >= 2 * len(samples)
+    assert main(["recover", str(left)]) == 0  # nothing to do
