@@ -73,6 +73,12 @@ class AckWindow:
     starve it; the window flushes the recorders itself when ``batch`` acknowledgements wait,
     when at least ``idle_min`` wait and no message has come for ``idle_s`` (the broker is
     waiting for us), or when the oldest has waited ``max_age_s``.
+
+    A recorder in another process (``durable_mark``, ``is_durable``, ``request_flush``: the
+    :class:`~tdmon.record.writer_process.RecorderProcess`) is never waited for: every
+    ``check_s`` the window notes a mark of what is waiting, asks for a flush instead of
+    flushing where the rules above would flush, and lets acknowledgements go once their mark
+    is in the file. Only ``force`` (shutdown) flushes and waits.
     """
 
     def __init__(self, recorders: Iterable[Any], batch: int = 500, idle_s: float = 0.05,
@@ -87,6 +93,10 @@ class AckWindow:
         self._last_check = float("-inf")
         self._flushes_seen = 0
         self._covered = 0  # leading entries that were waiting when _flushes_seen was read
+        self._marked = bool(self.recorders) and all(
+            callable(getattr(r, "durable_mark", None)) for r in self.recorders)
+        # (leading entries waiting when the marks were taken, each recorder's mark then)
+        self._marks: deque[tuple[int, list[Any]]] = deque()
         self.acknowledged = 0
         self.forced_flushes = 0
 
@@ -110,14 +120,19 @@ class AckWindow:
         if not pending:
             return
         count = len(pending)
-        if (force or count >= self.batch or (idle >= self.idle_s and count >= self.idle_min)
-                or now - pending[0][0] >= self.max_age_s):
+        due = (count >= self.batch or (idle >= self.idle_s and count >= self.idle_min)
+               or now - pending[0][0] >= self.max_age_s)
+        if self._marked and not force:
+            self._release_marked(now, due)
+            return
+        if force or due:
             for recorder in self.recorders:
                 recorder.flush()  # a failed recorder flushes nothing: monitoring goes on
             self.forced_flushes += 1
             acks = [ack for _, ack in pending]
             pending.clear()
             self._covered = 0
+            self._marks.clear()
             self._ack(acks)
             return
         if now - self._last_check < self.check_s:
@@ -129,6 +144,26 @@ class AckWindow:
             self._ack(acks)
         self._flushes_seen = flushes
         self._covered = len(pending)
+
+    def _release_marked(self, now: float, due: bool) -> None:
+        """``release`` for recorders in another process: marks, flush requests, no waiting."""
+        pending, marks = self._pending, self._marks
+        if due or now - self._last_check >= self.check_s:
+            self._last_check = now
+            if not marks or marks[-1][0] < len(pending):
+                marks.append((len(pending), [r.durable_mark() for r in self.recorders]))
+            if due:
+                for recorder in self.recorders:
+                    recorder.request_flush()
+                self.forced_flushes += 1
+        released = 0
+        while marks and all(r.is_durable(m) for r, m in zip(self.recorders, marks[0][1],
+                                                             strict=True)):
+            released = marks.popleft()[0]
+        if released:
+            for index, (count, taken) in enumerate(marks):
+                marks[index] = (count - released, taken)
+            self._ack([pending.popleft()[1] for _ in range(released)])
 
     def _ack(self, acks: list[Callable[[], None]]) -> None:
         for ack in acks:

@@ -81,12 +81,14 @@ class _Tag:
     RETRY: Final = "retry"
     REGISTER_TOPIC: Final = "register_topic"
     CLOSE: Final = "close"
+    FLUSH_SOON: Final = "flush_soon"  # answered by DURABLE, not waited for
     # child -> parent: unasked events, and the answers to starting and to CLOSE
     READY: Final = "ready"
     ERROR: Final = "error"
     ALARM: Final = "alarm"
     STATE: Final = "state"
     CLOSED: Final = "closed"
+    DURABLE: Final = "durable"  # every batch up to this count is flushed into the file
 
 
 class RecorderProcess:
@@ -128,6 +130,9 @@ class RecorderProcess:
         # in order: (topic, log time, message) and (topic, log times, make, rows) entries
         self._batch: list[tuple[Any, ...]] = []
         self._batched = 0  # messages in the batch
+        # batches sent, batches the child has flushed into its file (as it last said), and
+        # the count a flush was last asked at (see durable_mark)
+        self._sent = self._durable = self._flush_asked = 0
         self._send_at = time.monotonic() + self._send_every
         self._pending_alarms: list[dict[str, Any]] = []
         self._error: RecordError | None = None
@@ -235,6 +240,37 @@ class RecorderProcess:
         if self._pending_alarms:
             self._fire_alarms()
 
+    # -- acknowledging what is in the file, without waiting for the child ---------------------
+
+    def durable_mark(self) -> int:
+        """A mark of everything written so far: :meth:`is_durable` of it says when all of it
+        is flushed into the file. For the daemon's acknowledgements (``AckWindow``), which
+        must not wait on the child as ``flush`` and ``stats`` do."""
+        with self._lock:
+            return self._sent + (1 if self._batch else 0)
+
+    def is_durable(self, mark: int) -> bool:
+        """Whether what was written before ``durable_mark`` gave ``mark`` is flushed into the
+        file, as the child last said; also true once the recorder has failed or its process is
+        gone (that loss is alarmed and counted, and monitoring goes on, as with ``flush``)."""
+        with self._lock:
+            self._drain()
+            return self._durable >= mark or self._dead or self._error is not None
+
+    def request_flush(self) -> None:
+        """Send what is batched and have the child flush its file, without waiting: its answer
+        moves :meth:`is_durable` on. One such request at a time."""
+        with self._lock:
+            self._send_batch()
+            if (self._dead or self._closed or self._durable >= self._sent
+                    or self._durable < self._flush_asked):  # nothing new, or one on its way
+                return
+            self._flush_asked = self._sent
+            try:
+                self._conn.send((_Tag.FLUSH_SOON,))
+            except (OSError, ValueError) as exc:
+                self._child_gone(f"the recorder process could not be reached: {exc}")
+
     def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
         """Add a topic with its JSON Schema (see :meth:`McapRecorder.register_topic`)."""
         with self._lock:
@@ -317,6 +353,7 @@ class RecorderProcess:
             payload, count = self._picklable(batch)
         try:
             self._conn.send_bytes(payload)
+            self._sent += 1
         except (OSError, ValueError) as exc:
             self._lost_here += count
             self._child_gone(f"the recorder process stopped taking messages ({exc})")
@@ -352,7 +389,9 @@ class RecorderProcess:
 
     def _handle(self, event: tuple[Any, ...]) -> tuple[Any, ...] | None:
         tag = event[0]
-        if tag == _Tag.ALARM:
+        if tag == _Tag.DURABLE:
+            self._durable = max(self._durable, event[1])
+        elif tag == _Tag.ALARM:
             self._pending_alarms.append(event[1])
         elif tag == _Tag.STATE:
             error, path = event[1], event[2]
@@ -542,18 +581,43 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
             state = now
             conn.send((_Tag.STATE, *now))
 
+    # What is flushed into the file, for the parent's acknowledgements: ``marked`` batches had
+    # been written when the recorder had made ``flushes`` flushes; a flush counted later came
+    # after them (the recorder writes everything it holds before it flushes), so they are in
+    # the file: DURABLE says so.
+    batches = marked = 0
+    flushes = recorder.stats.flushes
+    idle_s = min(float(options.get("flush_interval_s", 1.0)) / 4, 0.25)
+
+    def durable(now_marked: int) -> None:
+        nonlocal marked, flushes
+        done = recorder.stats.flushes
+        if done > flushes:
+            conn.send((_Tag.DURABLE, marked))
+        marked, flushes = now_marked, done
+
     try:
         while True:
             try:
+                if not conn.poll(idle_s):
+                    durable(batches)  # a quiet parent: the recorder's own flush covers all
+                    continue
                 data = conn.recv_bytes()
             except (EOFError, OSError):
                 break  # the parent is gone: finish the file with what arrived
             item = pickle.loads(data)
             if type(item) is list:
                 _write_entries(recorder, item)
+                batches += 1
                 report()
+                durable(batches)
             elif item[0] == _Tag.CLOSE:
                 break
+            elif item[0] == _Tag.FLUSH_SOON:
+                recorder.flush()
+                report()
+                conn.send((_Tag.DURABLE, batches))
+                marked, flushes = batches, recorder.stats.flushes
             else:
                 reply = _command(recorder, item)
                 report()  # before the reply: the parent sees the command's effects with it

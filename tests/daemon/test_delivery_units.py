@@ -87,6 +87,76 @@ def test_acks_wait_for_the_recorders_flush() -> None:
     assert acked[-1] == 10
 
 
+class FarRecorder(FakeRecorder):
+    """A recorder in another process: marks of what was written, flushes asked for and done
+    later (``settle``), never waited for."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.written = self.durable = 0
+        self.asked: list[int] = []
+        self.failed = False
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        super().write(topic, log_time_ns, message)
+        self.written += 1
+
+    def durable_mark(self) -> int:
+        return self.written
+
+    def is_durable(self, mark: int) -> bool:
+        return self.durable >= mark or self.failed
+
+    def request_flush(self) -> None:
+        self.asked.append(self.written)
+
+    def settle(self) -> None:  # the other process flushed what it had been sent
+        self.flush()
+        self.durable = self.written
+
+
+def test_acks_wait_for_a_recorder_in_another_process_without_waiting_on_it() -> None:
+    recorder = FarRecorder()
+    window = AckWindow(recorders_of([recorder]), batch=5, idle_s=0.05, idle_min=3,
+                       max_age_s=5.0, check_s=0.05)
+    acked: list[int] = []
+
+    def arrive(i: int, now: float) -> None:
+        recorder.write("/tdmon/raw", 0, {"payload": i})
+        window.add([lambda: acked.append(i)], now=now)
+
+    arrive(0, 0.0)
+    arrive(1, 0.0)
+    window.release(now=0.01, idle=0.0)  # a mark of the two; nothing asked, nothing acked
+    assert acked == [] and recorder.asked == []
+    arrive(2, 0.02)
+    recorder.settle()  # its own schedule: all three are in the file now
+    window.release(now=0.03, idle=0.0)
+    assert acked == [0, 1]  # the third was written before the flush, but marked after it
+    window.release(now=0.1, idle=0.0)  # marked now, and in the file already
+    assert acked == [0, 1, 2] and len(window) == 0
+    # a full batch: a flush is asked for, nothing is waited for, the acks go once it is done
+    for i in range(3, 8):
+        arrive(i, 1.0)
+    window.release(now=1.0, idle=0.0)
+    assert recorder.asked == [8] and acked == [0, 1, 2] and window.forced_flushes == 1
+    window.release(now=1.01, idle=0.0)
+    assert acked == [0, 1, 2]
+    recorder.settle()
+    window.release(now=1.02, idle=0.0)
+    assert acked == list(range(8))
+    # a failed recorder holds nothing back (its loss is alarmed and counted)
+    arrive(8, 2.0)
+    recorder.failed = True
+    window.release(now=2.1, idle=0.0)
+    assert acked == list(range(9))
+    # shutdown: flushed and acknowledged at once
+    recorder.failed = False
+    arrive(9, 3.0)
+    window.release(now=3.0, idle=0.0, force=True)
+    assert acked == list(range(10)) and recorder.file[-1] == 9
+
+
 def test_without_a_recorder_acks_go_after_processing() -> None:
     acked: list[int] = []
     window = AckWindow([])

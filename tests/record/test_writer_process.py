@@ -97,6 +97,34 @@ def test_rows_made_into_messages_in_the_child(tmp_path: Path) -> None:
     assert stats.unencodable == 2 and stats.lost == 2  # the short row, the lambda's row
 
 
+def test_durable_marks_follow_the_childs_flushes(tmp_path: Path) -> None:
+    """What the daemon's acknowledgements go by: a mark of what was written is durable once
+    the child has flushed it into the file, after a flush asked for without waiting, or after
+    the recorder's own scheduled flush."""
+    path = tmp_path / "x.mcap"
+    with RecorderProcess(path=path, flush_interval_s=0.4, batch_size=10_000) as recorder:
+        for i in range(100):
+            recorder.write("/tdmon/raw", 1_000 + i, _raw(i))
+        mark = recorder.durable_mark()
+        assert mark == 1 and not recorder.is_durable(mark)  # still in this process's batch
+        recorder.request_flush()
+        deadline = time.monotonic() + 20
+        while not recorder.is_durable(mark):
+            assert time.monotonic() < deadline, "the asked-for flush never came back"
+            time.sleep(0.01)
+        assert len(list(read_messages(path, allow_unfinished=True))) == 100
+        for i in range(100, 150):
+            recorder.write("/tdmon/raw", 1_000 + i, _raw(i))
+        later = recorder.durable_mark()
+        assert later == 2 and not recorder.is_durable(later)
+        deadline = time.monotonic() + 20  # no request: the batch goes within half the
+        while not recorder.is_durable(later):  # interval, the child flushes on its own
+            assert time.monotonic() < deadline, "the scheduled flush never came back"
+            time.sleep(0.02)
+        assert len(list(read_messages(path, allow_unfinished=True))) == 150
+    assert recorder.stats.written == 150
+
+
 def test_start_up_problem_is_raised_with_the_childs_reason(tmp_path: Path) -> None:
     existing = tmp_path / "taken.mcap"
     existing.write_bytes(b"")
