@@ -234,8 +234,10 @@ class Pipeline:
         if sinks:
             log_times = [int(raw.receive_time * 1e9) for raw in raws]
             self._input_ns = log_times[0]
+            limit = self._recorded_payload_bytes
             self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
-                             partial(raw_row_message, max_bytes=self._recorded_payload_bytes))
+                             partial(raw_row_message, max_bytes=limit),
+                             lambda: [raw_message(raw, limit) for raw in raws])
         held = _HeldSamples([], [])
         process = self._process
         try:
@@ -243,8 +245,10 @@ class Pipeline:
                 process(raw, held)
         finally:
             if held.samples:
+                samples = held.samples
                 self._write_rows(self._sinks_for("/tdmon/sample"), "/tdmon/sample",
-                                 held.log_times, held.samples, SAMPLE_ROW, sample_row_message)
+                                 held.log_times, samples, SAMPLE_ROW, sample_row_message,
+                                 lambda: list(map(sample_message, samples)))
 
     def _process(self, raw: RawMessage, held: _HeldSamples | None) -> Sample | Rejected:
         """Everything after recording the raw input; a sample message goes to ``held`` when
@@ -404,10 +408,11 @@ class Pipeline:
 
     def _write_rows(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
                     items: Sequence[Any], row_of: Callable[[Any], tuple[Any, ...]],
-                    make: Callable[[Any], dict[str, Any]]) -> None:
+                    make: Callable[[Any], dict[str, Any]],
+                    messages: Callable[[], list[dict[str, Any]]]) -> None:
         """A burst's messages of one topic: a sink with ``write_rows`` gets each item's row
         (``row_of``) and the function that makes its message of a row (``make``), the others
-        the messages (docs/daemon.md, "Bursts"); each made once for all sinks."""
+        the messages (``messages()``; docs/daemon.md, "Bursts"); each made once for all."""
         rows: list[tuple[Any, ...]] | None = None
         plain: list[Sink] = []
         for sink in sinks:
@@ -424,8 +429,7 @@ class Pipeline:
                 log.exception("sink %r failed writing %d messages on %s", sink, len(rows),
                               topic)
         if plain:
-            made = map(make, rows) if rows is not None else map(make, map(row_of, items))
-            self._write_many(plain, topic, log_times_ns, list(made))
+            self._write_many(plain, topic, log_times_ns, messages())
 
     def _write_many(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
                     messages: list[dict[str, Any]]) -> None:

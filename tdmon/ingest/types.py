@@ -149,32 +149,18 @@ def bounded_payload(payload: bytes, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> 
     }
 
 
-#: The fields of a RawMessage its ``raw`` message is made of, as one tuple (a *row*), and the
-#: same for a Sample's ``sample`` message: what a sink with ``write_rows`` is handed instead of
-#: the dicts (docs/daemon.md, "Bursts"), made in C without a dict per message.
-RAW_ROW: Final = attrgetter("source", "topic", "payload", "receive_time")
-SAMPLE_ROW: Final = attrgetter("channel", "t", "value", "unit", "source", "topic")
-
-
 def raw_message(raw: RawMessage, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
     """The ``raw`` daemon message (docs/architecture.md); payload bounded as in
     :func:`bounded_payload`."""
-    return raw_row_message(RAW_ROW(raw), max_bytes)
-
-
-def raw_row_message(row: tuple[str, str, bytes, float],
-                    max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
-    """:func:`raw_message` of the :data:`RAW_ROW` of a RawMessage."""
-    source, topic, payload, receive_time = row
-    if len(payload) > max_bytes:
-        return {"source": source, "topic": topic, "receive_time": receive_time,
-                **bounded_payload(payload, max_bytes)}
+    if len(raw.payload) > max_bytes:
+        return {"source": raw.source, "topic": raw.topic, "receive_time": raw.receive_time,
+                **bounded_payload(raw.payload, max_bytes)}
     # the usual case, once per input message: no intermediate dict
-    text, encoding = payload_text(payload)
+    text, encoding = payload_text(raw.payload)
     return {
-        "source": source,
-        "topic": topic,
-        "receive_time": receive_time,
+        "source": raw.source,
+        "topic": raw.topic,
+        "receive_time": raw.receive_time,
         "payload": text,
         "payload_encoding": encoding,
     }
@@ -182,14 +168,36 @@ def raw_row_message(row: tuple[str, str, bytes, float],
 
 def sample_message(sample: Sample) -> dict[str, Any]:
     """The ``sample`` daemon message."""
-    return sample_row_message(SAMPLE_ROW(sample))
+    return {
+        "channel": sample.channel,
+        "t": sample.t,
+        "value": sample.value,
+        "unit": sample.unit,
+        "source": sample.source,
+        "topic": sample.topic,
+    }
+
+
+#: The fields a ``sample`` message holds, in its order.
+SAMPLE_FIELDS: Final = ("channel", "t", "value", "unit", "source", "topic")
+
+#: A RawMessage's fields its ``raw`` message is made of, as one tuple (a *row*), and a Sample's
+#: for its ``sample`` message: what a sink with ``write_rows`` is handed instead of the dicts
+#: (docs/daemon.md, "Bursts"), taken in C without building a dict per message.
+RAW_ROW: Final = attrgetter("source", "topic", "payload", "receive_time")
+SAMPLE_ROW: Final = attrgetter(*SAMPLE_FIELDS)
+
+
+def raw_row_message(row: tuple[str, str, bytes, float],
+                    max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
+    """:func:`raw_message` of a :data:`RAW_ROW` (where the rows went: the recorder's
+    process)."""
+    return raw_message(RawMessage(*row), max_bytes)
 
 
 def sample_row_message(row: tuple[str, float, float, str, str, str]) -> dict[str, Any]:
-    """:func:`sample_message` of the :data:`SAMPLE_ROW` of a Sample."""
-    channel, t, value, unit, source, topic = row
-    return {"channel": channel, "t": t, "value": value, "unit": unit, "source": source,
-            "topic": topic}
+    """:func:`sample_message` of a :data:`SAMPLE_ROW`."""
+    return dict(zip(SAMPLE_FIELDS, row, strict=True))
 
 
 def rejected_message(rejected: Rejected,
