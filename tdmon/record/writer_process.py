@@ -42,7 +42,7 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from itertools import repeat
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -208,16 +208,7 @@ class RecorderProcess:
         """``write`` for several messages of one topic (see :meth:`McapRecorder.write_many`)."""
         if len(log_times_ns) != len(messages):
             raise ValueError(f"{len(log_times_ns)} log times for {len(messages)} messages")
-        with self._lock:
-            if self._closed or self._dead:
-                self._lost_here += len(messages)
-                return
-            self._batch.extend(zip(repeat(topic), log_times_ns, messages))
-            self._batched += len(messages)
-            if self._batched >= self.batch_size or time.monotonic() >= self._send_at:
-                self._send_batch()
-        if self._pending_alarms:
-            self._fire_alarms()
+        self._add(zip(repeat(topic), log_times_ns, messages), len(messages))
 
     def write_rows(self, topic: str, log_times_ns: Sequence[int],
                    make: Callable[[Any], Message], rows: Sequence[tuple[Any, ...]]) -> None:
@@ -229,12 +220,16 @@ class RecorderProcess:
         "Bursts"): their dicts are then never built in the daemon's process."""
         if len(log_times_ns) != len(rows):
             raise ValueError(f"{len(log_times_ns)} log times for {len(rows)} rows")
+        self._add(((topic, log_times_ns, make, rows),), len(rows))
+
+    def _add(self, entries: Iterable[tuple[Any, ...]], count: int) -> None:
+        """Put ``entries`` (``count`` messages) in the batch; send it when full or due."""
         with self._lock:
             if self._closed or self._dead:
-                self._lost_here += len(rows)
+                self._lost_here += count
                 return
-            self._batch.append((topic, log_times_ns, make, rows))
-            self._batched += len(rows)
+            self._batch.extend(entries)
+            self._batched += count
             if self._batched >= self.batch_size or time.monotonic() >= self._send_at:
                 self._send_batch()
         if self._pending_alarms:

@@ -104,28 +104,29 @@ def _validate_all(path: Path) -> int:
     return n
 
 
-def test_sigkilled_daemon_loses_at_most_one_second(
-        tmp_path: Path, free_tcp_port: Callable[[], int]) -> None:
-    port = free_tcp_port()
-    config = _config(tmp_path, port)
-    first_log = tmp_path / "first.log"
-    daemon = _start(config, first_log)
+def _feed_and_kill(config: Path, log: Path, port: int, seconds: int, rows_after: int = 0
+                   ) -> list[tuple[str, float]]:
+    """Start ``tdmon run``, publish ``seconds`` of rows to it (20 rows/s, paced on the wall
+    clock), SIGKILL it right after a put (mid-stream) and publish ``rows_after`` more (the rig
+    does not know); returns (channel, value in SI) of every sample published before the
+    kill."""
+    daemon = _start(config, log)
     rig = _rig(port)
     published: list[tuple[str, float]] = []
     try:
-        _wait_for(first_log, "daemon running")
+        _wait_for(log, "daemon running")
         deadline = time.monotonic() + 20
         while not list(rig.info.peers_zid()):
             assert time.monotonic() < deadline, "the rig never met the daemon"
             time.sleep(0.05)
-        time.sleep(0.5)  # the daemon's subscription reaches the rig
+        time.sleep(0.5)
         t0 = time.time()
         started = time.monotonic()
-        for row in range(5 * ROWS_PER_S):  # 5 s at 20 rows/s, paced on the wall clock
+        for row in range(seconds * ROWS_PER_S):
             published += _publish(rig, row, t0)
             time.sleep(max(0.0, started + (row + 1) / ROWS_PER_S - time.monotonic()))
-        os.kill(daemon.pid, signal.SIGKILL)  # right after a put: mid-stream
-        for row in range(5 * ROWS_PER_S, 6 * ROWS_PER_S):  # the rig does not know
+        os.kill(daemon.pid, signal.SIGKILL)
+        for row in range(seconds * ROWS_PER_S, seconds * ROWS_PER_S + rows_after):
             _publish(rig, row, t0)
         assert daemon.wait(10) == -signal.SIGKILL
     finally:
@@ -133,7 +134,30 @@ def test_sigkilled_daemon_loses_at_most_one_second(
             daemon.kill()
             daemon.wait(10)
         rig.close()
+    return published
 
+
+def _recorded_prefix(path: Path, published: list[tuple[str, float]]
+                     ) -> list[tuple[str, float]]:
+    """The samples in ``path``: the first of those published, in order, exactly, missing at
+    most one second's worth."""
+    samples = [(m.message["channel"], m.message["value"])
+               for m in read_messages(path, "/tdmon/sample")]
+    assert [c for c, _ in samples] == [c for c, _ in published[:len(samples)]]
+    for (_, value), (_, sent) in zip(samples, published, strict=False):
+        assert value == pytest.approx(sent, rel=1e-12)
+    lost = len(published) - len(samples)
+    print(f"published {len(published)} samples before SIGKILL, recorded {len(samples)}, "
+          f"lost {lost} ({lost / SAMPLES_PER_S:.2f} s)")
+    assert 0 <= lost <= SAMPLES_PER_S, f"{lost} samples lost (one second is {SAMPLES_PER_S})"
+    return samples
+
+
+def test_sigkilled_daemon_loses_at_most_one_second(
+        tmp_path: Path, free_tcp_port: Callable[[], int]) -> None:
+    port = free_tcp_port()
+    config = _config(tmp_path, port)
+    published = _feed_and_kill(config, tmp_path / "first.log", port, 5, rows_after=ROWS_PER_S)
     [left] = sorted((tmp_path / "rec").glob("*.mcap"))
     assert not is_finished(left), "SIGKILL leaves no footer"
 
@@ -154,16 +178,8 @@ def test_sigkilled_daemon_loses_at_most_one_second(
     assert is_finished(left) and is_finished(files[1])
     assert "Traceback" not in second_log.read_text()
 
-    samples = [(m.message["channel"], m.message["value"])
-               for m in read_messages(left, "/tdmon/sample")]
     # exactly what was published, in order, up to the last flush before the kill
-    assert [c for c, _ in samples] == [c for c, _ in published[:len(samples)]]
-    for (_, value), (_, sent) in zip(samples, published, strict=False):
-        assert value == pytest.approx(sent, rel=1e-12)
-    lost = len(published) - len(samples)
-    print(f"published {len(published)} samples before SIGKILL, recovered {len(samples)}, "
-          f"lost {lost} ({lost / SAMPLES_PER_S:.2f} s)")
-    assert 0 <= lost <= SAMPLES_PER_S, f"{lost} samples lost (one second is {SAMPLES_PER_S})"
+    samples = _recorded_prefix(left, published)
     raw = list(read_messages(left, "/tdmon/raw"))
     assert len(samples) <= len(raw) <= len(samples) + 1  # a raw may precede its sample
     # results of the frames that made it are there too
@@ -173,35 +189,6 @@ def test_sigkilled_daemon_loses_at_most_one_second(
     _validate_all(files[1])
     # recovering again is a no-op, and says so
     assert main(["recover", str(left)]) == 0
-
-
-def _feed_and_kill(config: Path, log: Path, port: int, seconds: int
-                   ) -> list[tuple[str, float]]:
-    """Start ``tdmon run``, publish ``seconds`` of rows to it, SIGKILL it right after a put;
-    returns (channel, value in SI) of every sample published before the kill."""
-    daemon = _start(config, log)
-    rig = _rig(port)
-    published: list[tuple[str, float]] = []
-    try:
-        _wait_for(log, "daemon running")
-        deadline = time.monotonic() + 20
-        while not list(rig.info.peers_zid()):
-            assert time.monotonic() < deadline, "the rig never met the daemon"
-            time.sleep(0.05)
-        time.sleep(0.5)
-        t0 = time.time()
-        started = time.monotonic()
-        for row in range(seconds * ROWS_PER_S):
-            published += _publish(rig, row, t0)
-            time.sleep(max(0.0, started + (row + 1) / ROWS_PER_S - time.monotonic()))
-        os.kill(daemon.pid, signal.SIGKILL)
-        assert daemon.wait(10) == -signal.SIGKILL
-    finally:
-        if daemon.poll() is None:
-            daemon.kill()
-            daemon.wait(10)
-        rig.close()
-    return published
 
 
 def test_tdmon_recover_on_a_killed_daemon_file(tmp_path: Path,
@@ -232,14 +219,6 @@ def test_sigkilled_daemon_with_its_recorder_in_a_child(
     while not is_finished(left):  # the orphaned recorder finishing the file
         assert time.monotonic() < deadline, "the recorder's process never finished the file"
         time.sleep(0.05)
-    samples = [(m.message["channel"], m.message["value"])
-               for m in read_messages(left, "/tdmon/sample")]
-    assert [c for c, _ in samples] == [c for c, _ in published[:len(samples)]]
-    for (_, value), (_, sent) in zip(samples, published, strict=False):
-        assert value == pytest.approx(sent, rel=1e-12)
-    lost = len(published) - len(samples)
-    print(f"published {len(published)} samples before SIGKILL, recorded {len(samples)}, "
-          f"lost {lost} ({lost / SAMPLES_PER_S:.2f} s)")
-    assert 0 <= lost <= SAMPLES_PER_S
+    samples = _recorded_prefix(left, published)
     assert _validate_all(left) >= 2 * len(samples)
     assert main(["recover", str(left)]) == 0  # nothing to do
