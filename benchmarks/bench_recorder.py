@@ -15,8 +15,9 @@ second of data, of which 3 raw + 3 sample per second of input):
 3. the Rerun views built from the same stream (messages/s), for scale;
 4. the recorder's cost in the daemon itself: a recording (default the bundled simulated trip
    out with its daemon config) replayed flat out through ``build_daemon``'s pipeline (MCAP
-   source, no publishing), with and without the folder recorder of ``[recorder]``, runs
-   alternated in one invocation; throughput ratio and bytes per input sample. Twice: with the
+   source, no publishing), with and without the folder recorder of ``[recorder]`` (in a child
+   process and in the daemon's, ``--process``), runs alternated in one invocation; throughput
+   ratio and bytes per input sample. Twice: with the
    config as given (calibration on) and with calibration off (rig state and monitor only, the
    cheapest pipeline, where the recorder weighs most).
 
