@@ -8,6 +8,7 @@ and row here.
 
 from __future__ import annotations
 
+import logging
 import os
 
 from tdmon.config.daemon import DaemonConfig, MqttConfig, RecorderConfig, RerunConfig, ZenohConfig
@@ -15,6 +16,8 @@ from tdmon.daemon.wiring import Entry, Table, Wiring
 from tdmon.ingest.mqtt import MqttPublisher
 from tdmon.ingest.zenoh_io import ZenohPublisher
 from tdmon.record.sink import Recorder
+
+log = logging.getLogger(__name__)
 
 
 async def folder_recorder(wiring: Wiring, section: RecorderConfig) -> None:
@@ -32,6 +35,8 @@ async def folder_recorder(wiring: Wiring, section: RecorderConfig) -> None:
         flush_interval_s=section.flush_interval,
         on_alarm=wiring.emit_alarm,
     )
+    log.info("recording into %s (%s)", recorder.path,
+             "from its own process" if in_child else "in the daemon's process")
     wiring.add_sink(recorder)
 
 

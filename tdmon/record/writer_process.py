@@ -201,7 +201,7 @@ class RecorderProcess:
 
     def write(self, topic: str, log_time_ns: int, message: Message) -> None:
         """Queue one message for the child; never raises for recording problems."""
-        self.write_many(topic, (log_time_ns,), (message,))
+        self._add(((topic, log_time_ns, message),), 1)
 
     def write_many(self, topic: str, log_times_ns: Sequence[int],
                    messages: Sequence[Message]) -> None:
