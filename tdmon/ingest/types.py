@@ -167,7 +167,8 @@ def raw_message(raw: RawMessage, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dic
 
 
 def sample_message(sample: Sample) -> dict[str, Any]:
-    """The ``sample`` daemon message."""
+    """The ``sample`` daemon message (its keys: :data:`SAMPLE_FIELDS`, written out here because
+    this runs once per input message)."""
     return {
         "channel": sample.channel,
         "t": sample.t,

@@ -1,12 +1,13 @@
 """The flight recorder on a second core: :class:`McapRecorder` in a child process.
 
-At full replay speed the pipeline is CPU-bound, and the recorder (JSON encoding and mcap's
-pure-Python record framing of ~2.25 records per input message) took about 40 % of it on one
-core. :class:`RecorderProcess` is a :class:`~tdmon.record.sink.Recorder` like it whose
-``write`` only appends the message to a batch; batches are pickled (about
-0.75 us per message, a quarter of a JSON encoding) and sent over a pipe to a child process,
-which runs an ordinary :class:`McapRecorder`. Encoding, framing, compression and disk I/O then
-happen on the other core, and a slow disk never stalls the event loop.
+:class:`RecorderProcess` is a :class:`~tdmon.record.sink.Recorder` like it whose ``write``
+only appends the message to a batch; batches are pickled and sent over a pipe to a child
+process, which runs an ordinary :class:`McapRecorder`. Encoding, framing, compression and disk
+I/O then happen on the other core, and a slow disk never stalls the event loop. ``write_rows``
+takes a burst's raw input and samples as rows of plain values, made into messages in the
+child (docs/daemon.md, "Bursts"); ``durable_mark``, ``is_durable`` and ``request_flush`` let
+the daemon acknowledge what is in the file without waiting for the child. ``tdmon run`` records
+this way where it may use two cores (``[recorder] process``); figures in docs/benchmarks.md.
 
 Behaviour kept from :class:`McapRecorder`:
 
