@@ -35,6 +35,7 @@ from tdmon.daemon.loss import LossDetector
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
     RAW_ROW,
+    RECORDED,
     RECORDED_PAYLOAD_BYTES,
     SAMPLE_ROW,
     RawMessage,
@@ -235,9 +236,14 @@ class Pipeline:
             log_times = [int(raw.receive_time * 1e9) for raw in raws]
             self._input_ns = log_times[0]
             limit = self._recorded_payload_bytes
+            # a replay of tdmon's own recording: the raw messages as it held them, when every
+            # one is there and short enough to be kept whole (a recorded message is longer
+            # than its payload), go to a sink that takes encoded messages as they are
+            kept = list(map(RECORDED, raws))  # bytes or None each
+            recorded = None if None in kept or max(map(len, kept)) > limit else kept
             self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
                              partial(raw_row_message, max_bytes=limit),
-                             lambda: [raw_message(raw, limit) for raw in raws])
+                             lambda: [raw_message(raw, limit) for raw in raws], recorded)
         held = _HeldSamples([], [])
         process = self._process
         try:
@@ -409,16 +415,29 @@ class Pipeline:
     def _write_rows(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
                     items: Sequence[Any], row_of: Callable[[Any], tuple[Any, ...]],
                     make: Callable[[Any], dict[str, Any]],
-                    messages: Callable[[], list[dict[str, Any]]]) -> None:
+                    messages: Callable[[], list[dict[str, Any]]],
+                    encoded: list[bytes] | None = None) -> None:
         """A burst's messages of one topic: a sink with ``write_rows`` gets each item's row
-        (``row_of``) and the function that makes its message of a row (``make``), the others
-        the messages (``messages()``; docs/daemon.md, "Bursts"); each made once for all."""
+        (``row_of``) and the function that makes its message of a row (``make``); given the
+        messages' JSON bytes (``encoded``), a sink with ``write_encoded_many`` gets those; the
+        others the messages (``messages()``; docs/daemon.md, "Bursts"); each made once for
+        all."""
         rows: list[tuple[Any, ...]] | None = None
         plain: list[Sink] = []
         for sink in sinks:
             write_rows = getattr(sink, "write_rows", None)
             if write_rows is None:
-                plain.append(sink)
+                write_encoded = (None if encoded is None
+                                 else getattr(sink, "write_encoded_many", None))
+                if write_encoded is None:
+                    plain.append(sink)
+                    continue
+                try:
+                    write_encoded(topic, log_times_ns, encoded)
+                except Exception:
+                    self.stats.sink_errors += 1
+                    log.exception("sink %r failed writing %d messages on %s", sink,
+                                  len(log_times_ns), topic)
                 continue
             if rows is None:
                 rows = list(map(row_of, items))

@@ -23,7 +23,7 @@ from collections.abc import AsyncIterator, Iterable, Iterator
 from itertools import islice
 from pathlib import Path
 from types import TracebackType
-from typing import IO
+from typing import IO, Any
 
 import orjson
 import zstandard
@@ -54,41 +54,55 @@ def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMes
     """
     if channel_topic == RAW_TOPIC:
         try:
-            try:
-                # orjson: ~5x faster than json on these small records; what it refuses
-                # (NaN, lone surrogates, huge integers, damage) goes to json, whose result or
-                # error is the one given
-                record = orjson.loads(data)
-            except orjson.JSONDecodeError:
-                record = json.loads(data)
-            if type(record) is dict:
-                # the usual record, as tdmon writes it: each field of its type, a text payload
-                # (what the general path below would make of it, with fewer calls)
-                source, topic = record.get("source", "mcap"), record.get("topic")
-                text, receive_time = record.get("payload"), record.get("receive_time")
-                if (type(source) is str and type(topic) is str and type(text) is str
-                        and type(receive_time) is float
-                        and record.get("payload_encoding") != "base64"
-                        and not record.get("payload_truncated")):
-                    return RawMessage(source, topic, text.encode("utf-8"), receive_time)
-            if isinstance(record, dict) and record.get("payload_truncated"):
-                raise _Truncated
-            text = record["payload"]
-            if record.get("payload_encoding") == "base64":
-                payload = base64.b64decode(text, validate=True)
-            else:
-                payload = text.encode("utf-8")
-            return RawMessage(
-                source=str(record.get("source", "mcap")),
-                topic=str(record["topic"]),
-                payload=payload,
-                receive_time=float(record.get("receive_time", log_time_ns / 1e9)),
-            )
-        except (ValueError, KeyError, TypeError, binascii.Error) as exc:
-            raise IngestError(f"recorded {RAW_TOPIC} message is unreadable: {exc}") from exc
+            # orjson: ~5x faster than json on these small records; what it refuses (NaN, lone
+            # surrogates, huge integers, damage) goes to json, whose result or error is the
+            # one given
+            record = orjson.loads(data)
+        except orjson.JSONDecodeError:
+            return _raw_of_record(data, log_time_ns, json_module=True)
+        if type(record) is dict and len(record) == 5:
+            # the usual record, as tdmon writes it: exactly raw_message's fields, each of its
+            # type, a text payload. The general path below would make the same RawMessage of
+            # it, with more calls; and read by orjson (strict JSON: no NaN, no lone surrogate)
+            # it says what raw_message would of that RawMessage, so its bytes may be recorded
+            # again as they are (``recorded``)
+            source, topic = record.get("source"), record.get("topic")
+            text, receive_time = record.get("payload"), record.get("receive_time")
+            if (type(source) is str and type(topic) is str and type(text) is str
+                    and type(receive_time) is float
+                    and record.get("payload_encoding") == "utf-8"):
+                # positional: source, topic, payload, receive_time, ack, redelivered,
+                # duplicate, recorded
+                return RawMessage(source, topic, text.encode("utf-8"), receive_time, None,
+                                  False, False, data)
+        return _raw_of_record(record, log_time_ns)
     if channel_topic.startswith("/tdmon/"):
         return None  # derived data (samples, results): replay recomputes it
     return RawMessage("mcap", channel_topic.lstrip("/"), bytes(data), log_time_ns / 1e9)
+
+
+def _raw_of_record(record: Any, log_time_ns: int, json_module: bool = False) -> RawMessage:
+    """The RawMessage of a ``/tdmon/raw`` record in general: ``record`` parsed, or its bytes
+    to parse with the json module (``json_module``). Raises ``_Truncated`` for a payload kept
+    only in part, :class:`IngestError` for a record that is not a raw message."""
+    try:
+        if json_module:
+            record = json.loads(record)
+        if isinstance(record, dict) and record.get("payload_truncated"):
+            raise _Truncated
+        text = record["payload"]
+        if record.get("payload_encoding") == "base64":
+            payload = base64.b64decode(text, validate=True)
+        else:
+            payload = text.encode("utf-8")
+        return RawMessage(
+            source=str(record.get("source", "mcap")),
+            topic=str(record["topic"]),
+            payload=payload,
+            receive_time=float(record.get("receive_time", log_time_ns / 1e9)),
+        )
+    except (ValueError, KeyError, TypeError, binascii.Error) as exc:
+        raise IngestError(f"recorded {RAW_TOPIC} message is unreadable: {exc}") from exc
 
 
 def _summary(stream: IO[bytes]) -> Summary | None:

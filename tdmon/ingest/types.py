@@ -29,6 +29,11 @@ class RawMessage:
     processed and the recorder has flushed it to its file. ``redelivered`` is the transport's
     mark of a second delivery (MQTT's DUP flag); ``duplicate`` says the source recognised it
     as one this run already handed out, so it is counted and acknowledged, not processed again.
+
+    ``recorded``: the ``raw`` message's JSON bytes as a recording held them, when they say
+    exactly what :func:`raw_message` would (a replay of tdmon's own recording, see
+    :func:`tdmon.ingest.mcap_source.raw_from_record`); a recorder may write them again as they
+    are instead of encoding the message anew (docs/recording.md). None for live input.
     """
 
     source: str
@@ -38,12 +43,13 @@ class RawMessage:
     ack: Callable[[], None] | None = field(default=None, compare=False, repr=False)
     redelivered: bool = False
     duplicate: bool = False
+    recorded: bytes | None = field(default=None, compare=False, repr=False)
 
     def __init__(self, source: str, topic: str, payload: bytes, receive_time: float,
                  ack: Callable[[], None] | None = None, redelivered: bool = False,
-                 duplicate: bool = False) -> None:
+                 duplicate: bool = False, recorded: bytes | None = None) -> None:
         # once per input message: see _slot_setters
-        s, t, p, r, a, d, u = _RAW_SETTERS
+        s, t, p, r, a, d, u, c = _RAW_SETTERS
         s(self, source)
         t(self, topic)
         p(self, payload)
@@ -51,6 +57,7 @@ class RawMessage:
         a(self, ack)
         d(self, redelivered)
         u(self, duplicate)
+        c(self, recorded)
 
 
 @dataclass(frozen=True, slots=True, init=False)
@@ -187,6 +194,9 @@ SAMPLE_FIELDS: Final = ("channel", "t", "value", "unit", "source", "topic")
 #: (docs/daemon.md, "Bursts"), taken in C without building a dict per message.
 RAW_ROW: Final = attrgetter("source", "topic", "payload", "receive_time")
 SAMPLE_ROW: Final = attrgetter(*SAMPLE_FIELDS)
+
+#: A RawMessage's ``recorded`` bytes, taken in C for a burst.
+RECORDED: Final = attrgetter("recorded")
 
 
 def raw_row_message(row: tuple[str, str, bytes, float],

@@ -609,6 +609,22 @@ class McapRecorder:
         written as ``null``). Never raises for I/O problems, like ``write``."""
         self._enqueue(((topic, log_time_ns, data, replaced),))
 
+    def write_encoded_many(self, topic: str, log_times_ns: Sequence[int],
+                           datas: Sequence[bytes]) -> None:
+        """``write_encoded`` for several messages of one topic, none with a NaN/inf replaced:
+        as ``write_many`` for messages already JSON (a replay's raw input as its recording
+        held it, docs/recording.md)."""
+        if len(log_times_ns) != len(datas):
+            raise ValueError(f"{len(log_times_ns)} log times for {len(datas)} messages")
+        if len(datas) < DIRECT_BATCH:
+            self._enqueue(zip(repeat(topic), log_times_ns, datas, repeat(False)))
+            return
+        with self._lock:
+            self._write_queued()
+            self._log_batch(topic, log_times_ns, datas)
+        if self._pending_alarms:
+            self._fire_alarms()
+
     def retry(self) -> bool:
         """In the failure state, try a new file now (not waiting for ``retry_s``).
 
@@ -709,14 +725,19 @@ class McapRecorder:
     def _write_batch(self, topic: str, times: Sequence[int], messages: Sequence[Any]) -> None:
         """``_write_queued`` for a batch of one topic handed over whole (``write_many``): no
         queue between, one channel (call with the lock held)."""
-        current, now = self._file_for(len(messages))
-        if current is None:
-            return
         count = len(messages)
         datas = self._encode([topic] * count, messages, [None] * count)
         if None in datas:
             times = [t for t, data in zip(times, datas, strict=True) if data is not None]
             datas = [data for data in datas if data is not None]
+        self._log_batch(topic, times, datas)  # type: ignore[arg-type]  # no None left
+
+    def _log_batch(self, topic: str, times: Sequence[int], datas: Sequence[bytes]) -> None:
+        """Hand a batch of one topic's encoded messages to the file (call with the lock
+        held)."""
+        current, now = self._file_for(len(datas))
+        if current is None:
+            return
         log_message = self._channels.get(topic) or self._channel(topic)
         for data, log_time_ns in zip(datas, times, strict=True):
             log_message(data, log_time_ns)

@@ -42,7 +42,9 @@ class Sink(Protocol):
     (docs/daemon.md, "Bursts"), and one ``write`` per message otherwise. A sink with
     ``write_rows(topic, log_times_ns, make, rows)`` gets those two as rows of plain values
     instead, with ``make`` (a picklable function) that makes each row's message (the recorder
-    in a child process makes them there).
+    in a child process makes them there). A sink with ``write_encoded_many(topic,
+    log_times_ns, datas)`` gets a replay's raw input as the JSON bytes its recording held,
+    when they are there for the whole burst (the in-process recorder writes them as they are).
     """
 
     def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import orjson
 import pytest
 import zenoh
 from daemon_support import CollectSink, linear_model
@@ -24,9 +25,10 @@ from tdmon.daemon.monitor import MonitorStep
 from tdmon.daemon.pipeline import Pipeline, Sink, Step
 from tdmon.daemon.steps.rig_state import RigStateStep
 from tdmon.errors import IngestError
+from tdmon.ingest import mcap_source
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.mcap_source import McapSource
-from tdmon.ingest.types import RawMessage, raw_message
+from tdmon.ingest.types import RAW_ROW, RawMessage, raw_message
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for, open_session
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import read_messages
@@ -183,6 +185,58 @@ def test_a_sink_taking_rows_gets_the_messages_the_others_get() -> None:
     assert sum(n for topic, n in rows.row_calls if topic == "/tdmon/raw") == len(messages)
 
 
+class EncodedSink(ManySink):
+    """A sink taking messages already JSON, as the in-process recorder does."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.encoded_calls: list[tuple[str, int]] = []
+
+    def write_encoded_many(self, topic: str, log_times_ns: list[int],
+                           datas: list[bytes]) -> None:
+        self.encoded_calls.append((topic, len(datas)))
+        for log_time_ns, data in zip(log_times_ns, datas, strict=True):
+            self.write(topic, log_time_ns, json.loads(data))
+
+
+def _as_recorded(messages: list[RawMessage]) -> list[RawMessage]:
+    """The messages as a replay of their recording reads them: with their bytes."""
+    return [mcap_source.raw_from_record("/tdmon/raw", orjson.dumps(raw_message(raw)), 0)
+            for raw in messages]  # type: ignore[misc]
+
+
+def test_a_replay_s_raw_input_is_recorded_as_its_recording_held_it() -> None:
+    messages = _as_recorded(_rig_messages())
+    assert all(raw.recorded is not None for raw in messages)
+    bursts = [messages[k:k + 7] for k in range(0, len(messages), 7)]
+    # one burst with a message that has no bytes (as live input), one with a payload
+    # longer than the pipeline keeps whole: both made into messages as usual
+    bursts[1][3] = RawMessage(*RAW_ROW(bursts[1][3]))
+    payload = b'{"t": 4.5, "value": 1}' + b" " * 5000
+    whole = {"source": "mqtt", "topic": "rig/hookload", "receive_time": 104.5,
+             "payload": payload.decode(), "payload_encoding": "utf-8"}
+    bursts[2].insert(2, RawMessage("mqtt", "rig/hookload", payload, 104.5,
+                                   recorded=orjson.dumps(whole)))
+    alone = CollectSink()
+    single = _pipeline([alone])
+    for burst in bursts:
+        for message in burst:
+            single.process(message)
+    encoded, rows = EncodedSink(), RowsSink()
+    batched = _pipeline([encoded, rows])
+    for burst in bursts:
+        batched.process_burst(burst)
+    for pipeline in (single, batched):
+        pipeline.flush()
+    for topic in ("raw", "sample", "rejected", "state", "model"):
+        assert alone[topic], topic
+        assert encoded[topic] == rows[topic] == alone[topic], topic
+    assert any(m.get("payload_truncated") for m in encoded["raw"])
+    assert encoded.encoded_calls == [("/tdmon/raw", len(burst))
+                                     for i, burst in enumerate(bursts) if i not in (1, 2)]
+    assert [n for topic, n in encoded.calls if topic == "/tdmon/raw"] == [7, 8]
+
+
 def test_a_sink_failing_a_burst_is_counted_and_the_others_get_it() -> None:
     class Broken(ManySink):
         def write_many(self, topic: str, log_times_ns: list[int],
@@ -225,6 +279,24 @@ def test_write_many_records_what_write_does(tmp_path: Path) -> None:
     assert back_many[0].message == messages[0] and len(back_many) == 700
     assert many.stats.per_topic == {"/tdmon/sample": 700, "/tdmon/alarm": 1}
     assert many.stats.nonfinite_replaced == 1 and many.stats.lost == 0
+
+
+def test_write_encoded_many_records_the_bytes_given(tmp_path: Path) -> None:
+    messages = [{"source": "mqtt", "topic": "rig/hookload", "receive_time": 1.0 + i,
+                 "payload": f'{{"t":{i}}}', "payload_encoding": "utf-8"} for i in range(300)]
+    datas = [orjson.dumps(message) for message in messages]
+    times = [1_700_000_000_000_000_000 + i * 10**9 for i in range(300)]
+    with McapRecorder(tmp_path, recover=False) as recorder:
+        recorder.write_many("/tdmon/raw", times[:5], messages[:5])
+        recorder.write_encoded_many("/tdmon/raw", times[5:20], datas[5:20])  # queued
+        recorder.write_encoded_many("/tdmon/raw", times[20:], datas[20:])  # straight on
+        with pytest.raises(ValueError, match="2 log times for 1 messages"):
+            recorder.write_encoded_many("/tdmon/raw", times[:2], datas[:1])
+    [path] = recorder.stats.files
+    back = list(read_messages(path))
+    assert [(m.log_time_ns, m.message) for m in back] == list(zip(times, messages, strict=True))
+    assert recorder.stats.per_topic == {"/tdmon/raw": 300} and recorder.stats.lost == 0
+    assert recorder.stats.nonfinite_replaced == 0
 
 
 def test_a_message_that_is_not_json_leaves_its_list_s_others_recorded(tmp_path: Path) -> None:

@@ -172,6 +172,38 @@ def test_a_recorded_raw_message_becomes_its_raw_message(record: dict[str, object
     assert raw == expected and raw is not None and type(raw.receive_time) is float
 
 
+@pytest.mark.parametrize(("data", "kept"), [
+    # tdmon's own record, whatever its key order and spacing: the same JSON value
+    (b'{"source":"mqtt","topic":"rig/a","receive_time":12.5,"payload":"{\\"v\\":1}",'
+     b'"payload_encoding":"utf-8"}', True),
+    (b'{"payload_encoding": "utf-8", "payload": "x", "receive_time": 12.5, "topic": "rig/a",'
+     b' "source": "mqtt"}', True),
+    # not what raw_message writes of the message it becomes: no encoding, no source, another
+    # key, an integer time, base64, a NaN time only the json module reads
+    (b'{"source":"mqtt","topic":"rig/a","receive_time":12.5,"payload":"x"}', False),
+    (b'{"topic":"rig/a","receive_time":12.5,"payload":"x","payload_encoding":"utf-8"}', False),
+    (b'{"source":"mqtt","topic":"rig/a","receive_time":12.5,"payload":"x",'
+     b'"payload_encoding":"utf-8","note":"n"}', False),
+    (b'{"source":"mqtt","topic":"rig/a","receive_time":12,"payload":"x",'
+     b'"payload_encoding":"utf-8"}', False),
+    (b'{"source":"mqtt","topic":"rig/a","receive_time":12.5,"payload":"eA==",'
+     b'"payload_encoding":"base64"}', False),
+    (b'{"source":"mqtt","topic":"rig/a","receive_time":NaN,"payload":"x",'
+     b'"payload_encoding":"utf-8"}', False),
+])
+def test_a_recorded_raw_message_keeps_its_bytes_only_when_they_say_what_it_says(
+        data: bytes, kept: bool) -> None:
+    raw = mcap_source.raw_from_record("/tdmon/raw", data, 3 * 10**9)
+    assert raw is not None
+    if kept:
+        assert raw.recorded is data
+        assert json.loads(data) == raw_message(raw)
+    else:
+        assert raw.recorded is None
+    # the bytes kept are no part of the message's value
+    assert raw == RawMessage(raw.source, raw.topic, raw.payload, raw.receive_time)
+
+
 def test_a_recorded_raw_message_kept_in_part_or_damaged_is_refused() -> None:
     truncated = {"source": "mqtt", "topic": "rig/a", "receive_time": 12.5, "payload": "x",
                  "payload_encoding": "utf-8", "payload_truncated": True}
