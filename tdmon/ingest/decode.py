@@ -221,7 +221,21 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     except orjson.JSONDecodeError:
         obj = _NOT_PLAIN
     else:
-        if type(obj) is not dict or _beyond_int64(obj):
+        if type(obj) is dict:
+            # the usual payload answered at once, with what the rules below would give it:
+            # a float time in range, a value json reads alike (a float inside 2**63, so
+            # finite, or a 64-bit integer), a text unit or none, a counter or none, no error
+            # (0.6 instead of 1.0 us, docs/benchmarks.md)
+            t, value, unit, seq = obj.get("t"), obj.get("value"), obj.get("unit"), obj.get("seq")
+            if (type(t) is float and T_MIN <= t < T_MAX
+                    and ((type(value) is float and -_INT64 < value < _INT64)
+                         or type(value) is int)
+                    and (unit is None or (type(unit) is str and unit.strip()))
+                    and (seq is None or type(seq) is int) and "error" not in obj):
+                return t, float(value), unit, (seq if seq is None or seq >= 0 else None)
+            if _beyond_int64(obj):
+                obj = _NOT_PLAIN
+        else:
             obj = _NOT_PLAIN
     if obj is _NOT_PLAIN:
         try:

@@ -5,11 +5,20 @@ from __future__ import annotations
 import json
 import math
 
+import orjson
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tdmon.ingest.decode import ChannelSpec, Decoder, SampleChecks, parse_payload, parse_time
+from tdmon.ingest import decode
+from tdmon.ingest.decode import (
+    ChannelSpec,
+    Decoder,
+    SampleChecks,
+    parse_payload,
+    parse_payload_seq,
+    parse_time,
+)
 from tdmon.ingest.types import RawMessage, Rejected, Sample, payload_text
 
 DECODER = Decoder("rig/F4", [
@@ -187,6 +196,33 @@ def test_payload_parsing_is_json_loads_whatever_surrounds_the_object(
     if not isinstance(parsed, str):  # the rules on t, value and unit are tested above
         assert parsed == (parse_time(expected["t"]), float(expected["value"]),
                           expected.get("unit"))
+
+
+counters = (st.none() | st.integers() | st.integers(min_value=2**63 - 2, max_value=2**65)
+            | st.floats(allow_nan=False) | st.booleans() | st.text(max_size=3))
+usual = st.builds(
+    lambda t, v, u, q, extra: {"t": t, "value": v, **({"unit": u} if u else {}),
+                               **({"seq": q} if q is not None else {}), **extra},
+    st.floats(-10.0, 8e9) | st.integers(-10, 8 * 10**9) | times,
+    st.floats(allow_nan=False) | st.integers(-2**64, 2**64) | values,
+    st.none() | units | st.integers(), counters,
+    st.dictionaries(st.sampled_from(["error", "x", "t0"]), st.none() | st.text(max_size=3),
+                    max_size=1))
+
+
+def _refuse(data: bytes) -> object:
+    raise orjson.JSONDecodeError("refused", "", 0)
+
+
+@settings(max_examples=1500, deadline=None)
+@given(body=usual)
+def test_the_usual_payload_s_quick_answer_is_the_rules_answer(body: dict[str, object]) -> None:
+    payload = _encode(body)
+    quick = parse_payload_seq(payload)
+    # the same payload through the general rules alone: orjson refuses it
+    with pytest.MonkeyPatch.context() as patched:
+        patched.setattr(decode.orjson, "loads", _refuse)
+        assert parse_payload_seq(payload) == quick
 
 
 @pytest.mark.parametrize(("text", "expected"), [
