@@ -217,12 +217,13 @@ class Pipeline:
         sinks = routes.get("/tdmon/raw")
         if sinks is None:
             sinks = self._sinks_for("/tdmon/raw")
+        log_ns = int(raw.receive_time * 1e9)
         if sinks:
             # the input's time first: an alarm the write raises (a recorder's) carries it
-            self._input_ns = log_ns = int(raw.receive_time * 1e9)
+            self._input_ns = log_ns
             self._write_to(sinks, "/tdmon/raw", log_ns,
                            raw_message(raw, self._recorded_payload_bytes))
-        return self._process(raw, None)
+        return self._process(raw, log_ns, None)
 
     def process_burst(self, raws: Sequence[RawMessage]) -> None:
         """Handle several messages completely, in order, as ``process`` does one by one, with
@@ -232,23 +233,23 @@ class Pipeline:
         if not raws:
             return
         sinks = self._sinks_for("/tdmon/raw")
+        log_times = [int(raw.receive_time * 1e9) for raw in raws]
         if sinks:
-            log_times = [int(raw.receive_time * 1e9) for raw in raws]
             self._input_ns = log_times[0]
             limit = self._recorded_payload_bytes
             # a replay of tdmon's own recording: the raw messages as it held them, when every
             # one is there and short enough to be kept whole (a recorded message is longer
             # than its payload), go to a sink that takes encoded messages as they are
-            kept = list(map(RECORDED, raws))  # bytes or None each
-            recorded = None if None in kept or max(map(len, kept)) > limit else kept
+            kept = list(map(RECORDED, raws))  # bytes (never empty) or None each
+            recorded = kept if all(kept) and max(map(len, kept)) <= limit else None
             self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
                              partial(raw_row_message, max_bytes=limit),
                              lambda: [raw_message(raw, limit) for raw in raws], recorded)
         held = _HeldSamples([], [])
         process = self._process
         try:
-            for raw in raws:
-                process(raw, held)
+            for raw, log_ns in zip(raws, log_times):
+                process(raw, log_ns, held)
         finally:
             if held.samples:
                 samples = held.samples
@@ -256,14 +257,15 @@ class Pipeline:
                                  held.log_times, samples, SAMPLE_ROW, sample_row_message,
                                  lambda: list(map(sample_message, samples)))
 
-    def _process(self, raw: RawMessage, held: _HeldSamples | None) -> Sample | Rejected:
-        """Everything after recording the raw input; a sample message goes to ``held`` when
-        given (a burst), else to the sinks at once."""
+    def _process(self, raw: RawMessage, log_ns: int, held: _HeldSamples | None
+                 ) -> Sample | Rejected:
+        """Everything after recording the raw input (``log_ns``: its log time); a sample
+        message goes to ``held`` when given (a burst), else to the sinks at once."""
         # once per input message (a replay's whole cost is in here): routes, counters and the
         # loss detector's figures are read once, not through helper calls
         stats = self.stats
         stats.messages_in += 1
-        self._input_ns = log_ns = int(raw.receive_time * 1e9)
+        self._input_ns = log_ns
         routes = self._routes
         decoded = self.decoder.decode(raw)
         if isinstance(decoded, Rejected):
