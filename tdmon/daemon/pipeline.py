@@ -248,7 +248,7 @@ class Pipeline:
         held = _HeldSamples([], [])
         process = self._process
         try:
-            for raw, log_ns in zip(raws, log_times):
+            for raw, log_ns in zip(raws, log_times, strict=True):
                 process(raw, log_ns, held)
         finally:
             if held.samples:
