@@ -99,6 +99,18 @@ class TestAligner:
                 emitted += [f.t for f in frames]
         assert emitted == [float(k) for k in range(12)]
 
+    def test_a_frame_held_back_by_a_channel_never_seen_comes_when_it_is_no_longer_awaited(
+            self) -> None:
+        # the pending frame is held back by "ghost" (expected, never seen); the aligner does not
+        # look again until that channel sends, unless a new channel comes: once more channels
+        # are seen than expected, the expected ones are no longer awaited and the frame is due
+        aligner = Aligner(expected=("bit_depth", "ghost"), stale_timeout=1.0)
+        assert aligner.push(s("block_position", 1001.0, 5.0), 0.0) == []
+        assert aligner.push(s("hookload", 998.0, 1e6), 0.0) == []  # waits for ghost
+        assert aligner.push(s("block_position", 1002.0, 5.0), 0.0) == []  # still
+        [frame] = aligner.push(s("bit_depth", 1001.0, 100.0), 0.0)
+        assert frame.t == 998.0 and frame.stale == ("block_position", "bit_depth")
+
 
 def _rig_frames(rows: list[tuple[float, dict[str, float]]]) -> list[Frame]:
     return [Frame(t, 0, values, {}) for t, values in rows]
