@@ -132,7 +132,6 @@ class Aligner:
                     frames.append(self._emit())
                 self._pending = _Pending(sample.t, sample.value, now,
                                          int(sample.receive_time * 1e9))
-                self._held_by = None
                 self._frame_offset = sample.t - sample.receive_time
                 if self._refused:
                     self._refused.clear()
