@@ -122,8 +122,10 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     if step is None:
         return state
     mean, gain, innovation, s = step
-    a = np.eye(h.size) - np.outer(gain, h)
-    covariance = a @ state.covariance @ a.T + noise_variance * np.outer(gain, gain)
+    # outer products by broadcasting: np.outer's products without its wrapper (~2 us a call)
+    column = gain[:, np.newaxis]
+    a = np.eye(h.size) - column * h
+    covariance = a @ state.covariance @ a.T + noise_variance * (column * gain)
     return replace(state, mean=mean, covariance=0.5 * (covariance + covariance.T),
                    updates=state.updates + 1, innovation=innovation, innovation_variance=s)
 
@@ -244,7 +246,7 @@ def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], 
     for iterate in range(last + 1):
         linearisation = linearise(estimate)
         h = linearisation.jacobian
-        if not np.any(h):
+        if not np.asarray(h).any():  # the method: np.any's dispatch costs more than the test
             return IteratedUpdate(prior, False, linearisation=linearisation)
         # linearise about the current iterate, not the prior mean
         predicted_at_prior = linearisation.predicted + float(h @ (prior.mean - estimate))
