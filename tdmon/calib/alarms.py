@@ -347,6 +347,7 @@ _FROZEN_KIND = {"hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
 
 
 _NONE: frozenset[str] = frozenset()
+_NO_CONDITIONS: frozenset[AlarmKind] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -458,7 +459,9 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
         if frozen_kind is not None and moving and run >= settings.frozen_samples \
                 and value != 0.0 and (channel != "torque" or rotating):
             conditions.add(frozen_kind)
-    new_conditions = conditions - state.active
+    # once per frame: no set arithmetic and no new frozenset while no condition holds
+    active = frozenset(conditions) if conditions else _NO_CONDITIONS
+    new_conditions = active - state.active if active else _NO_CONDITIONS
     if new_conditions:
         texts = {
             AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE: (
@@ -477,8 +480,8 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
         for condition in sorted(new_conditions):
             severity, text, value, limit = texts[condition]
             alarms.append(Alarm(t, condition, severity, text, value, limit))
-    # built directly: dataclasses.replace on every frame cost more than the checks
-    new_state = SensorState(stale=new_stale, announced=announced, last=tuple(last.items()),
-                            runs=tuple(runs.items()), active=frozenset(conditions),
-                            below_since=below_since)
+    # built directly, positionally in the order of the fields: dataclasses.replace on every
+    # frame cost more than the checks, and the keywords a third of the construction
+    new_state = SensorState(new_stale, announced, tuple(last.items()), tuple(runs.items()),
+                            active, below_since)
     return new_state, alarms

@@ -169,7 +169,9 @@ def back_calculate(
         raise FitError(f"measured {quantity} {measured!r} +/- {measured_se!r} at bit depth "
                        f"{bit_depth!r} m is not finite")
     n = model.n_elements
-    base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
+    base = np.asarray(base_mu, dtype=np.float64)
+    if base.ndim and base.shape != (n,):
+        base = np.broadcast_to(base, (n,))  # checked here; np.where spreads a number itself
     mask = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
     index = 1 if quantity == "torque" else 0
     calls = 0

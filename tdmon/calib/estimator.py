@@ -175,12 +175,11 @@ class FrictionEstimator:
         return self._learnt(state.samples.block_weight)
 
     def _learnt(self, block: BlockWeightWindow) -> float | None:
-        # the in-slips median, once it rests on enough samples and learning is on
-        estimate = block.estimate
-        if (estimate is None or estimate.n < MIN_BLOCK_WEIGHT_SAMPLES
-                or not self.settings.learn_block_weight):
+        # the in-slips median, once it rests on enough samples and learning is on (the
+        # median alone: per sample, the estimate's spread is not needed)
+        if len(block.ordered) < MIN_BLOCK_WEIGHT_SAMPLES or not self.settings.learn_block_weight:
             return None
-        return estimate.value
+        return block.median
 
     # -- samples --------------------------------------------------------------------------
 

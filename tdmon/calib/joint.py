@@ -196,7 +196,7 @@ def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float,
     model_offset = model.well.block_weight if m.quantity == 0 else 0.0
 
     def linearise(x: Array) -> _Linear:
-        mu = float(np.clip(x[0], 0.0, 1.0))
+        mu = float(x[0].clip(0.0, 1.0))  # np.clip's own call, without its wrapper
         w = float(x[1])
         value, gradient = model.evaluate_gradient(m.operation, bit_depth, mu,
                                                   quantity_index=m.quantity, method=method)

@@ -194,7 +194,9 @@ def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Ar
     """
     n = model.n_elements
     where = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
+    base = np.asarray(base_mu, dtype=np.float64)
+    if base.ndim and base.shape != (n,):
+        base = np.broadcast_to(base, (n,))  # checked here; np.where spreads a number itself
 
     def friction(law: Array, extra: Array | float = 0.0) -> Array:
         mu = np.where(where, law + extra, base)

@@ -130,6 +130,12 @@ def _mean_se(values: np.ndarray, floor: float) -> tuple[float, float]:
     return float(mean), max(spread, floor) / math.sqrt(n)
 
 
+def _mean(values: list[float] | np.ndarray) -> float:
+    # np.mean of floats to the last bit (the same pairwise sum and division) without its
+    # wrapper, which costs more than the sum of a window's values (summarise 81 -> 66 us)
+    return float(np.asarray(values, dtype=np.float64).sum() / len(values))
+
+
 def summarise(state: RigState, samples: tuple[RigSample, ...],
               velocities: tuple[float | None, ...], settings: WindowSettings) -> Window | None:
     """Check and summarise the samples of one window (None when there are none usable).
@@ -163,7 +169,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
     keep = _robust_keep(hookload, settings.spike_mads, floor)
     if not keep.all():
         flags.append(f"spikes_removed:{int((~keep).sum())}")
-    kept = [row for row, k in zip(rows, keep, strict=True) if k]
+    kept = [row for row, k in zip(rows, keep.tolist(), strict=True) if k]
     if len(kept) < settings.min_samples:
         rejected = rejected or f"too_few_samples:{len(kept)}"
     hookload, depth = hookload[keep], depth[keep]
@@ -179,9 +185,9 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
                 and float(np.ptp(torque_values)) == 0.0 and torque != 0.0):
             flags.append("torque_stuck")
     rpm_values = [s.rpm for s, _ in kept if s.rpm is not None and math.isfinite(s.rpm)]
-    rpm = float(np.mean(rpm_values)) if len(rpm_values) == len(kept) else None
+    rpm = _mean(rpm_values) if len(rpm_values) == len(kept) else None
     speeds = [v for _, v in kept if v is not None and math.isfinite(v)]
-    velocity = float(np.mean(speeds)) if speeds else None
+    velocity = _mean(speeds) if speeds else None
     if state in MOVING_STATES and len(kept) >= 2 and velocity is not None:
         travel = float(depth[-1] - depth[0])
         expected = velocity * (kept[-1][0].t - kept[0][0].t)
@@ -191,7 +197,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
     return Window(
         state=state, t_start=kept[0][0].t if kept else rows[0][0].t,
         t_end=kept[-1][0].t if kept else rows[-1][0].t, n=len(kept),
-        bit_depth=float(np.mean(depth)) if depth.size else float(rows[0][0].bit_depth or 0.0),
+        bit_depth=_mean(depth) if depth.size else float(rows[0][0].bit_depth or 0.0),
         bit_depth_start=float(depth[0]) if depth.size else 0.0,
         bit_depth_end=float(depth[-1]) if depth.size else 0.0,
         hookload=mean if hookload.size else 0.0, hookload_se=se if hookload.size else 0.0,

@@ -110,6 +110,12 @@ class Aligner:
         # the channels _complete looks at, kept until a channel is first seen (or forgotten):
         # worked out on every sample, the set of them cost more than the rest of the check
         self._waited: tuple[str, ...] | None = None
+        # the channel the pending frame waits for, when _complete found one: until it sends
+        # or a new channel is seen, the frame stays incomplete (the verdict on that channel
+        # depends only on its samples, the frame's time, the last frame's and the first
+        # sample's), so other channels' samples need no look (6 of a frame's 8 samples on the
+        # synthetic session: 0.97 -> 0.83 us a sample)
+        self._held_by: str | None = None
 
     def push(self, sample: Sample, now: float) -> list[Frame]:
         """Take one sample (``now`` is monotonic seconds); return the frames it completes."""
@@ -142,7 +148,11 @@ class Aligner:
             self._late.append(sample)
         if stored == _TOO_OLD:
             return frames
-        if self._pending is not None and self._complete(self._pending.t):
+        pending = self._pending
+        if pending is None:
+            return frames
+        held_by = self._held_by
+        if (held_by is None or held_by == sample.channel) and self._complete(pending.t):
             frames.append(self._emit())
         return frames
 
@@ -177,6 +187,7 @@ class Aligner:
         self._values.clear()
         self._waited = None
         self._pending = None
+        self._held_by = None
         self._last_frame_t = float("-inf")
         self._first_t = None
         self._frame_offset = None
@@ -215,7 +226,9 @@ class Aligner:
         if times is None:
             self._times[sample.channel] = [sample.t]
             self._values[sample.channel] = [sample.value]
-            self._waited = None
+            # a new channel changes the channels waited for (and may drop the one holding
+            # the pending frame back: an expected channel never seen)
+            self._waited = self._held_by = None
             return _STORED
         values = self._values[sample.channel]
         newest = times[-1]
@@ -263,6 +276,7 @@ class Aligner:
                 # order every time, and the one that held this frame back will hold the next
                 # ones back as well (the verdict does not depend on the order)
                 self._waited = (channel, *(c for c in waited if c != channel))
+            self._held_by = channel
             return False
         return True
 
@@ -281,6 +295,7 @@ class Aligner:
         pending = self._pending
         assert pending is not None
         self._pending = None
+        self._held_by = None
         previous = self._last_frame_t
         self._last_frame_t = pending.t
         t = pending.t

@@ -13,6 +13,7 @@ from __future__ import annotations
 import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any, Protocol
 
 import numpy as np
@@ -72,8 +73,12 @@ class GridLoadModel:
         self.band_mu = tuple(float(m) for m in band_mu)
         # every curve's value per grid depth as Python floats: interpolating a dozen values in
         # Python is several times faster than slicing, scaling and adding NumPy columns, and
-        # gives the same numbers (the same multiplications and addition, in float64)
-        self._columns: list[list[float]] = curves.T.tolist()
+        # gives the same numbers (the same multiplications and addition, in float64); paired
+        # per grid interval (each curve's values at its two ends) once here, not zipped on
+        # every frame (an interpolation 3.1 -> 2.7 us)
+        columns: list[list[float]] = curves.T.tolist()
+        self._intervals: list[list[tuple[float, float]]] = [
+            list(zip(lower, upper, strict=True)) for lower, upper in pairwise(columns)]
         self._last: ModelledLoads | None = None
 
     @classmethod
@@ -101,8 +106,7 @@ class GridLoadModel:
         lo, hi = depths[index], depths[index + 1]
         weight = (bit_depth - lo) / (hi - lo)
         keep = 1.0 - weight
-        values = [a * keep + b * weight
-                  for a, b in zip(self._columns[index], self._columns[index + 1], strict=True)]
+        values = [lower * keep + upper * weight for lower, upper in self._intervals[index]]
         n = len(self.band_mu)
         loads = ModelledLoads(bit_depth, values[0], values[1], values[2], values[3],
                               self.band_mu, tuple(values[4:4 + n]),

@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
 from tdmon.model import kernels
-from tdmon.model.survey import interpolate_survey, tangent_vectors
+from tdmon.model.survey import tangent_vectors, tvd_and_inclination
 from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
 from tdmon.vocabulary import Operation
 
@@ -482,7 +482,7 @@ class WellModel:
             operations, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi)
         names = [op.value for op in operations]
         # one interpolation for both: the limit check needs the nodes' inclination too
-        nodes = interpolate_survey(self.well.survey, md)
+        tvd, inclination = tvd_and_inclination(self.well.survey, md)
         return Loads(
             bit_depth=float(bit_depth), method=str(method),
             hookload={name: float(force[i, 0]) + self.well.block_weight
@@ -491,9 +491,9 @@ class WellModel:
             md=md,
             axial_force={name: force[i] for i, name in enumerate(names)},
             torque={name: torque[i] for i, name in enumerate(names)},
-            tvd=nodes.tvd,
+            tvd=tvd,
             component=component,
-            inclination=nodes.inclination,
+            inclination=inclination,
         )
 
 

@@ -272,7 +272,7 @@ def test_noise_with_model_error() -> None:
 
 def test_predict_adds_the_drift_to_the_diagonal_to_the_last_bit() -> None:
     # P + diag(q^2) as NumPy adds the two matrices, a -0.0 off the diagonal included
-    for n, q in [(1, 0.01), (3, np.array([0.0, 0.01, 0.02])), (141, 0.003)]:
+    for n, q in [(1, 0.01), (3, np.array([0.0, 0.01, 0.02])), (4, np.array([0.02])), (141, 0.003)]:
         p = _spd(n, n, 0.01)
         p[0, n - 1] = -0.0
         state = KalmanState(np.zeros(n), p)

@@ -49,3 +49,15 @@ def test_window_mean_and_spread_are_numpys_to_the_last_bit() -> None:
             assert mean == float(np.mean(values))
             assert se == float(np.std(values, ddof=1)) / math.sqrt(n)
     assert _mean_se(np.array([5.0]), floor=2.0) == (5.0, 2.0)
+
+
+def test_window_means_of_lists_are_numpys_to_the_last_bit() -> None:
+    # depth, rotation and speed means skip np.mean's wrapper (lists and arrays alike)
+    from tdmon.calib.windows import _mean
+
+    rng = np.random.default_rng(13)
+    for n in (1, 2, 3, 7, 8, 9, 16, 17, 60, 119, 120, 300, 9000):
+        for _ in range(10):
+            values = 2500.0 + 40.0 * rng.standard_normal(n)
+            assert _mean(values) == float(np.mean(values))
+            assert _mean(values.tolist()) == float(np.mean(values.tolist()))

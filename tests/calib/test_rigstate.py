@@ -11,6 +11,7 @@ import pytest
 
 from tdmon.calib.rigstate import (
     STATES,
+    Detection,
     DetectorState,
     RigSample,
     RigStateThresholds,
@@ -321,3 +322,43 @@ def test_with_block_weight_is_replace() -> None:
         assert type(copied) is RigStateThresholds
         with pytest.raises(dataclasses.FrozenInstanceError):
             copied.block_weight = 1.0  # type: ignore[misc]
+
+
+@pytest.mark.parametrize("cls", [RigSample, DetectorState, Detection])
+def test_init_takes_the_fields_in_order_with_their_defaults(cls: type) -> None:
+    # the hand-written __init__ (slot setters, once per frame) is the dataclass's own
+    import dataclasses
+    import inspect
+
+    parameters = list(inspect.signature(cls).parameters.values())
+    assert [p.name for p in parameters] == [f.name for f in dataclasses.fields(cls)]
+    for parameter, field in zip(parameters, dataclasses.fields(cls), strict=True):
+        expected = (inspect.Parameter.empty if field.default is dataclasses.MISSING
+                    else field.default)
+        assert parameter.default == expected, field.name
+
+
+def test_detector_values_are_built_frozen_compared_and_copied_like_dataclasses() -> None:
+    import dataclasses
+    import pickle
+
+    sample = RigSample(3.0, 1.4e6, 2999.0, block_position=20.3, block_time=0.5)
+    assert (sample.t, sample.hookload, sample.bit_depth, sample.block_position, sample.rpm,
+            sample.block_time, sample.bit_time) == (3.0, 1.4e6, 2999.0, 20.3, None, 0.5, None)
+    assert sample == RigSample(t=3.0, hookload=1.4e6, bit_depth=2999.0, block_position=20.3,
+                               block_time=0.5)
+    assert hash(sample) == hash(dataclasses.replace(sample))
+    assert dataclasses.replace(sample, rpm=1.0).rpm == 1.0
+    with pytest.raises(TypeError):
+        RigSample(3.0, 1.4e6)  # type: ignore[call-arg]
+    state = DetectorState()
+    assert state.t == -math.inf and state.state == "unknown" and state.hang_run == 0
+    prior, detection = detect(state, sample, TH)
+    assert pickle.loads(pickle.dumps(prior)) == prior
+    assert dataclasses.astuple(prior)[0] == 3.0 and prior.run == 1
+    assert detection == Detection(prior.state, detection.steady, detection.velocity)
+    assert repr(detection) == (f"Detection(state={prior.state!r}, steady=False, "
+                               f"velocity={detection.velocity!r})")
+    for value, name in ((sample, "hookload"), (prior, "run"), (detection, "steady")):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(value, name, None)

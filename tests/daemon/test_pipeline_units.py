@@ -99,6 +99,48 @@ class TestAligner:
                 emitted += [f.t for f in frames]
         assert emitted == [float(k) for k in range(12)]
 
+    def test_a_frame_held_back_by_a_channel_never_seen_comes_when_it_is_no_longer_awaited(
+            self) -> None:
+        # the pending frame is held back by "ghost" (expected, never seen); the aligner does not
+        # look again until that channel sends, unless a new channel comes: once more channels
+        # are seen than expected, the expected ones are no longer awaited and the frame is due
+        aligner = Aligner(expected=("bit_depth", "ghost"), stale_timeout=1.0)
+        assert aligner.push(s("block_position", 1001.0, 5.0), 0.0) == []
+        assert aligner.push(s("hookload", 998.0, 1e6), 0.0) == []  # waits for ghost
+        assert aligner.push(s("block_position", 1002.0, 5.0), 0.0) == []  # still
+        [frame] = aligner.push(s("bit_depth", 1001.0, 100.0), 0.0)
+        assert frame.t == 998.0 and frame.stale == ("block_position", "bit_depth")
+
+
+class _LooksOnEverySample(Aligner):
+    """The aligner without its shortcut: whether the pending frame is complete is looked at
+    on every sample, not only on those of the channel that held it back."""
+
+    def push(self, sample: Sample, now: float) -> list[Frame]:
+        self._held_by = None
+        return super().push(sample, now)
+
+
+@settings(max_examples=300, deadline=None)
+@given(stream=st.lists(st.tuples(st.sampled_from(["hookload", "bit_depth", "torque", "rpm"]),
+                                 st.sampled_from([0.0, 1e-7, 0.2, -0.5, -3.0, -40.0]),
+                                 st.sampled_from([0.0, 0.0, 1.0, 7.0])), max_size=60),
+       expected=st.sampled_from([(), ("bit_depth", "ghost"), ("torque",)]))
+def test_the_aligner_emits_what_looking_on_every_sample_emits(
+        stream: list[tuple[str, float, float]], expected: tuple[str, ...]) -> None:
+    # in and out of order, duplicates, stale and never-seen channels, expiry
+    fast = Aligner(expected=expected, stale_timeout=5.0)
+    slow = _LooksOnEverySample(expected=expected, stale_timeout=5.0)
+    t = now = 1000.0
+    for channel, jitter, step in stream:
+        t += step
+        sample = s(channel, t + jitter, t)
+        assert fast.push(sample, now) == slow.push(sample, now)
+        now += 0.1
+        assert fast.expire(now) == slow.expire(now)
+    assert fast.flush() == slow.flush()
+    assert (fast.duplicates, fast.out_of_order) == (slow.duplicates, slow.out_of_order)
+
 
 def _rig_frames(rows: list[tuple[float, dict[str, float]]]) -> list[Frame]:
     return [Frame(t, 0, values, {}) for t, values in rows]

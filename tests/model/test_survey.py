@@ -15,6 +15,7 @@ from tdmon.model.survey import (
     interpolate_survey,
     minimum_curvature,
     ratio_factor,
+    tvd_and_inclination,
 )
 
 VOLVE_TRAJECTORY = Path(__file__).resolve().parents[2] / "data" / "volve-f4" / "trajectory.csv"
@@ -127,10 +128,28 @@ def test_interpolated_points_lie_on_the_arc() -> None:
     assert np.allclose(chord, 2 * radius * np.sin(f * survey.dogleg[1] / 2), rtol=1e-12)
 
 
+def test_tvd_and_inclination_are_interpolate_surveys_to_the_last_bit() -> None:
+    # the loads along the string take these two alone; they must not move a recorded number
+    rng = np.random.default_rng(17)
+    for _ in range(40):
+        n = int(rng.integers(2, 12))
+        md = np.cumsum(rng.uniform(5.0, 400.0, n)) - 5.0
+        survey = minimum_curvature(md, rng.uniform(0.0, 100.0, n) * (rng.random(n) > 0.2),
+                                   rng.uniform(0.0, 360.0, n))
+        targets = np.sort(rng.uniform(md[0], md[-1], int(rng.integers(1, 500))))
+        targets = np.unique(np.concatenate([targets, md[rng.random(n) > 0.5]]))
+        full = interpolate_survey(survey, targets)
+        tvd, inclination = tvd_and_inclination(survey, targets)
+        assert tvd.tobytes() == full.tvd.tobytes()
+        assert inclination.tobytes() == full.inclination.tobytes()
+
+
 def test_interpolation_outside_survey_is_an_error() -> None:
     survey = minimum_curvature([0.0, 100.0], [0.0, 10.0], [0.0, 0.0])
     with pytest.raises(ModelError, match="outside the survey"):
         interpolate_survey(survey, [50.0, 150.0])
+    with pytest.raises(ModelError, match="outside the survey"):
+        tvd_and_inclination(survey, [50.0, 150.0])
 
 
 @pytest.mark.parametrize(

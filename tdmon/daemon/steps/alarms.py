@@ -25,6 +25,12 @@ from tdmon.vocabulary import MOVING_STATES, RigState
 __all__ = ["AlarmStep"]
 
 
+#: What the band-trend alarm names, per state in which it is checked (the pick-up and
+#: slack-off hook loads against their band): made once, not on every steady frame.
+_BAND_SUBJECTS: dict[str, str] = {state: f"{state} hook load"
+                                  for state in (RigState.PICK_UP, RigState.SLACK_OFF)}
+
+
 def _value(values: dict[str, float], name: str) -> float | None:
     value = values.get(name)
     return float(value) if value is not None and math.isfinite(value) else None
@@ -50,7 +56,8 @@ class AlarmStep:
             rig_state in MOVING_STATES, self.sensors, frame.gap, frame.gap_reported)
         for sensor_alarm in alarms:
             emit("alarm", sensor_alarm.to_message())
-        if not frame.steady or rig_state not in (RigState.PICK_UP, RigState.SLACK_OFF):
+        subject = _BAND_SUBJECTS.get(rig_state)
+        if not frame.steady or subject is None:
             return
         model = frame.results.get("model")
         hookload = _value(frame.values, "hookload")
@@ -66,7 +73,7 @@ class AlarmStep:
         if state is None:
             state = BandTrendState()
         state, alarm = update_band_trend(state, frame.t, hookload, min(values), max(values),
-                                         noise, self.band, what=f"{rig_state} hook load")
+                                         noise, self.band, what=subject)
         self.trend[rig_state] = state
         if alarm is not None:
             emit("alarm", alarm.to_message())
