@@ -33,7 +33,9 @@ class RawMessage:
     ``recorded``: the ``raw`` message's JSON bytes as a recording held them, when they say
     exactly what :func:`raw_message` would (a replay of tdmon's own recording, see
     :func:`tdmon.ingest.mcap_source.raw_from_record`); a recorder may write them again as they
-    are instead of encoding the message anew (docs/recording.md). None for live input.
+    are instead of encoding the message anew (docs/recording.md). None for live input. A copy
+    that changes what the message says (``dataclasses.replace``) must be given
+    ``recorded=None``.
     """
 
     source: str
