@@ -46,6 +46,7 @@ from tdmon.ingest.types import (
     rejected_message,
     sample_message,
     sample_row_message,
+    samples_json,
 )
 from tdmon.messages import alarm_message, status_message
 from tdmon.record.sink import Sink
@@ -244,7 +245,8 @@ class Pipeline:
             recorded = kept if all(kept) and max(map(len, kept)) <= limit else None
             self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
                              partial(raw_row_message, max_bytes=limit),
-                             lambda: [raw_message(raw, limit) for raw in raws], recorded)
+                             lambda: [raw_message(raw, limit) for raw in raws],
+                             lambda: recorded)
         held = _HeldSamples([], [])
         process = self._process
         try:
@@ -255,7 +257,8 @@ class Pipeline:
                 samples = held.samples
                 self._write_rows(self._sinks_for("/tdmon/sample"), "/tdmon/sample",
                                  held.log_times, samples, SAMPLE_ROW, sample_row_message,
-                                 lambda: list(map(sample_message, samples)))
+                                 lambda: list(map(sample_message, samples)),
+                                 lambda: samples_json(samples))
 
     def _process(self, raw: RawMessage, log_ns: int, held: _HeldSamples | None
                  ) -> Sample | Rejected:
@@ -418,37 +421,40 @@ class Pipeline:
                     items: Sequence[Any], row_of: Callable[[Any], tuple[Any, ...]],
                     make: Callable[[Any], dict[str, Any]],
                     messages: Callable[[], list[dict[str, Any]]],
-                    encoded: list[bytes] | None = None) -> None:
+                    encoded: Callable[[], list[bytes] | None] | None = None) -> None:
         """A burst's messages of one topic: a sink with ``write_rows`` gets each item's row
-        (``row_of``) and the function that makes its message of a row (``make``); given the
-        messages' JSON bytes (``encoded``), a sink with ``write_encoded_many`` gets those; the
-        others the messages (``messages()``; docs/daemon.md, "Bursts"); each made once for
-        all."""
+        (``row_of``) and the function that makes its message of a row (``make``); a sink with
+        ``write_encoded_many`` gets the messages' JSON bytes where ``encoded()`` gives them;
+        the others the messages (``messages()``; docs/daemon.md, "Bursts"); each made once
+        for all."""
         rows: list[tuple[Any, ...]] | None = None
+        datas: list[bytes] | None = None
+        asked = False  # whether encoded() was called
         plain: list[Sink] = []
         for sink in sinks:
             write_rows = getattr(sink, "write_rows", None)
-            if write_rows is None:
-                write_encoded = (None if encoded is None
-                                 else getattr(sink, "write_encoded_many", None))
-                if write_encoded is None:
-                    plain.append(sink)
-                    continue
+            if write_rows is not None:
+                if rows is None:
+                    rows = list(map(row_of, items))
                 try:
-                    write_encoded(topic, log_times_ns, encoded)
+                    write_rows(topic, log_times_ns, make, rows)
                 except Exception:
                     self.stats.sink_errors += 1
                     log.exception("sink %r failed writing %d messages on %s", sink,
-                                  len(log_times_ns), topic)
+                                  len(rows), topic)
                 continue
-            if rows is None:
-                rows = list(map(row_of, items))
+            write_encoded = getattr(sink, "write_encoded_many", None)
+            if write_encoded is not None and encoded is not None and not asked:
+                datas, asked = encoded(), True
+            if write_encoded is None or datas is None:
+                plain.append(sink)
+                continue
             try:
-                write_rows(topic, log_times_ns, make, rows)
+                write_encoded(topic, log_times_ns, datas)
             except Exception:
                 self.stats.sink_errors += 1
-                log.exception("sink %r failed writing %d messages on %s", sink, len(rows),
-                              topic)
+                log.exception("sink %r failed writing %d messages on %s", sink,
+                              len(datas), topic)
         if plain:
             self._write_many(plain, topic, log_times_ns, messages())
 

@@ -44,7 +44,8 @@ class Sink(Protocol):
     instead, with ``make`` (a picklable function) that makes each row's message (the recorder
     in a child process makes them there). A sink with ``write_encoded_many(topic,
     log_times_ns, datas)`` gets a replay's raw input as the JSON bytes its recording held,
-    when they are there for the whole burst (the in-process recorder writes them as they are).
+    when they are there for the whole burst, and a burst's samples as JSON bytes (the
+    in-process recorder writes them as they are).
     """
 
     def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:

@@ -4,6 +4,7 @@ the recorder taking a burst's raw input and samples at once (docs/daemon.md, "Bu
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 import math
 import pickle
@@ -28,7 +29,14 @@ from tdmon.errors import IngestError
 from tdmon.ingest import mcap_source
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.mcap_source import McapSource
-from tdmon.ingest.types import RAW_ROW, RawMessage, raw_message
+from tdmon.ingest.types import (
+    RAW_ROW,
+    RawMessage,
+    Sample,
+    raw_message,
+    sample_message,
+    samples_json,
+)
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for, open_session
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import read_messages
@@ -232,9 +240,32 @@ def test_a_replay_s_raw_input_is_recorded_as_its_recording_held_it() -> None:
         assert alone[topic], topic
         assert encoded[topic] == rows[topic] == alone[topic], topic
     assert any(m.get("payload_truncated") for m in encoded["raw"])
-    assert encoded.encoded_calls == [("/tdmon/raw", len(burst))
-                                     for i, burst in enumerate(bursts) if i not in (1, 2)]
+    assert [call for call in encoded.encoded_calls if call[0] == "/tdmon/raw"] == [
+        ("/tdmon/raw", len(burst)) for i, burst in enumerate(bursts) if i not in (1, 2)]
     assert [n for topic, n in encoded.calls if topic == "/tdmon/raw"] == [7, 8]
+    # the samples as JSON bytes too (live input as well): every burst's that has one
+    assert sum(n for topic, n in encoded.encoded_calls if topic == "/tdmon/sample") == len(
+        encoded["sample"])
+    assert not [n for topic, n in encoded.calls if topic == "/tdmon/sample"]
+
+
+@pytest.mark.parametrize("sample", [
+    Sample("hookload", 1.7e9, 1.2e6, "mqtt", "rig/F4/hookload", "N", 1.7e9 + 0.2),
+    Sample("torque", 1714521600.125, -0.0, "zenoh", 'rig/"F4"/tq\\ü🙂', "N*m", 0.0, 7),
+    Sample("bit_depth", 0.0, 1e16, "mcap", "rig/bit", "m", 1.0),
+    Sample("flow_in", 7e9, 5e-324, "wits0", "rig/flow", "m**3/s", 1.0),
+    Sample("spp", 1.5, 123456789.98765432, "mqtt", "", "Pa", 1.0),
+])
+def test_samples_json_writes_the_bytes_orjson_writes_of_the_messages(sample: Sample) -> None:
+    other = dataclasses.replace(sample, t=sample.t + 1.0, value=-sample.value)
+    assert samples_json([sample, other, sample]) == [
+        orjson.dumps(sample_message(s)) for s in (sample, other, sample)]
+
+
+def test_samples_json_leaves_a_non_finite_number_to_the_recorder() -> None:
+    good = Sample("hookload", 1.7e9, 1.2e6, "mqtt", "rig/F4/hookload", "N", 1.7e9)
+    for bad in (dataclasses.replace(good, value=math.nan), dataclasses.replace(good, t=math.inf)):
+        assert samples_json([good, bad]) is None
 
 
 def test_a_sink_failing_a_burst_is_counted_and_the_others_get_it() -> None:
