@@ -145,7 +145,8 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
     Parameters
     ----------
     well : the well
-    loads : `WellModel.loads` at the window's bit depth with the back-calculated friction
+    loads : `WellModel.loads` at the window's bit depth with the back-calculated friction (of
+        ``operation`` and rotating at least)
     operation : which operation's profile to check (``pick_up``, ``slack_off``, ``rotating``)
     t : time [s]
     warn : utilisation that raises a warning [-]
