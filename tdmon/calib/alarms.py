@@ -175,22 +175,25 @@ def limit_alarms(well: Well, loads: Loads, operation: str, t: float, *, warn: fl
         (AlarmKind.LIMIT_MAKEUP_TORQUE, "makeup_torque", torque, window.makeup_torque, "torque"),
     )
     alarms: list[Alarm] = []
-    for kind, name, load, limit, label in checks:
-        with np.errstate(invalid="ignore", divide="ignore"):
+    # one errstate for the loop (the usage is its only arithmetic): entering and leaving one
+    # per check cost ~5 us a window; argmax the array's method, without np.argmax's wrapper
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for kind, name, load, limit, label in checks:
             usage = np.where(np.isfinite(limit) & (limit > 0) & (load > 0), load / limit, 0.0)
-        if not usage.size:
-            continue
-        worst = int(np.argmax(usage))
-        ratio = float(usage[worst])
-        if ratio < warn:
-            continue
-        severity = Severity.CRITICAL if ratio >= 1.0 else Severity.WARNING
-        where = "at surface" if loads.md[worst] < 0.5 else f"at {loads.md[worst]:.0f} m MD"
-        limit_name = "make-up torque" if name == "makeup_torque" else name.replace("_", " ")
-        alarms.append(Alarm(t, kind, severity,
-                            f"{operation.replace('_', '-')} {label} {where} is "
-                            f"{100 * ratio:.0f} % of the {limit_name} limit",
-                            float(load[worst]), float(limit[worst])))
+            if not usage.size:
+                continue
+            worst = int(usage.argmax())
+            ratio = float(usage[worst])
+            if ratio < warn:
+                continue
+            severity = Severity.CRITICAL if ratio >= 1.0 else Severity.WARNING
+            where = "at surface" if loads.md[worst] < 0.5 else f"at {loads.md[worst]:.0f} m MD"
+            limit_name = ("make-up torque" if name == "makeup_torque"
+                          else name.replace("_", " "))
+            alarms.append(Alarm(t, kind, severity,
+                                f"{operation.replace('_', '-')} {label} {where} is "
+                                f"{100 * ratio:.0f} % of the {limit_name} limit",
+                                float(load[worst]), float(limit[worst])))
     return alarms
 
 
