@@ -265,10 +265,16 @@ def profile_anomaly(t: float, edges: np.ndarray, mu: np.ndarray, covariance: np.
     touched = np.isfinite(mu) & (std < 0.8 * prior_std)
     # in Python: one NumPy call per candidate stretch cost more than the products below
     flags = touched.tolist()
-    starts = [k for k in range(n - width + 1) if all(flags[k:k + width])]
+    touched_before = [0, *itertools.accumulate(flags)]  # touched bins in [0, k)
+    if width > 0:
+        # all touched: ``width`` touched bins in the stretch (a subtraction, not a slice and
+        # all(), per stretch: 141 bins 19 -> 8 us)
+        starts = [k for k in range(n - width + 1)
+                  if touched_before[k + width] - touched_before[k] == width]
+    else:
+        starts = [k for k in range(n - width + 1) if all(flags[k:k + width])]
     if len(starts) < 3:
         return None, known
-    touched_before = [0, *itertools.accumulate(flags)]  # touched bins in [0, k)
     best: tuple[float, int, float, float, float] | None = None
     for first in _candidates(mu, touched, starts, width, settings.min_step):
         # contrast: this stretch's mean minus the mean of the other touched bins (leaving a
