@@ -422,8 +422,11 @@ class FrictionEstimator:
                 out: list[Output]) -> WindowState:
         """Load-limit alarms at the window's friction, each reported when it starts."""
         try:
+            # the loads of the two operations limit_alarms reads (the estimate's operation
+            # is one the back-calculation modelled, so a valid one)
             loads = self.model.loads(window.bit_depth, self._friction_of(w, estimate),
-                                     method=self.settings.method)
+                                     method=self.settings.method,
+                                     operations=(estimate.operation, Operation.ROTATING))
             alarms = limit_alarms(self.model.well, loads, estimate.operation, window.t_end,
                                   warn=self.settings.limit_warn, grid=self.model.grid)
         except (ModelError, ValueError):

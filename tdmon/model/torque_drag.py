@@ -475,12 +475,19 @@ class WellModel:
         wob: float = 0.0,
         bit_torque: float = 0.0,
         psi: float | None = None,
+        operations: Sequence[Operation | str] | None = None,
     ) -> Loads:
-        """`Loads` (every operation, with profiles) at one bit depth; see `torque_drag`."""
-        operations = list(Operation)
+        """`Loads` (every operation, with profiles) at one bit depth; see `torque_drag`.
+
+        ``operations`` limits the loads to those operations (None: every one): each operation's
+        loads are those of a march of all, and the calibration's limit check reads only two
+        (the march 46 -> 38 us).
+        """
+        chosen = list(Operation) if operations is None else list(
+            dict.fromkeys(Operation(op) for op in operations))
         md, force, torque, component = self.profiles(
-            operations, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi)
-        names = [op.value for op in operations]
+            chosen, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi)
+        names = [op.value for op in chosen]
         # one interpolation for both: the limit check needs the nodes' inclination too
         tvd, inclination = tvd_and_inclination(self.well.survey, md)
         return Loads(

@@ -104,3 +104,32 @@ def test_update_by_hand_and_missing_measurement() -> None:
     scale, one = scale_parametrisation(GLYDRIL)
     assert scale.names == ("scale",) and one[0] == 1.0
     assert float(scale.mu([2.0], 10.0)) == pytest.approx(2 * (0.23 + 0.013))
+
+
+@pytest.mark.parametrize("prior", [
+    FrictionModel("linear", {"a": 0.23, "b": 0.0013}),
+    FrictionModel("exponential", {"a": 0.2, "b": 0.004}),
+    FrictionModel("power", {"a": 0.1, "b": 0.3}),
+    FrictionModel("constant", {"mu": 0.25}),
+    FrictionModel("polynomial", {"a0": 0.2, "a1": 1e-3}),
+])
+@pytest.mark.parametrize("mode", ["family", "scale"])
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.parametrize("theta", [
+    [1.3, 0.002], [1e308, 1e308], [math.nan, 0.001], [math.inf, -math.inf], [0.5], [0.5, 1, 2],
+])
+def test_mu_is_the_friction_model_called(prior: FrictionModel, mode: str,
+                                         theta: list[float]) -> None:
+    # mu evaluates the law without building its FrictionModel: the same bits and errors
+    parametrisation = (family_parametrisation(prior) if mode == "family"
+                       else scale_parametrisation(prior))[0]
+    temperature = np.linspace(-10.0, 120.0, 27)
+
+    def outcome(call: Any) -> object:
+        try:
+            return np.asarray(call()).tobytes()
+        except Exception as exc:  # the errors themselves are compared
+            return type(exc), str(exc)
+
+    expected = outcome(lambda: parametrisation.friction_model(theta)(temperature))
+    assert outcome(lambda: parametrisation.mu(theta, temperature)) == expected

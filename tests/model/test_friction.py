@@ -16,6 +16,7 @@ from tdmon.model.friction import (
     TYPICAL_FRICTION_RANGES,
     FrictionModel,
     constant,
+    evaluate_law,
     exponential,
     linear,
     local_friction,
@@ -242,3 +243,41 @@ def test_friction_config_forms(raw: object, family: str, mu_at_50: float,
 def test_friction_config_errors(raw: object, message: str) -> None:
     with pytest.raises(ValidationError, match=message):
         _Section.model_validate({"friction": raw})
+
+
+def _outcome(call: object) -> object:
+    """The value's bits, or the error's class and message."""
+    try:
+        return np.asarray(call()).tobytes()  # type: ignore[operator]
+    except Exception as exc:  # the errors themselves are compared
+        return type(exc), str(exc)
+
+
+@pytest.mark.parametrize(("family", "coefficients"), [
+    ("constant", {"mu": 0.2}),
+    ("linear", {"a": 0.23, "b": 0.0013}),
+    ("linear", {"b": 0.0013, "a": 0.23}),
+    ("power", {"a": 0.1, "b": 0.3}),
+    ("exponential", {"a": 0.2, "b": 0.004}),
+    ("exponential", {"a": 0.2, "b": 900.0}),
+    ("saturation-growth", {"a": 0.4, "b": 30.0}),
+    ("saturation-growth", {"a": 0.4, "b": -50.0}),
+    ("polynomial", {"a0": 0.2, "a2": 1e-5}),
+    ("polynomial", {"b0": 0.2}),
+    ("linear", {"a": float("nan"), "b": 0.0013}),
+    ("linear", {"a": 0.23, "b": float("inf")}),
+    ("linear", {"a": 0.23}),
+    ("linear", {"a": 0.23, "b": 0.001, "c": 0.0}),
+    ("linear", {"a": np.float64(0.23), "b": 0.0013}),
+    ("linear", {"a": 1, "b": True}),
+    ("linear", {"a": "0.5", "b": 0.0013}),
+    ("cubic", {"a": 0.23, "b": 0.0013}),
+])
+@pytest.mark.parametrize("temperature", [
+    50.0, [10.0, 50.0, 90.0], np.linspace(-60.0, 120.0, 37), [20.0, float("nan")], -50.0, [],
+])
+def test_evaluate_law_is_the_model_called(family: str, coefficients: dict[str, float],
+                                          temperature: object) -> None:
+    # the quick path's bits and errors are the model's, for good and bad laws and temperatures
+    expected = _outcome(lambda: FrictionModel(family, coefficients)(temperature))
+    assert _outcome(lambda: evaluate_law(family, coefficients, temperature)) == expected

@@ -152,6 +152,16 @@ def test_interpolation_outside_survey_is_an_error() -> None:
         tvd_and_inclination(survey, [50.0, 150.0])
 
 
+@pytest.mark.parametrize("depths", [[10.0, 50.0, 50.0], [10.0, 60.0, 50.0], [80.0, 20.0]])
+def test_interpolation_depths_must_increase(depths: list[float]) -> None:
+    survey = minimum_curvature([0.0, 100.0], [0.0, 10.0], [0.0, 0.0])
+    with pytest.raises(ModelError, match="increase strictly"):
+        interpolate_survey(survey, depths)
+    with pytest.raises(ModelError, match="increase strictly"):
+        tvd_and_inclination(survey, depths)
+    assert tvd_and_inclination(survey, [50.0])[0].shape == (1,)  # one depth needs no order
+
+
 @pytest.mark.parametrize(
     ("md", "inc", "azi", "reason"),
     [

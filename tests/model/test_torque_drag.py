@@ -371,3 +371,30 @@ def test_aadnoy_uses_the_2010_interval_formulas_on_a_horizontal_turn() -> None:
     torque = loads.torque["rotating"]
     assert _at(loads.md, torque, md[3]) == pytest.approx(_at(loads.md, torque, md[4]), rel=1e-9)
     assert _at(loads.md, torque, md[4]) == pytest.approx(0.3 * 250.0 * 500.0 * 0.0635, rel=1e-9)
+
+
+@pytest.mark.parametrize("method", ["soft-string", "aadnoy"])
+@pytest.mark.parametrize("operations", [
+    ["pick_up", "rotating"], [Operation.SLACK_OFF], ["rotating", "rotating"],
+    ["on_bottom", "static", "pick_up"],
+])
+def test_loads_of_some_operations_are_those_of_all(three_d: Well, method: str,
+                                                    operations: list[str]) -> None:
+    # each operation's loads are its own march's: choosing a few changes no bit
+    model = WellModel(three_d)
+    mu = np.linspace(0.15, 0.35, model.n_elements)
+    for bit_depth, psi in ((1800.0, None), (3599.0, 0.3)):
+        every = model.loads(bit_depth, mu, method=method, wob=4e4, bit_torque=3e3, psi=psi)
+        some = model.loads(bit_depth, mu, method=method, wob=4e4, bit_torque=3e3, psi=psi,
+                           operations=operations)
+        names = list(dict.fromkeys(Operation(op).value for op in operations))
+        assert list(some.hookload) == list(some.axial_force) == list(some.torque) == names
+        for name in names:
+            assert some.hookload[name] == every.hookload[name]
+            assert some.surface_torque[name] == every.surface_torque[name]
+            assert some.axial_force[name].tobytes() == every.axial_force[name].tobytes()
+            assert some.torque[name].tobytes() == every.torque[name].tobytes()
+        for field in ("md", "tvd", "component", "inclination"):
+            assert getattr(some, field).tobytes() == getattr(every, field).tobytes()
+    with pytest.raises(ValueError, match="not a valid Operation"):
+        model.loads(1000.0, mu, operations=["tripping"])
