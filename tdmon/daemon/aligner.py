@@ -320,9 +320,9 @@ class Aligner:
             values[channel] = held[channel][index]
             ages[channel] = age
         reported, self._reported = self._reported, ()
-        return Frame(t=t, log_time_ns=pending.log_time_ns, values=values, ages=ages,
-                     stale=tuple(stale), gap=reported or self._gap(previous, t),
-                     gap_reported=bool(reported))
+        # positional, in the order of Frame's fields (once per frame: 0.45 -> 0.24 us)
+        return Frame(t, pending.log_time_ns, values, ages, tuple(stale),
+                     reported or self._gap(previous, t), bool(reported))
 
     def silence(self, now: float) -> tuple[tuple[str, float], ...]:
         """Live: the channels gone stale in a silence of the hook load still under way, and when
