@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from tdmon.calib.rigstate import classify
 from tdmon.config.daemon import RigStateConfig
 from tdmon.daemon.aligner import Aligner
-from tdmon.daemon.monitor import GridLoadModel, MonitorStep
+from tdmon.daemon.monitor import GridLoadModel, ModelledLoads, MonitorStep
 from tdmon.daemon.pipeline import Emit, Frame, Pipeline, Sink, Step
 from tdmon.daemon.steps.rig_state import RigStateStep, rig_state_thresholds
 from tdmon.ingest.decode import ChannelSpec, Decoder
@@ -265,6 +265,21 @@ class TestMonitor:
             assert loads.band_slack_off == tuple(column[7:10])
             assert loads.bit_depth == depth and loads.band_mu == band
         assert model.loads(math.nan) is None
+
+    def test_modelled_loads_init_is_the_dataclass_one(self) -> None:
+        # the hand-written __init__ (slot setters): the fields in order, frozen, compared
+        import dataclasses
+        import inspect
+
+        names = [f.name for f in dataclasses.fields(ModelledLoads)]
+        assert list(inspect.signature(ModelledLoads).parameters) == names
+        args = (1.0, 2.0, 3.0, 4.0, 5.0, (0.1,), (6.0,), (7.0,))
+        loads = ModelledLoads(*args)
+        assert dataclasses.astuple(loads) == args
+        assert loads == ModelledLoads(**dict(zip(names, args, strict=True)))
+        assert hash(loads) == hash(dataclasses.replace(loads))
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            loads.pick_up = 0.0  # type: ignore[misc]
 
     def test_same_depth_reuses_the_evaluation(self) -> None:
         model = linear_model()
