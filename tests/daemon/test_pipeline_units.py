@@ -367,6 +367,52 @@ def test_pipeline_records_before_steps_and_survives_a_failing_step() -> None:
     assert status["samples_in"] == 10 and status["rejected"] == 1 and status["lag_s"] == 6.0
 
 
+class _Emits:
+    """Emits ``state`` and ``model`` on every frame, and ``summary`` when closing."""
+
+    name = "emits"
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        emit("state", {"t": frame.t})
+        emit("model", {"t": frame.t, "seen": sorted(frame.results)})
+
+    def close(self, emit: Emit) -> None:
+        emit("summary", {"done": True})
+
+
+class _Failing(CollectSink):
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        raise OSError("disk full")
+
+
+class _StateOnly(CollectSink):
+    topics = frozenset({"/tdmon/state"})
+
+
+def test_step_messages_reach_the_sinks_that_want_them_and_the_frame_results(
+        caplog: pytest.LogCaptureFixture) -> None:
+    kept, failing, state_only, late = CollectSink(), _Failing(), _StateOnly(), CollectSink()
+    sinks: list[Sink] = [failing, kept, state_only]
+    pipeline = Pipeline(Decoder("rig", [ChannelSpec("hookload", "hookload", "N")]),
+                        Aligner(), [_Emits()], sinks)
+    frames = [Frame(float(i), 1000 + i, {"hookload": 1e6}, {"hookload": 0.0})
+              for i in range(3)]
+    pipeline._run_steps(frames[0])
+    pipeline.add_sink(late)  # routes worked out again
+    for frame in frames[1:]:
+        pipeline._run_steps(frame)
+    pipeline.flush()
+    assert kept.order == ["/tdmon/state", "/tdmon/model"] * 3 + ["/tdmon/summary"]
+    assert [m["t"] for m in kept.messages["/tdmon/model"]] == [0.0, 1.0, 2.0]
+    assert kept.messages["/tdmon/model"][0]["seen"] == ["state"]
+    assert state_only.order == ["/tdmon/state"] * 3
+    assert late.order == ["/tdmon/state", "/tdmon/model"] * 2 + ["/tdmon/summary"]
+    assert [sorted(frame.results) for frame in frames] == [["model", "state"]] * 3
+    assert frames[2].results["state"] is kept.messages["/tdmon/state"][2]
+    assert pipeline.stats.sink_errors == 7 and pipeline.stats.step_errors == 0
+    assert caplog.text.count("failed writing /tdmon/") == 7
+
+
 class TestStaleAfterAGap:
     """Every channel silent for 45 s (1 Hz, stale timeout 5 s): one ``sensor_stale`` alarm names
     the channels that went stale, stamped when they went stale, and none when data resumes."""
