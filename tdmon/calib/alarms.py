@@ -26,10 +26,11 @@ import itertools
 import math
 from dataclasses import dataclass
 from statistics import median
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
+from tdmon.calib.rigstate import slot_setters
 from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads
@@ -360,18 +361,36 @@ _NONE: frozenset[str] = frozenset()
 _NO_CONDITIONS: frozenset[AlarmKind] = frozenset()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True, init=False)
 class SensorState:
     """Channels reported stale, those named by a gap's alarm and not heard from since, the last
     values and their run lengths, and the sensor alarm kinds whose condition holds (an alarm is
     raised when its condition starts)."""
 
-    stale: frozenset[str] = frozenset()
-    announced: frozenset[str] = frozenset()
+    stale: frozenset[str] = _NONE
+    announced: frozenset[str] = _NONE
     last: tuple[tuple[str, float], ...] = ()
     runs: tuple[tuple[str, int], ...] = ()
-    active: frozenset[AlarmKind] = frozenset()
+    active: frozenset[AlarmKind] = _NO_CONDITIONS
     below_since: float | None = None
+
+    def __init__(self, stale: frozenset[str] = _NONE, announced: frozenset[str] = _NONE,
+                 last: tuple[tuple[str, float], ...] = (), runs: tuple[tuple[str, int], ...] = (),
+                 active: frozenset[AlarmKind] = _NO_CONDITIONS, below_since: float | None = None
+                 ) -> None:
+        # once per frame: the slots set through their descriptors, not object.__setattr__
+        # (see tdmon.calib.rigstate.slot_setters; 0.73 -> 0.41 us)
+        set_stale, set_announced, set_last, set_runs, set_active, set_below_since = (
+            _SENSOR_SETTERS)
+        set_stale(self, stale)
+        set_announced(self, announced)
+        set_last(self, last)
+        set_runs(self, runs)
+        set_active(self, active)
+        set_below_since(self, below_since)
+
+
+_SENSOR_SETTERS: Final = slot_setters(SensorState)
 
 
 def stale_gap_alarm(gap: tuple[tuple[str, float], ...], resumed: float | None = None) -> Alarm:

@@ -119,20 +119,33 @@ class Aligner:
 
     def push(self, sample: Sample, now: float) -> list[Frame]:
         """Take one sample (``now`` is monotonic seconds); return the frames it completes."""
-        stored = self._store(sample)
-        if stored == _DUPLICATE:
-            return []
-        self._arrived[sample.channel] = now
+        channel, t = sample.channel, sample.t
+        times = self._times.get(channel)
+        if times is not None and t - times[-1] > _SAME_TIME:
+            # what _store does with the usual sample, newer than its channel's newest, without
+            # the call (once per sample; with the sample's channel and time read once: 0.85 ->
+            # 0.74 us a sample)
+            values = self._values[channel]
+            times.append(t)
+            values.append(sample.value)
+            if len(times) > self.history:
+                del times[0]
+                del values[0]
+            stored = _STORED
+        else:
+            stored = self._store(sample)
+            if stored == _DUPLICATE:
+                return []
+        self._arrived[channel] = now
         frames: list[Frame] = []
-        if sample.channel == self.trigger:
+        if channel == self.trigger:
             pending = self._pending
-            if sample.t > self._last_frame_t + _SAME_TIME and (
-                    pending is None or sample.t > pending.t + _SAME_TIME):
+            if t > self._last_frame_t + _SAME_TIME and (
+                    pending is None or t > pending.t + _SAME_TIME):
                 if pending is not None:
                     frames.append(self._emit())
-                self._pending = _Pending(sample.t, sample.value, now,
-                                         int(sample.receive_time * 1e9))
-                self._frame_offset = sample.t - sample.receive_time
+                self._pending = _Pending(t, sample.value, now, int(sample.receive_time * 1e9))
+                self._frame_offset = t - sample.receive_time
                 if self._refused:
                     self._refused.clear()
                 if self._late:
@@ -152,7 +165,7 @@ class Aligner:
         if pending is None:
             return frames
         held_by = self._held_by
-        if (held_by is None or held_by == sample.channel) and self._complete(pending.t):
+        if (held_by is None or held_by == channel) and self._complete(pending.t):
             frames.append(self._emit())
         return frames
 
@@ -320,9 +333,9 @@ class Aligner:
             values[channel] = held[channel][index]
             ages[channel] = age
         reported, self._reported = self._reported, ()
-        return Frame(t=t, log_time_ns=pending.log_time_ns, values=values, ages=ages,
-                     stale=tuple(stale), gap=reported or self._gap(previous, t),
-                     gap_reported=bool(reported))
+        # positional, in the order of Frame's fields (once per frame: 0.45 -> 0.24 us)
+        return Frame(t, pending.log_time_ns, values, ages, tuple(stale),
+                     reported or self._gap(previous, t), bool(reported))
 
     def silence(self, now: float) -> tuple[tuple[str, float], ...]:
         """Live: the channels gone stale in a silence of the hook load still under way, and when

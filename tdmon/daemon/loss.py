@@ -23,6 +23,8 @@ GAP_MIN_S = 2.0
 #: Intervals kept per channel for the median, and needed before any gap is judged.
 INTERVALS_KEPT = 64
 INTERVALS_NEEDED = 16
+#: A channel's median is worked out again after this many new intervals [-].
+_MEDIAN_EVERY = INTERVALS_KEPT // 4
 
 
 @dataclass(slots=True)
@@ -64,13 +66,14 @@ class LossDetector:
         # (once per sample)
         state = self._sampling.get(sample.channel)
         if state is not None and not state.rebase and state.median is not None:
-            interval = sample.t - state.last_t
-            if (0 < interval <= GAP_FACTOR * state.median
-                    and state.since_median + 1 < INTERVALS_KEPT // 4):
+            t = sample.t
+            interval = t - state.last_t
+            since_median = state.since_median + 1
+            if 0 < interval <= GAP_FACTOR * state.median and since_median < _MEDIAN_EVERY:
                 # what _check_sampling does with it: no gap, no new median yet
                 state.intervals.append(interval)
-                state.last_t = sample.t
-                state.since_median += 1
+                state.last_t = t
+                state.since_median = since_median
                 return alarms
         alarm = self._check_sampling(sample)
         if alarm is not None:
@@ -126,7 +129,7 @@ class LossDetector:
             state.intervals.append(interval)
             state.since_median += 1
             if len(state.intervals) >= INTERVALS_NEEDED and (
-                    median is None or state.since_median >= INTERVALS_KEPT // 4):
+                    median is None or state.since_median >= _MEDIAN_EVERY):
                 state.median = statistics.median(state.intervals)
                 state.since_median = 0
         return alarm

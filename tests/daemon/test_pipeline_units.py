@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from tdmon.calib.rigstate import classify
 from tdmon.config.daemon import RigStateConfig
 from tdmon.daemon.aligner import Aligner
-from tdmon.daemon.monitor import GridLoadModel, MonitorStep
+from tdmon.daemon.monitor import GridLoadModel, ModelledLoads, MonitorStep
 from tdmon.daemon.pipeline import Emit, Frame, Pipeline, Sink, Step
 from tdmon.daemon.steps.rig_state import RigStateStep, rig_state_thresholds
 from tdmon.ingest.decode import ChannelSpec, Decoder
@@ -266,6 +266,21 @@ class TestMonitor:
             assert loads.bit_depth == depth and loads.band_mu == band
         assert model.loads(math.nan) is None
 
+    def test_modelled_loads_init_is_the_dataclass_one(self) -> None:
+        # the hand-written __init__ (slot setters): the fields in order, frozen, compared
+        import dataclasses
+        import inspect
+
+        names = [f.name for f in dataclasses.fields(ModelledLoads)]
+        assert list(inspect.signature(ModelledLoads).parameters) == names
+        args = (1.0, 2.0, 3.0, 4.0, 5.0, (0.1,), (6.0,), (7.0,))
+        loads = ModelledLoads(*args)
+        assert dataclasses.astuple(loads) == args
+        assert loads == ModelledLoads(**dict(zip(names, args, strict=True)))
+        assert hash(loads) == hash(dataclasses.replace(loads))
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            loads.pick_up = 0.0  # type: ignore[misc]
+
     def test_same_depth_reuses_the_evaluation(self) -> None:
         model = linear_model()
         first = model.loads(1234.5)
@@ -350,6 +365,52 @@ def test_pipeline_records_before_steps_and_survives_a_failing_step() -> None:
     assert sink.order.count("/tdmon/raw") == 11
     status = pipeline.status_message({"mqtt": "connected"}, now=10.0)
     assert status["samples_in"] == 10 and status["rejected"] == 1 and status["lag_s"] == 6.0
+
+
+class _Emits:
+    """Emits ``state`` and ``model`` on every frame, and ``summary`` when closing."""
+
+    name = "emits"
+
+    def on_frame(self, frame: Frame, emit: Emit) -> None:
+        emit("state", {"t": frame.t})
+        emit("model", {"t": frame.t, "seen": sorted(frame.results)})
+
+    def close(self, emit: Emit) -> None:
+        emit("summary", {"done": True})
+
+
+class _Failing(CollectSink):
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        raise OSError("disk full")
+
+
+class _StateOnly(CollectSink):
+    topics = frozenset({"/tdmon/state"})
+
+
+def test_step_messages_reach_the_sinks_that_want_them_and_the_frame_results(
+        caplog: pytest.LogCaptureFixture) -> None:
+    kept, failing, state_only, late = CollectSink(), _Failing(), _StateOnly(), CollectSink()
+    sinks: list[Sink] = [failing, kept, state_only]
+    pipeline = Pipeline(Decoder("rig", [ChannelSpec("hookload", "hookload", "N")]),
+                        Aligner(), [_Emits()], sinks)
+    frames = [Frame(float(i), 1000 + i, {"hookload": 1e6}, {"hookload": 0.0})
+              for i in range(3)]
+    pipeline._run_steps(frames[0])
+    pipeline.add_sink(late)  # routes worked out again
+    for frame in frames[1:]:
+        pipeline._run_steps(frame)
+    pipeline.flush()
+    assert kept.order == ["/tdmon/state", "/tdmon/model"] * 3 + ["/tdmon/summary"]
+    assert [m["t"] for m in kept.messages["/tdmon/model"]] == [0.0, 1.0, 2.0]
+    assert kept.messages["/tdmon/model"][0]["seen"] == ["state"]
+    assert state_only.order == ["/tdmon/state"] * 3
+    assert late.order == ["/tdmon/state", "/tdmon/model"] * 2 + ["/tdmon/summary"]
+    assert [sorted(frame.results) for frame in frames] == [["model", "state"]] * 3
+    assert frames[2].results["state"] is kept.messages["/tdmon/state"][2]
+    assert pipeline.stats.sink_errors == 7 and pipeline.stats.step_errors == 0
+    assert caplog.text.count("failed writing /tdmon/") == 7
 
 
 class TestStaleAfterAGap:
