@@ -48,9 +48,10 @@ _INT64 = 2.0**63
 
 #: What :meth:`Decoder.decode` needs of a topic's channel: its name, SI unit, the configured
 #: unit's factor (None: none configured), the cache of payload units' factors, its bounds
-#: [SI] (None: none) and the well's limit with its reason (depth channels; else None).
+#: [SI] (None: none), the well's limit with its reason (depth channels; else None), and the
+#: range [SI] a value passes every check in (all bounds and ``ABS_VALUE_MAX`` together).
 _Route = tuple[str, str, "tuple[float, float] | None", dict[str, tuple[float, float]],
-               "float | None", "float | None", "tuple[float, str] | None"]
+               "float | None", "float | None", "tuple[float, str] | None", float, float]
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,7 +121,8 @@ class Decoder:
         self._routes: dict[str, _Route] = {
             topic: (spec.channel, CHANNEL_UNITS[spec.channel][1],
                     self._default_factor[spec.channel], self._factors[spec.channel],
-                    spec.minimum, spec.maximum, self._beyond_well.get(spec.channel))
+                    spec.minimum, spec.maximum, self._beyond_well.get(spec.channel),
+                    *_accepted_range(spec, self._beyond_well.get(spec.channel)))
             for topic, spec in self._by_topic.items()}
 
     @property
@@ -146,7 +148,7 @@ class Decoder:
         if earliest is not None and t < earliest:
             return _reject(raw, f"t before the earliest accepted time ({_utc(t)} < "
                                 f"{self._earliest_text}: a rig clock that was never set)")
-        channel, si_unit, default, factors, minimum, maximum, beyond = route
+        channel, si_unit, default, factors, minimum, maximum, beyond, low, high = route
         # the usual case, a unit seen before or the configured one, without a method call
         factor = default if unit is None else factors.get(unit)
         if factor is None:
@@ -155,6 +157,10 @@ class Decoder:
                 return _reject(raw, looked_up)
             factor = looked_up
         si_value = value * factor[0] + factor[1]
+        if low <= si_value <= high:
+            # the usual value, inside every check below at once (NaN is not)
+            return Sample(channel, t, si_value, raw.source, raw.topic, si_unit,
+                          raw.receive_time, seq)
         if not math.isfinite(si_value) or abs(si_value) > ABS_VALUE_MAX:
             return _reject(raw, f"value {value!r} out of range after unit conversion")
         if minimum is not None and si_value < minimum:
@@ -187,6 +193,15 @@ class Decoder:
         if len(cache) < _MAX_CACHED_UNITS:
             cache[unit] = factor
         return factor
+
+
+def _accepted_range(spec: ChannelSpec, beyond: tuple[float, str] | None
+                    ) -> tuple[float, float]:
+    """The values [SI] of ``spec``'s channel that no check of :meth:`Decoder.decode` rejects:
+    within ``ABS_VALUE_MAX``, its minimum and maximum, and the well's limit ``beyond``."""
+    low = -ABS_VALUE_MAX if spec.minimum is None else max(-ABS_VALUE_MAX, spec.minimum)
+    highs = [ABS_VALUE_MAX, *(b for b in (spec.maximum, beyond and beyond[0]) if b is not None)]
+    return low, min(highs)
 
 
 def topic_for(prefix: str, topic: str) -> str:

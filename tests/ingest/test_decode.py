@@ -286,3 +286,27 @@ def test_values_at_the_limits_are_samples(topic: str, value: float) -> None:
 def test_without_checks_the_decoder_takes_any_time_and_depth() -> None:
     sample = DECODER.decode(raw("rig/F4/bit_depth", {"t": 0, "value": -1e4, "unit": "m"}))
     assert isinstance(sample, Sample) and sample.value == -1e4
+
+
+def _every_check(decoder: Decoder) -> Decoder:
+    """``decoder`` with no value taken in its accepted range at once: each through every
+    check of its own."""
+    slow = Decoder.__new__(Decoder)
+    slow.__dict__.update(decoder.__dict__)
+    slow._routes = {topic: (*route[:-2], math.inf, -math.inf)
+                    for topic, route in decoder._routes.items()}
+    return slow
+
+
+@settings(max_examples=600, deadline=None)
+@given(topic=st.sampled_from(["rig/bit_depth", "rig/hole_depth", "rig/hookload"]),
+       value=st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from(
+           [-2.0, -2.0000001, 3500.0, 3500.0001, 3100.0 / 0.3048, 1e12, 1e15 / 1000.0]),
+       unit=st.sampled_from([None, "m", "ft", "kN", "N", "lbf"]))
+def test_the_accepted_range_decides_as_every_check_does(
+        topic: str, value: float, unit: str | None) -> None:
+    body: dict[str, object] = {"t": 1.7e9, "value": value}
+    if unit is not None:
+        body["unit"] = unit
+    message = raw(topic, body)
+    assert CHECKED.decode(message) == _every_check(CHECKED).decode(message)
