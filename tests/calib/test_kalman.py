@@ -65,6 +65,38 @@ def test_joseph_update_equals_the_information_form() -> None:
                                                                 rel=1e-10)
 
 
+def test_a_profile_sized_update_is_the_joseph_product_and_stays_positive() -> None:
+    # 141 bins as the friction profile has: the Joseph form multiplied out (O(n^2)) against
+    # its two matrix products and against the information form
+    n = 141
+    rng = np.random.default_rng(11)
+    mean, covariance = np.full(n, 0.25), _spd(n, 5, 0.01)
+    h = rng.uniform(0.0, 2.0e4, n) * (rng.uniform(size=n) < 0.7)
+    noise, measured, predicted = 4.0e6, 251.3e3, 243.0e3
+    posterior = update(KalmanState(mean, covariance), measured, predicted, h, noise)
+    gain = covariance @ h / (h @ covariance @ h + noise)
+    a = np.eye(n) - np.outer(gain, h)
+    product = a @ covariance @ a.T + noise * np.outer(gain, gain)
+    scale = np.abs(product).max()
+    np.testing.assert_allclose(posterior.covariance, product, rtol=0.0, atol=1e-13 * scale)
+    expected_mean, expected_cov = _information_posterior(
+        mean, covariance, h[None, :], np.array([noise]), np.array([measured - predicted]))
+    np.testing.assert_allclose(posterior.mean, expected_mean, rtol=1e-12, atol=0.0)
+    np.testing.assert_allclose(posterior.covariance, expected_cov, rtol=0.0,
+                               atol=1e-11 * scale)
+    # a long session of precise windows, each on a few bins: the covariance stays symmetric
+    # and positive definite
+    state = KalmanState(mean, np.diag(np.full(n, 0.01)))
+    for step in range(3000):
+        row = np.zeros(n)
+        lo = int(rng.integers(0, n - 5))
+        row[lo:lo + 5] = rng.uniform(1.0e4, 2.0e4, 5)
+        state = update(predict(state, 1e-4), float(rng.normal(0.0, 50.0)), 0.0, row,
+                       2.5e3 if step % 2 else 1.0e2)
+    assert np.array_equal(state.covariance, state.covariance.T)
+    assert np.linalg.eigvalsh(state.covariance).min() > 0.0
+
+
 def test_update_clips_to_bounds_and_rejects_bad_input() -> None:
     state = KalmanState(np.array([0.2, 0.3]), np.eye(2) * 0.01)
     # an innovation of 1000 with gain 1e-3 / 1.01 per unit would push both bins past 1
