@@ -419,19 +419,13 @@ class Pipeline:
         if frame is not None:
             frame.results[name] = message
         # twice per frame (state, model): the topic and its sinks from one lookup by name,
-        # not an f-string, a route lookup and two calls per message (with the partial in
-        # place of a closure per frame: 1.17 -> 0.85 us a frame of two messages, two sinks)
+        # not an f-string and a route lookup per message (with the partial in place of a
+        # closure per frame: 1.17 -> 0.85 us a frame of two messages, two sinks)
         route = self._named_routes.get(name)
         if route is None:
             topic = f"/tdmon/{name}"
             route = self._named_routes[name] = (topic, self._sinks_for(topic))
-        topic, sinks = route
-        for sink in sinks:
-            try:
-                sink.write(topic, log_time_ns, message)
-            except Exception:
-                self.stats.sink_errors += 1
-                log.exception("sink %r failed writing %s", sink, topic)
+        self._write_to(route[1], route[0], log_time_ns, message)
 
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         self._write_to(self._sinks_for(topic), topic, log_time_ns, message)

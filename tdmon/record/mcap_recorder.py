@@ -34,7 +34,7 @@ import time
 import weakref
 from bisect import bisect_right
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
@@ -591,17 +591,7 @@ class McapRecorder:
         """Record several messages of one topic, ``log_times_ns[i]`` for ``messages[i]``: as
         many ``write`` calls, for a fraction of their cost (the daemon's raw input and samples
         of a burst, docs/recording.md)."""
-        if len(log_times_ns) != len(messages):
-            raise ValueError(f"{len(log_times_ns)} log times for {len(messages)} messages")
-        if len(messages) < DIRECT_BATCH:
-            self._enqueue(zip(repeat(topic), log_times_ns, messages, repeat(None)))
-            return
-        with self._lock:
-            # a batch already: written as one, after what was queued before it
-            self._write_queued()
-            self._write_batch(topic, log_times_ns, messages)
-        if self._pending_alarms:
-            self._fire_alarms()
+        self._take_many(topic, log_times_ns, messages, None, self._write_batch)
 
     def write_encoded(self, topic: str, log_time_ns: int, data: bytes,
                       replaced: bool = False) -> None:
@@ -613,15 +603,23 @@ class McapRecorder:
                            datas: Sequence[bytes]) -> None:
         """``write_encoded`` for several messages of one topic, none with a NaN/inf replaced:
         as ``write_many`` for messages already JSON (a replay's raw input as its recording
-        held it, docs/recording.md)."""
-        if len(log_times_ns) != len(datas):
-            raise ValueError(f"{len(log_times_ns)} log times for {len(datas)} messages")
-        if len(datas) < DIRECT_BATCH:
-            self._enqueue(zip(repeat(topic), log_times_ns, datas, repeat(False)))
+        held it, a burst's samples: docs/daemon.md, "Bursts")."""
+        self._take_many(topic, log_times_ns, datas, False, self._log_batch)
+
+    def _take_many(self, topic: str, log_times_ns: Sequence[int], items: Sequence[Any],
+                   flag: bool | None, write_batch: Callable[[str, Sequence[int], Any], None]
+                   ) -> None:
+        """``write_many`` of messages (``flag`` None) or of their bytes (False): fewer than
+        ``DIRECT_BATCH`` are queued, more are a batch already and go to the file at once
+        (``write_batch``), after what was queued before them."""
+        if len(log_times_ns) != len(items):
+            raise ValueError(f"{len(log_times_ns)} log times for {len(items)} messages")
+        if len(items) < DIRECT_BATCH:
+            self._enqueue(zip(repeat(topic), log_times_ns, items, repeat(flag)))
             return
         with self._lock:
             self._write_queued()
-            self._log_batch(topic, log_times_ns, datas)
+            write_batch(topic, log_times_ns, items)
         if self._pending_alarms:
             self._fire_alarms()
 

@@ -324,20 +324,6 @@ def test_with_block_weight_is_replace() -> None:
             copied.block_weight = 1.0  # type: ignore[misc]
 
 
-@pytest.mark.parametrize("cls", [RigSample, DetectorState, Detection])
-def test_init_takes_the_fields_in_order_with_their_defaults(cls: type) -> None:
-    # the hand-written __init__ (slot setters, once per frame) is the dataclass's own
-    import dataclasses
-    import inspect
-
-    parameters = list(inspect.signature(cls).parameters.values())
-    assert [p.name for p in parameters] == [f.name for f in dataclasses.fields(cls)]
-    for parameter, field in zip(parameters, dataclasses.fields(cls), strict=True):
-        expected = (inspect.Parameter.empty if field.default is dataclasses.MISSING
-                    else field.default)
-        assert parameter.default == expected, field.name
-
-
 def test_detector_values_are_built_frozen_compared_and_copied_like_dataclasses() -> None:
     import dataclasses
     import pickle

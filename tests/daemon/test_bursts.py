@@ -118,22 +118,32 @@ def _rig_messages() -> list[RawMessage]:
     return messages
 
 
-def test_a_burst_records_and_computes_what_one_by_one_does() -> None:
-    messages = _rig_messages()
-    alone, plain = CollectSink(), ManySink()
+def _one_by_one_and_in_bursts(bursts: list[list[RawMessage]], sinks: list[Sink]
+                              ) -> tuple[Pipeline, Pipeline, CollectSink]:
+    """The messages through one pipeline one by one (recorded by the sink returned) and
+    through another burst by burst into ``sinks``; both flushed. Each sink got what the
+    one-by-one sink got, topic for topic."""
+    alone = CollectSink()
     single = _pipeline([alone])
-    for message in messages:
-        single.process(message)
-    batched = _pipeline([plain, together := ManySink()])
-    bursts = [messages[k:k + 7] for k in range(0, len(messages), 7)]
+    for burst in bursts:
+        for message in burst:
+            single.process(message)
+    batched = _pipeline(sinks)
     for burst in bursts:
         batched.process_burst(burst)
     for pipeline in (single, batched):
         pipeline.flush()
-
     for topic in ("raw", "sample", "rejected", "state", "model"):
         assert alone[topic], topic
-        assert plain[topic] == alone[topic] == together[topic], topic
+        for sink in sinks:
+            assert sink[topic] == alone[topic], (sink, topic)  # type: ignore[index]
+    return single, batched, alone
+
+
+def test_a_burst_records_and_computes_what_one_by_one_does() -> None:
+    messages = _rig_messages()
+    bursts = [messages[k:k + 7] for k in range(0, len(messages), 7)]
+    single, batched, _ = _one_by_one_and_in_bursts(bursts, [ManySink(), together := ManySink()])
     for name in ("messages_in", "samples_in", "rejected", "frames", "duplicates"):
         assert getattr(batched.stats, name) == getattr(single.stats, name), name
     assert batched.stats.samples_in == 62 and batched.stats.rejected == 3
@@ -175,19 +185,9 @@ def test_a_sink_taking_rows_gets_the_messages_the_others_get() -> None:
     # a payload longer than the recorded limit: its raw message is cut (bounded_payload)
     messages.insert(9, RawMessage("mqtt", "rig/hookload", b'{"t": 4.5, "value": 1}' + b" " * 5000,
                                   104.5))
-    alone = CollectSink()
-    single = _pipeline([alone])
-    for message in messages:
-        single.process(message)
-    rows, plain = RowsSink(), ManySink()
-    batched = _pipeline([rows, plain])
-    for k in range(0, len(messages), 7):
-        batched.process_burst(messages[k:k + 7])
-    for pipeline in (single, batched):
-        pipeline.flush()
-    for topic in ("raw", "sample", "rejected", "state", "model"):
-        assert alone[topic], topic
-        assert rows[topic] == plain[topic] == alone[topic], topic
+    rows = RowsSink()
+    _one_by_one_and_in_bursts([messages[k:k + 7] for k in range(0, len(messages), 7)],
+                              [rows, ManySink()])
     assert any(m.get("payload_truncated") for m in rows["raw"])
     assert {topic for topic, _ in rows.row_calls} == {"/tdmon/raw", "/tdmon/sample"}
     assert sum(n for topic, n in rows.row_calls if topic == "/tdmon/raw") == len(messages)
@@ -225,20 +225,8 @@ def test_a_replay_s_raw_input_is_recorded_as_its_recording_held_it() -> None:
              "payload": payload.decode(), "payload_encoding": "utf-8"}
     bursts[2].insert(2, RawMessage("mqtt", "rig/hookload", payload, 104.5,
                                    recorded=orjson.dumps(whole)))
-    alone = CollectSink()
-    single = _pipeline([alone])
-    for burst in bursts:
-        for message in burst:
-            single.process(message)
-    encoded, rows = EncodedSink(), RowsSink()
-    batched = _pipeline([encoded, rows])
-    for burst in bursts:
-        batched.process_burst(burst)
-    for pipeline in (single, batched):
-        pipeline.flush()
-    for topic in ("raw", "sample", "rejected", "state", "model"):
-        assert alone[topic], topic
-        assert encoded[topic] == rows[topic] == alone[topic], topic
+    encoded = EncodedSink()
+    _one_by_one_and_in_bursts(bursts, [encoded, RowsSink()])
     assert any(m.get("payload_truncated") for m in encoded["raw"])
     assert [call for call in encoded.encoded_calls if call[0] == "/tdmon/raw"] == [
         ("/tdmon/raw", len(burst)) for i, burst in enumerate(bursts) if i not in (1, 2)]

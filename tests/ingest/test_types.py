@@ -1,24 +1,14 @@
-"""RawMessage and Sample: hand-written ``__init__`` (slot setters), the dataclass behaviour kept."""
+"""RawMessage and Sample: the dataclass behaviour their hand-written ``__init__`` keeps (its
+signature: tests/test_hand_written_inits.py)."""
 
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import pickle
 
 import pytest
 
 from tdmon.ingest.types import RawMessage, Sample
-
-
-@pytest.mark.parametrize("cls", [RawMessage, Sample])
-def test_init_takes_the_fields_in_order_with_their_defaults(cls: type) -> None:
-    parameters = list(inspect.signature(cls).parameters.values())
-    assert [p.name for p in parameters] == [f.name for f in dataclasses.fields(cls)]
-    for parameter, field in zip(parameters, dataclasses.fields(cls), strict=True):
-        expected = (inspect.Parameter.empty if field.default is dataclasses.MISSING
-                    else field.default)
-        assert parameter.default == expected, field.name
 
 
 def test_a_raw_message_is_built_frozen_compared_and_copied_like_a_dataclass() -> None:
