@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -200,8 +201,9 @@ def test_a_recorded_raw_message_keeps_its_bytes_only_when_they_say_what_it_says(
         assert json.loads(data) == raw_message(raw)
     else:
         assert raw.recorded is None
-    # the bytes kept are no part of the message's value
-    assert raw == RawMessage(raw.source, raw.topic, raw.payload, raw.receive_time)
+    # the bytes kept are no part of the message's value (a NaN time equals nothing)
+    if not math.isnan(raw.receive_time):
+        assert raw == RawMessage(raw.source, raw.topic, raw.payload, raw.receive_time)
 
 
 def test_a_recorded_raw_message_kept_in_part_or_damaged_is_refused() -> None:
