@@ -21,7 +21,7 @@ from types import MappingProxyType
 from typing import Final, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from tdmon import vocabulary
 from tdmon.calib.windows import Window
@@ -35,6 +35,7 @@ __all__ = [
     "FrictionEstimate",
     "back_calculate",
     "back_calculate_window",
+    "base_friction",
     "motion_angle",
     "shoe_depth",
     "window_measurement",
@@ -119,6 +120,18 @@ def shoe_depth(model: WellModel) -> float:
     return float(model.grid.md[cased[-1] + 1]) if cased.size else 0.0
 
 
+def base_friction(base_mu: ArrayLike, n: int) -> NDArray[np.float64]:
+    """The friction of the elements a fit leaves alone [-]: ``base_mu`` as an array for
+    ``np.where`` beside ``n`` elements. A number or one value per element is taken as it is
+    (``np.where`` spreads a number itself; ``np.broadcast_to`` cost more than the rest of a
+    small call); any other shape is spread to ``n`` here, which raises for one that does not
+    fit."""
+    base = np.asarray(base_mu, dtype=np.float64)
+    if base.ndim and base.shape != (n,):
+        base = np.broadcast_to(base, (n,))
+    return base
+
+
 def back_calculate(
     model: WellModel,
     operation: str,
@@ -169,9 +182,7 @@ def back_calculate(
         raise FitError(f"measured {quantity} {measured!r} +/- {measured_se!r} at bit depth "
                        f"{bit_depth!r} m is not finite")
     n = model.n_elements
-    base = np.asarray(base_mu, dtype=np.float64)
-    if base.ndim and base.shape != (n,):
-        base = np.broadcast_to(base, (n,))  # checked here; np.where spreads a number itself
+    base = base_friction(base_mu, n)
     mask = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
     index = 1 if quantity == "torque" else 0
     calls = 0

@@ -125,11 +125,11 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     Notes
     -----
     ``S = H P H^T + R``, ``K = P H^T / S``, ``x += K (z - h)``,
-    ``P = (I - K H) P (I - K H)^T + K R K^T`` (Joseph form: P stays symmetric and positive
-    where the short form ``(I - K H) P`` loses both to rounding), symmetrised. For more than
-    ``_EXPANDED_FROM`` components the same expression multiplied out,
-    ``P - K (P H^T)^T - (P H^T) K^T + S K K^T``, true for any gain, in O(n^2) instead of
-    the products' O(n^3).
+    ``P = (I - K H) P (I - K H)^T + K R K^T`` (Joseph form, [1]_ ch. 5: P stays symmetric and
+    positive where the short form ``(I - K H) P`` loses both to rounding), symmetrised. For
+    more than ``_EXPANDED_FROM`` components the same expression multiplied out,
+    ``P - K (P H^T)^T - (P H^T) K^T + S K K^T``, true for any gain, in O(n^2) instead of the
+    products' O(n^3).
     """
     h = np.asarray(jacobian, dtype=np.float64)
     step = _mean_step(state, measured, predicted, h, noise_variance, bounds)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.calib import kalman
-from tdmon.calib.backcalc import window_measurement
+from tdmon.calib.backcalc import base_friction, window_measurement
 from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
@@ -198,9 +198,7 @@ def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Ar
     """
     n = model.n_elements
     where = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    base = np.asarray(base_mu, dtype=np.float64)
-    if base.ndim and base.shape != (n,):
-        base = np.broadcast_to(base, (n,))  # checked here; np.where spreads a number itself
+    base = base_friction(base_mu, n)
 
     def friction(law: Array, extra: Array | float = 0.0) -> Array:
         mu = np.where(where, law + extra, base)

@@ -260,8 +260,8 @@ def slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
     ``__setattr__`` refuses), about 0.1 us a field; the slot's descriptor sets it in half that
     (1.5 -> 0.8 us for a DetectorState, 1.2 -> 0.6 us for a RigSample), as
     ``tdmon.ingest.types`` does for every input message. Their hand-written ``__init__`` does
-    that and nothing else; ``tests/calib/test_rigstate.py`` checks that it takes the fields, in
-    order, with their defaults, and that the instances stay frozen.
+    that and nothing else; ``tests/test_hand_written_inits.py`` checks that it takes the fields,
+    in order, with their defaults, the classes' own tests that the instances stay frozen.
     """
     return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
 

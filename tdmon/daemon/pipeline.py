@@ -144,6 +144,15 @@ class _HeldSamples:
     samples: list[Sample]
 
 
+def _recorded_bytes(raws: Sequence[RawMessage], limit: int) -> list[bytes] | None:
+    """A replay of tdmon's own recording: the raw messages as it held them
+    (``RawMessage.recorded``), when every one is there and short enough for its payload to be
+    kept whole (``limit`` [bytes]; a recorded message is longer than its payload); else
+    None."""
+    kept = list(map(RECORDED, raws))  # bytes (never empty) or None each
+    return kept if all(kept) and max(map(len, kept)) <= limit else None
+
+
 class Pipeline:
     """Decode, record, align and run the steps for each raw message."""
 
@@ -241,15 +250,10 @@ class Pipeline:
         if sinks:
             self._input_ns = log_times[0]
             limit = self._recorded_payload_bytes
-            # a replay of tdmon's own recording: the raw messages as it held them, when every
-            # one is there and short enough to be kept whole (a recorded message is longer
-            # than its payload), go to a sink that takes encoded messages as they are
-            kept = list(map(RECORDED, raws))  # bytes (never empty) or None each
-            recorded = kept if all(kept) and max(map(len, kept)) <= limit else None
             self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
                              partial(raw_row_message, max_bytes=limit),
                              lambda: [raw_message(raw, limit) for raw in raws],
-                             lambda: recorded)
+                             partial(_recorded_bytes, raws, limit))
         held = _HeldSamples([], [])
         process = self._process
         try:

@@ -99,8 +99,10 @@ def _slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
     dataclass gets sets each field through ``object.__setattr__`` (its own ``__setattr__``
     refuses), about 0.1 us a field; the slot's descriptor sets it in half that: 0.44 instead
     of 0.82 us for a RawMessage (docs/benchmarks.md). Their hand-written ``__init__`` does that
-    and nothing else; ``tests/ingest/test_types.py`` checks that it takes the fields, in order,
-    with their defaults, and that the instances stay frozen.
+    and nothing else; ``tests/test_hand_written_inits.py`` checks that it takes the fields, in
+    order, with their defaults, ``tests/ingest/test_types.py`` that the instances stay frozen.
+    (:func:`tdmon.calib.rigstate.slot_setters` is the same for the per-frame classes: the
+    layers keep the two apart, calib below ingest, and this module without NumPy.)
     """
     return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
 

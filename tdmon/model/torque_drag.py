@@ -477,11 +477,11 @@ class WellModel:
         psi: float | None = None,
         operations: Sequence[Operation | str] | None = None,
     ) -> Loads:
-        """`Loads` (every operation, with profiles) at one bit depth; see `torque_drag`.
+        """`Loads` (of every operation, or of ``operations``, with profiles) at one bit depth;
+        see `torque_drag`.
 
-        ``operations`` limits the loads to those operations (None: every one): each operation's
-        loads are those of a march of all, and the calibration's limit check reads only two
-        (the march 46 -> 38 us).
+        Each operation's loads are those of a march of all, so the calibration's limit check
+        asks for the two it reads (the march 46 -> 38 us).
         """
         chosen = list(Operation) if operations is None else list(
             dict.fromkeys(Operation(op) for op in operations))
