@@ -26,11 +26,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from tdmon.calib.frozen import evolve
 
 __all__ = [
     "IteratedUpdate",
@@ -94,7 +96,7 @@ def predict(state: S, process_std: ArrayLike) -> S:
     # diagonal would (-0.0 becomes 0.0), then the diagonal takes q^2
     covariance = state.covariance + 0.0
     covariance.flat[::state.mean.size + 1] += q**2
-    return replace(state, covariance=covariance)
+    return evolve(state, covariance=covariance)
 
 
 #: A state of more components than this takes the Joseph form multiplied out, O(n^2) (the
@@ -144,7 +146,7 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     else:
         a = np.eye(h.size) - column * h
         covariance = a @ state.covariance @ a.T + noise_variance * (column * gain)
-    return replace(state, mean=mean, covariance=0.5 * (covariance + covariance.T),
+    return evolve(state, mean=mean, covariance=0.5 * (covariance + covariance.T),
                    updates=state.updates + 1, innovation=innovation, innovation_variance=s)
 
 
