@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, NamedTuple
+from typing import Any, Final, NamedTuple
 
 from tdmon.calib.alarms import JumpSettings
 from tdmon.calib.blockweight import BlockWeightWindow, BuoyancyCheck
@@ -19,6 +19,7 @@ from tdmon.calib.joint import JointSettings, JointState
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
+from tdmon.calib.rigstate import slot_setters
 from tdmon.calib.scatter import Scatter
 from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings
 
@@ -81,7 +82,12 @@ class Output(NamedTuple):
     message: dict[str, Any]
 
 
-@dataclass(frozen=True, slots=True)
+#: an empty window and no in-slips hook load, shared: values never changed once made
+_NO_WINDOW: Final = WindowAccumulator()
+_NO_BLOCK_WEIGHT: Final = BlockWeightWindow()
+
+
+@dataclass(frozen=True, slots=True, init=False)
 class SampleState:
     """What samples change: the window being built and the in-slips block weight.
 
@@ -92,9 +98,21 @@ class SampleState:
     block_alarmed : the block-weight alarm has been raised (it is raised once)
     """
 
-    accumulator: WindowAccumulator = field(default_factory=WindowAccumulator)
-    block_weight: BlockWeightWindow = field(default_factory=BlockWeightWindow)
+    accumulator: WindowAccumulator = _NO_WINDOW
+    block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT
     block_alarmed: bool = False
+
+    def __init__(self, accumulator: WindowAccumulator = _NO_WINDOW,
+                 block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT,
+                 block_alarmed: bool = False) -> None:
+        # once per frame: see tdmon.calib.rigstate.slot_setters
+        set_accumulator, set_block_weight, set_block_alarmed = _SAMPLE_STATE_SETTERS
+        set_accumulator(self, accumulator)
+        set_block_weight(self, block_weight)
+        set_block_alarmed(self, block_alarmed)
+
+
+_SAMPLE_STATE_SETTERS: Final = slot_setters(SampleState)
 
 
 @dataclass(frozen=True)
@@ -143,12 +161,21 @@ class WindowState:
         return None if cased is None else cased.mu
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, init=False)
 class EstimatorState:
     """The whole state: what samples change and what windows change."""
 
     samples: SampleState
     windows: WindowState
+
+    def __init__(self, samples: SampleState, windows: WindowState) -> None:
+        # once per frame: see tdmon.calib.rigstate.slot_setters
+        set_samples, set_windows = _ESTIMATOR_STATE_SETTERS
+        set_samples(self, samples)
+        set_windows(self, windows)
+
+
+_ESTIMATOR_STATE_SETTERS: Final = slot_setters(EstimatorState)
 
 
 def put(mapping: Mapping[str, Any], key: str, value: Any) -> Mapping[str, Any]:

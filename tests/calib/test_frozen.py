@@ -74,3 +74,22 @@ def test_falls_back_to_replace() -> None:
     assert evolve(SampleState(), block_alarmed=True).block_alarmed  # slots
     with pytest.raises(TypeError):
         evolve(_Plain(), d=1)
+
+
+def test_per_frame_states_stay_frozen_values() -> None:
+    # the hand-written __init__ of these (tests/test_hand_written_inits.py) keeps them values
+    import copy
+    import pickle
+
+    from tdmon.calib.estimator_state import EstimatorState
+    from tdmon.calib.windows import WindowAccumulator
+    from tdmon.vocabulary import RigState
+
+    acc = WindowAccumulator(RigState.PICK_UP, (), (1.0,))
+    state = SampleState(acc, block_alarmed=True)
+    for value in (acc, state, EstimatorState(state, None)):  # type: ignore[arg-type]
+        assert pickle.loads(pickle.dumps(value)) == value == copy.copy(value)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(value, dataclasses.fields(value)[0].name, None)
+    assert SampleState() == SampleState(WindowAccumulator())
+    assert dataclasses.replace(state, block_alarmed=False).accumulator is acc
