@@ -9,11 +9,13 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from tdmon.errors import ModelError
 from tdmon.model.string import DrillString, StringComponent
-from tdmon.model.survey import interpolate_survey, minimum_curvature
+from tdmon.model.survey import interpolate_survey, minimum_curvature, tvd_and_inclination
 from tdmon.model.torque_drag import Operation, WellModel, torque_drag
 from tdmon.model.well import Fluid, HoleSection, Well, hole_grid
 
@@ -398,3 +400,29 @@ def test_loads_of_some_operations_are_those_of_all(three_d: Well, method: str,
             assert getattr(some, field).tobytes() == getattr(every, field).tobytes()
     with pytest.raises(ValueError, match="not a valid Operation"):
         model.loads(1000.0, mu, operations=["tripping"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(depths=st.lists(st.floats(0.0, 1.0), min_size=1, max_size=6),
+       which=st.sampled_from(["three_d", "example_71"]))
+def test_loads_tvd_and_inclination_are_the_interpolations(depths: list[float],
+                                                          which: str, three_d: Well,
+                                                          example_71: Well) -> None:
+    # the grid nodes' numbers are taken from one interpolation of all of them: each node's
+    # bits must be those of the loads' own nodes interpolated together, at any bit depth
+    if which not in _MODELS:
+        _MODELS[which] = WellModel(three_d if which == "three_d" else example_71)
+    model = _MODELS[which]
+    top = float(model.node_md[0]) + 1.0
+    bottom = min(model.well.string.length, float(model.node_md[-1]))
+    for fraction in (*depths, 1.0):
+        loads = model.loads(top + fraction * (bottom - top), 0.25, operations=["pick_up"])
+        tvd, inclination = tvd_and_inclination(model.well.survey, loads.md)
+        assert loads.tvd.tobytes() == tvd.tobytes()
+        assert loads.inclination is not None
+        assert loads.inclination.tobytes() == inclination.tobytes()
+        single = tvd_and_inclination(model.well.survey, loads.md[-1:])
+        assert (single[0][0], single[1][0]) == (tvd[-1], inclination[-1])
+
+
+_MODELS: dict[str, WellModel] = {}
