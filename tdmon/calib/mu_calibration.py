@@ -197,30 +197,28 @@ def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Ar
     -------
     predicted [N or N m], jacobian (len(theta),), effective temperature [degC] (nan if none)
     """
-    n = model.n_elements
-    where = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    base = base_friction(base_mu, n)
-
-    def friction(law: Array, extra: Array | float = 0.0) -> Array:
-        mu = np.where(where, law + extra, base)
-        return np.maximum(mu, 0.0)
-
-    # the law at theta once: three of the cases below bump it, not theta
+    # every friction case of the finite differences marched together, in one call: each
+    # row the law (plus a bump), then, all rows at once, the other elements' friction and
+    # no negative friction (per row as before, element by element: the same numbers)
+    base = base_friction(base_mu, model.n_elements)
+    cases = np.empty((theta.size + 3, model.n_elements))
+    # the law at theta once: three of the cases bump it, not theta
     at_theta = parametrisation.mu(theta, temperature)
-    # every friction case of the finite differences marched together, in one call
-    cases = [friction(at_theta)]
+    np.add(at_theta, 0.0, out=cases[0])  # + 0.0 as before: -0.0 becomes 0.0
     steps = np.empty(theta.size)
     for k in range(theta.size):
         steps[k] = max(abs(theta[k]) * relative_step, 1e-6)
         bumped = theta.copy()
         bumped[k] += steps[k]
-        cases.append(friction(parametrisation.mu(bumped, temperature)))
+        np.add(parametrisation.mu(bumped, temperature), 0.0, out=cases[k + 1])
     delta = 1e-3
-    scale = max(float(np.max(np.abs(temperature))), 1.0)
-    cases.append(friction(at_theta, delta))
-    cases.append(friction(at_theta, delta * temperature / scale))
-    values = model.evaluate_cases(operation, bit_depth, np.stack(cases),
-                                  method=method)[quantity_index]
+    scale = max(float(np.abs(temperature).max()), 1.0)
+    np.add(at_theta, delta, out=cases[-2])
+    np.add(at_theta, delta * temperature / scale, out=cases[-1])
+    if mask is not None:
+        cases = np.where(np.asarray(mask, dtype=bool), cases, base)
+    np.maximum(cases, 0.0, out=cases)
+    values = model.evaluate_cases(operation, bit_depth, cases, method=method)[quantity_index]
     predicted = float(values[0])
     jacobian = (values[1:theta.size + 1] - predicted) / steps
     uniform = float(values[-2]) - predicted

@@ -133,3 +133,63 @@ def test_mu_is_the_friction_model_called(prior: FrictionModel, mode: str,
 
     expected = outcome(lambda: parametrisation.friction_model(theta)(temperature))
     assert outcome(lambda: parametrisation.mu(theta, temperature)) == expected
+
+
+def _measurement_case_by_case(model: WellModel, parametrisation: Any, theta: np.ndarray,
+                              temperature: np.ndarray, operation: str, bit_depth: float,
+                              mask: np.ndarray | None, base_mu: Any) -> tuple[Any, ...]:
+    """`measurement` as it was written before its cases were built together: each case's
+    friction on its own, then stacked (the reference its numbers must equal)."""
+    n = model.n_elements
+    where = np.ones(n, dtype=bool) if mask is None else mask
+    base = np.broadcast_to(np.asarray(base_mu, dtype=np.float64), (n,))
+
+    def friction(law: np.ndarray, extra: Any = 0.0) -> np.ndarray:
+        return np.maximum(np.where(where, law + extra, base), 0.0)
+
+    at_theta = parametrisation.mu(theta, temperature)
+    cases = [friction(at_theta)]
+    steps = np.empty(theta.size)
+    for k in range(theta.size):
+        steps[k] = max(abs(theta[k]) * 1e-3, 1e-6)
+        bumped = theta.copy()
+        bumped[k] += steps[k]
+        cases.append(friction(parametrisation.mu(bumped, temperature)))
+    scale = max(float(np.max(np.abs(temperature))), 1.0)
+    cases.append(friction(at_theta, 1e-3))
+    cases.append(friction(at_theta, 1e-3 * temperature / scale))
+    values = model.evaluate_cases(operation, bit_depth, np.stack(cases))[0]
+    predicted = float(values[0])
+    jacobian = (values[1:theta.size + 1] - predicted) / steps
+    uniform, weighted = float(values[-2]) - predicted, float(values[-1]) - predicted
+    return predicted, jacobian.tobytes(), (weighted / uniform * scale if uniform != 0.0
+                                           else math.nan)
+
+
+@pytest.mark.parametrize("prior", [GLYDRIL, FrictionModel("polynomial", {"a0": 0.3, "a2": -1e-5}),
+                                   FrictionModel("exponential", {"a": 0.2, "b": 0.004})])
+@pytest.mark.parametrize("mode", ["family", "scale"])
+@pytest.mark.parametrize("masked", [False, True])
+def test_measurement_cases_are_those_built_one_by_one(model_open: WellModel,
+                                                       prior: FrictionModel, mode: str,
+                                                       masked: bool) -> None:
+    from tdmon.calib.mu_calibration import measurement
+
+    parametrisation, theta = (family_parametrisation(prior) if mode == "family"
+                              else scale_parametrisation(prior))
+    rng = np.random.default_rng(7)
+    n = model_open.n_elements
+    # temperatures where the law goes negative too (friction clipped at 0), -0.0 included
+    temperature = np.linspace(-40.0, 150.0, n)
+    mask = rng.random(n) < 0.6 if masked else None
+    for base_mu in (0.0, -0.0, 0.21, rng.uniform(0.0, 0.4, n)):
+        for scale in (1.0, -3.0, 1e-9):
+            for depth in (1500.0, 4000.0):
+                args = (model_open, parametrisation, theta * scale, temperature, "pick_up",
+                        depth)
+                predicted, jacobian, effective = measurement(*args, mask=mask,
+                                                             base_mu=base_mu)
+                expected = _measurement_case_by_case(*args, mask, base_mu)
+                assert (predicted, jacobian.tobytes()) == expected[:2]
+                assert effective == expected[2] or (math.isnan(effective)
+                                                    and math.isnan(expected[2]))
