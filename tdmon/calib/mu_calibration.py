@@ -83,7 +83,8 @@ class MuTParametrisation:
         """The family and coefficients of the friction law at parameters ``theta``."""
         values = np.asarray(theta, dtype=np.float64)
         if self.lab is None:
-            return self.family, dict(zip(self.names, map(float, values), strict=True))
+            # tolist: the Python floats float() makes of each element, in one call
+            return self.family, dict(zip(self.names, values.tolist(), strict=True))
         scale = float(values[0])
         if self.lab.family in ("power", "exponential", "saturation-growth"):
             coefficients = dict(self.lab.coefficients)

@@ -179,12 +179,14 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
         # a real load cell always shows some noise: identical readings mean a frozen value
         rejected = "hookload_stuck"
     keep = _robust_keep(hookload, settings.spike_mads, floor)
-    if not keep.all():
+    if keep.all():
+        kept = rows  # no spike (most windows): no copies of the same values
+    else:
         flags.append(f"spikes_removed:{int((~keep).sum())}")
-    kept = [row for row, k in zip(rows, keep.tolist(), strict=True) if k]
+        kept = [row for row, k in zip(rows, keep.tolist(), strict=True) if k]
+        hookload, depth = hookload[keep], depth[keep]
     if len(kept) < settings.min_samples:
         rejected = rejected or f"too_few_samples:{len(kept)}"
-    hookload, depth = hookload[keep], depth[keep]
     mean, se = _mean_se(hookload, floor)
     torque_values = np.array([s.torque for s, _ in kept if s.torque is not None
                               and math.isfinite(s.torque)], dtype=np.float64)
