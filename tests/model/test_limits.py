@@ -211,3 +211,31 @@ def test_loads_carry_the_nodes_inclination(example_71: Well) -> None:
     given, again = operating_window(example_71, loads), operating_window(example_71, without)
     np.testing.assert_array_equal(given.sinusoidal_buckling, again.sinusoidal_buckling)
     np.testing.assert_array_equal(given.helical_buckling, again.helical_buckling)
+
+
+def test_component_table_is_each_component_s_properties(example_71: Well) -> None:
+    # the per-component arrays are built once per string and fluid: each column is the
+    # component by component list it replaced (None as NaN), read-only
+    from dataclasses import replace
+
+    from tdmon.model.limits import _COMPONENT_PROPERTIES, _component_table
+    from tdmon.model.survey import tangent_vectors
+
+    tube = StringComponent("tube", 500.0, outer_diameter=0.127, inner_diameter=0.1086,
+                           yield_strength=5.2e8, makeup_torque=3e4)
+    for components in (example_71.string.components, (tube, *example_71.string.components)):
+        for density, inside in ((1200.0, None), (1400.0, 1000.0)):
+            table = _component_table(components, density, inside)
+            columns = [[c.buoyed_weight_in(density, inside) for c in components],
+                       *([getattr(c, name) for c in components]
+                         for name in _COMPONENT_PROPERTIES)]
+            assert len(table) == len(columns)
+            for array, values in zip(table, columns, strict=True):
+                expected = np.array([np.nan if v is None else v for v in values])
+                assert array.tobytes() == expected.tobytes()
+                assert not array.flags.writeable
+            assert _component_table(components, density, inside) is table
+    survey = example_71.survey
+    assert survey.tangents.tobytes() == tangent_vectors(survey.inclination,
+                                                        survey.azimuth).tobytes()
+    assert replace(survey).tangents is not survey.tangents
