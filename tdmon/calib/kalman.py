@@ -137,26 +137,34 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     step = _mean_step(state, measured, predicted, h, noise_variance, bounds)
     if step is None:
         return state
-    mean, gain, innovation, s = step
+    mean, gain, innovation, s, ph = step
     # outer products by broadcasting: np.outer's products without its wrapper (~2 us a call)
     column = gain[:, np.newaxis]
     if h.size > _EXPANDED_FROM:
-        cross = column * (state.covariance @ h)  # K (P H^T)^T
-        covariance = state.covariance - cross - cross.T + s * (column * gain)
+        # ``P - K (P H^T)^T - (P H^T) K^T + S K K^T`` left to right, as written, the steps
+        # after the first in place (no new n x n array each: 141 bins, ~75 -> ~65 us)
+        cross = column * ph  # K (P H^T)^T
+        covariance = state.covariance - cross
+        covariance -= cross.T
+        outer = column * gain
+        outer *= s
+        covariance += outer
     else:
         a = np.eye(h.size) - column * h
         covariance = a @ state.covariance @ a.T + noise_variance * (column * gain)
-    return evolve(state, mean=mean, covariance=0.5 * (covariance + covariance.T),
-                   updates=state.updates + 1, innovation=innovation, innovation_variance=s)
+    symmetric = covariance + covariance.T
+    symmetric *= 0.5
+    return evolve(state, mean=mean, covariance=symmetric, updates=state.updates + 1,
+                  innovation=innovation, innovation_variance=s)
 
 
 def _mean_step(state: KalmanState, measured: float, predicted: float, h: Array,
                noise_variance: float, bounds: tuple[float, float] | None
-               ) -> tuple[Array, Array, float, float] | None:
-    """The first half of :func:`update`: (posterior mean, gain, innovation, its variance), or
-    None where :func:`update` keeps the prior. The covariance, the costly half (two products
-    of n x n matrices), is left to the caller: an iterate of :func:`iterated_update` before
-    the last needs the mean alone."""
+               ) -> tuple[Array, Array, float, float, Array] | None:
+    """The first half of :func:`update`: (posterior mean, gain, innovation, its variance,
+    ``P H^T``), or None where :func:`update` keeps the prior. The covariance, the costly half
+    (two products of n x n matrices), is left to the caller: an iterate of
+    :func:`iterated_update` before the last needs the mean alone."""
     if not (math.isfinite(measured) and math.isfinite(predicted) and np.isfinite(h).all()
             and math.isfinite(noise_variance) and noise_variance > 0.0):
         return None
@@ -167,7 +175,7 @@ def _mean_step(state: KalmanState, measured: float, predicted: float, h: Array,
     mean = state.mean + gain * innovation
     if bounds is not None:
         mean = mean.clip(*bounds)  # np.clip calls this method, after a wrapper of ~1 us
-    return mean, gain, float(innovation), s
+    return mean, gain, float(innovation), s, ph
 
 
 def noise_with_model_error(standard_error: float, model_std_fraction: float, jacobian: Array,
@@ -278,7 +286,7 @@ def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], 
                               bounds)
             if step is None:
                 return IteratedUpdate(prior, False, linearisation=linearisation)
-            estimate, _, innovation, variance = step
+            estimate, _, innovation, variance, _ = step
         else:
             posterior = update(prior, measured, predicted_at_prior, h,
                                linearisation.noise_variance, bounds=bounds)
