@@ -142,7 +142,7 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     column = gain[:, np.newaxis]
     if h.size > _EXPANDED_FROM:
         # ``P - K (P H^T)^T - (P H^T) K^T + S K K^T`` left to right, as written, the steps
-        # after the first in place (no new n x n array each: 141 bins, ~75 -> ~65 us)
+        # after the first in place (no new n x n array each: 141 bins, ~74 -> ~69 us)
         cross = column * ph  # K (P H^T)^T
         covariance = state.covariance - cross
         covariance -= cross.T

@@ -256,8 +256,8 @@ def _component_table(components: tuple[StringComponent, ...], density: float,
                      inside_density: float | None) -> tuple[FloatArray, ...]:
     """Per component (bit up): the buoyed weight in the fluid [N/m], then the properties of
     `_COMPONENT_PROPERTIES`, NaN where not given; read-only arrays. A string's are the same
-    at every bit depth: the calibration's limit check asks once per window (built each time,
-    they were ~20 us of it)."""
+    at every bit depth: the calibration's limit check asks once per window, and built each
+    time they were nine list comprehensions over the components' properties."""
     columns = [[c.buoyed_weight_in(density, inside_density) for c in components],
                *([getattr(c, name) for c in components] for name in _COMPONENT_PROPERTIES)]
     table = tuple(np.array([np.nan if v is None else v for v in values], dtype=np.float64)
