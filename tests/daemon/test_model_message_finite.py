@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import orjson
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -18,6 +19,7 @@ from tdmon.daemon.pipeline import Frame
 from tdmon.record.mcap_recorder import McapRecorder, _has_nonfinite
 from tdmon.record.reader import read_messages
 from tdmon.record.sink import FiniteMessage
+from tdmon.record.writer_process import RecorderProcess
 from tdmon.vocabulary import RigState
 
 # mostly ordinary numbers, with at most two odd ones put in anywhere: NaN, infinities, finite
@@ -83,7 +85,8 @@ def test_vouched_only_when_every_number_is_finite(
     assert type(again) is type(message) and json.dumps(again) == json.dumps(message)
 
 
-def test_the_recorder_counts_and_writes_what_it_did(tmp_path: Path) -> None:
+@pytest.mark.parametrize("where", ["inline", "child"])
+def test_the_recorder_counts_and_writes_what_it_did(tmp_path: Path, where: str) -> None:
     loads = ModelledLoads(1000.0, 8e5, 6e5, 7e5, 2e4, (0.1, 0.2), (7e5, 9e5), (5e5, 4e5))
     frames = [Frame(1.0, 0, {"hookload": 1e6}, {}, state="in_slips"),  # null residuals
               Frame(2.0, 0, {"hookload": math.nan}, {}, state="pick_up"),
@@ -91,7 +94,9 @@ def test_the_recorder_counts_and_writes_what_it_did(tmp_path: Path) -> None:
               Frame(4.0, 0, {"hookload": 1e6}, {}, state="pick_up")]
     messages = [model_message(frame, loads) for frame in frames]
     assert [type(m) is FiniteMessage for m in messages] == [True, False, False, True]
-    with McapRecorder(tmp_path) as recorder:
+    recorder = (McapRecorder(tmp_path) if where == "inline"
+                else RecorderProcess(path=tmp_path / "child.mcap"))
+    with recorder:
         for i, message in enumerate(messages):
             recorder.write("/tdmon/model", i, message)
     stats = recorder.stats
