@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from tdmon.calib.rigstate import slot_setters
 from tdmon.daemon.pipeline import Emit, Frame
+from tdmon.record.sink import FiniteMessage
 from tdmon.vocabulary import CURVE_FOR_STATE, ROTATING_STATES, Operation
 
 # The vocabulary's map as a plain dict keyed by state name: a frame carries its state as a
@@ -171,7 +172,7 @@ def model_message(frame: Frame, loads: ModelledLoads) -> dict[str, Any]:
                          else hookload - modelled[curve])
     torque_residual = (torque - loads.torque_rotating
                        if torque is not None and frame.state in ROTATING_STATES else None)
-    return {
+    message = {
         "t": frame.t,
         "bit_depth_m": loads.bit_depth,
         "hookload_N": modelled,
@@ -181,3 +182,15 @@ def model_message(frame: Frame, loads: ModelledLoads) -> dict[str, Any]:
         "measured": {"hookload_N": hookload, "torque_Nm": torque},
         "residual": {"hookload_N": hookload_residual, "torque_Nm": torque_residual},
     }
+    # every number of the message in one sum (a missing one as 0): finite only if each is
+    # (an overflow only sends it the long way); a recorder then need not search the message
+    # for a NaN (FiniteMessage: ~2 us less a frame in the in-process recorder for ~0.4 us here)
+    try:
+        total = (frame.t + loads.bit_depth + loads.pick_up + loads.slack_off + loads.rotating
+                 + loads.torque_rotating + (hookload or 0.0) + (torque or 0.0)
+                 + (hookload_residual or 0.0) + (torque_residual or 0.0)
+                 + sum(loads.band_mu, 0.0) + sum(loads.band_pick_up, 0.0)
+                 + sum(loads.band_slack_off, 0.0))
+    except (TypeError, OverflowError):  # not all plain numbers: the recorder looks
+        return message
+    return FiniteMessage(message) if type(total) is float and total - total == 0.0 else message

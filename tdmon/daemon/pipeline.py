@@ -429,7 +429,13 @@ class Pipeline:
         if route is None:
             topic = f"/tdmon/{name}"
             route = self._named_routes[name] = (topic, self._sinks_for(topic))
-        self._write_to(route[1], route[0], log_time_ns, message)
+        topic, sinks = route
+        for sink in sinks:  # _write_to, without the call
+            try:
+                sink.write(topic, log_time_ns, message)
+            except Exception:
+                self.stats.sink_errors += 1
+                log.exception("sink %r failed writing %s", sink, topic)
 
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         self._write_to(self._sinks_for(topic), topic, log_time_ns, message)

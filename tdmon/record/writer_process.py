@@ -54,7 +54,7 @@ import tdmon
 from tdmon.errors import RecordError
 from tdmon.messages import alarm_message
 from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
-from tdmon.record.sink import AlarmHook, Message, call_alarm_hook
+from tdmon.record.sink import AlarmHook, FiniteMessage, Message, call_alarm_hook
 from tdmon.vocabulary import AlarmKind, Severity
 
 __all__ = ["RecorderProcess"]
@@ -202,6 +202,11 @@ class RecorderProcess:
 
     def write(self, topic: str, log_time_ns: int, message: Message) -> None:
         """Queue one message for the child; never raises for recording problems."""
+        if type(message) is FiniteMessage:
+            # pickled as a plain dict: a dict subclass takes ~0.85 us more a message in this
+            # process (the model message of every frame), a copy 0.1 us; the child then
+            # searches it for a NaN as before, on its own core
+            message = dict(message)
         self._add(((topic, log_time_ns, message),), 1)
 
     def write_many(self, topic: str, log_times_ns: Sequence[int],
