@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
+import msgspec
 import orjson
 
 # CHANNEL_UNITS and ChannelSpec live in tdmon.channels (the config builds channel specs
@@ -52,6 +53,23 @@ _INT64 = 2.0**63
 #: range [SI] a value passes every check in (all bounds and ``ABS_VALUE_MAX`` together).
 _Route = tuple[str, str, "tuple[float, float] | None", dict[str, tuple[float, float]],
                "float | None", "float | None", "tuple[float, str] | None", float, float]
+
+
+class _UsualPayload(msgspec.Struct, forbid_unknown_fields=True, gc=False):
+    """The usual payload's shape, for msgspec to read into at once: a time and a value as
+    numbers, an optional unit and counter, nothing else (``error`` or any other field: the
+    general rules)."""
+
+    t: float
+    value: float
+    unit: str | None = None
+    seq: int | None = None
+
+
+#: Reads the usual payload into a :class:`_UsualPayload`, or raises ``msgspec.DecodeError``
+#: (``UnicodeDecodeError`` for invalid UTF-8): 0.44 instead of 0.74 us a payload through
+#: orjson's dict and its look-ups (docs/benchmarks.md)
+_read_usual = msgspec.json.Decoder(_UsualPayload).decode
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,6 +245,21 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     message counter per topic, is a non-negative integer or None (anything else is ignored, never
     a rejection: the sample is good without it).
     """
+    # The usual payload read by msgspec into its struct and answered at once, when its
+    # numbers pass the rules below as they are: a time in range (msgspec reads an integer as
+    # the float ``parse_time`` makes of it), a value inside 2**63 (read alike by json, as
+    # float() of an integer), a unit that is not blank. Anything msgspec refuses (another
+    # field, another type, NaN, a lone surrogate, invalid UTF-8, damage) goes on below.
+    try:
+        usual = _read_usual(payload)
+    except (msgspec.DecodeError, ValueError):
+        pass
+    else:
+        unit = usual.unit
+        if (T_MIN <= usual.t < T_MAX and -_INT64 < usual.value < _INT64
+                and (unit is None or unit.strip())):
+            count = usual.seq
+            return usual.t, usual.value, unit, (count if count is None or count >= 0 else None)
     # The usual payload, a JSON object, parsed by orjson (~4x faster than ``json``); only
     # where the two agree: anything orjson refuses (invalid UTF-8, NaN, lone surrogates,
     # errors of any kind) and any object where it may have read a number otherwise is left to

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 
+import msgspec
 import orjson
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -214,15 +215,58 @@ def _refuse(data: bytes) -> object:
     raise orjson.JSONDecodeError("refused", "", 0)
 
 
+def _refuse_usual(data: bytes) -> object:
+    raise msgspec.DecodeError("refused")
+
+
+def _by_the_rules(payload: bytes) -> object:
+    """``parse_payload_seq`` through the general rules alone: msgspec's struct and orjson
+    refuse every payload."""
+    with pytest.MonkeyPatch.context() as patched:
+        patched.setattr(decode, "_read_usual", _refuse_usual)
+        patched.setattr(decode.orjson, "loads", _refuse)
+        return parse_payload_seq(payload)
+
+
+def _by_orjson(payload: bytes) -> object:
+    """``parse_payload_seq`` without msgspec's quick path (orjson's is taken)."""
+    with pytest.MonkeyPatch.context() as patched:
+        patched.setattr(decode, "_read_usual", _refuse_usual)
+        return parse_payload_seq(payload)
+
+
 @settings(max_examples=1500, deadline=None)
 @given(body=usual)
 def test_the_usual_payload_s_quick_answer_is_the_rules_answer(body: dict[str, object]) -> None:
     payload = _encode(body)
     quick = parse_payload_seq(payload)
-    # the same payload through the general rules alone: orjson refuses it
-    with pytest.MonkeyPatch.context() as patched:
-        patched.setattr(decode.orjson, "loads", _refuse)
-        assert parse_payload_seq(payload) == quick
+    assert _by_orjson(payload) == quick
+    assert _by_the_rules(payload) == quick
+
+
+@pytest.mark.parametrize("payload", [
+    b'{"t":1714521600.0,"value":1472812.0,"unit":"N"}',
+    b'{"t":1714521600,"value":-0.0,"unit":"kN","seq":7}',
+    b'{"t":1714521600,"value":1,"t":5}',  # a repeated key: the last one, as json
+    b'{"t":1714521600.0,"value":9007199254740993}',  # an integer float() rounds
+    b'{"t":1714521600.0,"value":1,"unit":"\\ud800"}',  # a lone surrogate
+    b'{"t":1714521600.0,"value":1,"unit":"\xff"}',  # not UTF-8
+    b'{"t":1714521600.0,"value":1,"seq":1.0}', b'{"t":1714521600.0,"value":1,"seq":-3}',
+    b'{"t":1714521600.0,"value":1,"seq":99999999999999999999999}',
+    b'{"t":1714521600.0,"value":true}', b' {"t":1714521600.0,"value":1e400} ',
+    b'{"t":1714521600.0,"value":1,"unit":" "}', b'{"t":1714521600.0,"value":1,"unit":null}',
+    b'{"t":-1.0,"value":1}', b'{"t":"2024-05-01T00:00:00Z","value":1}',
+    b'{"t":1714521600.0,"value":1,"error":"bad line"}', b'{"t":1714521600.0}',
+    b'\xef\xbb\xbf{"t":1714521600.0,"value":1}', b'[1, 2]', b'{"t":1714521600.0,"value":1',
+])
+def test_msgspec_s_quick_answer_is_the_rules_answer_at_the_edges(payload: bytes) -> None:
+    assert parse_payload_seq(payload) == _by_orjson(payload) == _by_the_rules(payload)
+
+
+def test_the_usual_payload_is_answered_by_msgspec_s_struct() -> None:
+    # the quick path is taken (the tests above would also pass without it)
+    usual = decode._read_usual(b'{"t":1714521600.0,"value":1.5,"unit":"N","seq":3}')
+    assert (usual.t, usual.value, usual.unit, usual.seq) == (1714521600.0, 1.5, "N", 3)
 
 
 @pytest.mark.parametrize(("text", "expected"), [

@@ -7,7 +7,10 @@ import json
 import math
 from pathlib import Path
 
+import msgspec
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
@@ -204,6 +207,52 @@ def test_a_recorded_raw_message_keeps_its_bytes_only_when_they_say_what_it_says(
     # the bytes kept are no part of the message's value (a NaN time equals nothing)
     if not math.isnan(raw.receive_time):
         assert raw == RawMessage(raw.source, raw.topic, raw.payload, raw.receive_time)
+
+
+def _refuse_usual(data: bytes) -> object:
+    raise msgspec.DecodeError("refused")
+
+
+def _outcome(data: bytes, usual: bool) -> object:
+    """What raw_from_record makes of ``data``, with msgspec's quick path or without it."""
+    with pytest.MonkeyPatch.context() as patched:
+        if not usual:
+            patched.setattr(mcap_source, "_read_usual", _refuse_usual)
+        try:
+            return mcap_source.raw_from_record("/tdmon/raw", data, 3 * 10**9)
+        except (IngestError, mcap_source._Truncated) as exc:
+            return type(exc)
+
+
+record_values = (st.text(max_size=4) | st.floats() | st.integers(-2**70, 2**70) | st.none()
+                 | st.booleans() | st.sampled_from(["utf-8", "base64", "\ud800", "eA=="]))
+records = st.fixed_dictionaries(
+    {"source": st.text(max_size=4) | record_values, "topic": st.text(max_size=4),
+     "receive_time": st.floats() | st.integers(-10, 10**20) | record_values,
+     "payload": st.text(max_size=6) | record_values,
+     "payload_encoding": st.sampled_from(["utf-8", "base64", "UTF-8"]) | record_values},
+    optional={"payload_truncated": st.booleans(), "note": record_values})
+
+
+@settings(max_examples=800, deadline=None)
+@given(record=records, drop=st.sets(st.sampled_from(
+    ["source", "topic", "receive_time", "payload", "payload_encoding"]), max_size=2),
+    ascii_only=st.booleans())
+def test_msgspec_s_quick_path_makes_the_general_path_s_raw_message(
+        record: dict[str, object], drop: set[str], ascii_only: bool) -> None:
+    for key in drop:
+        record.pop(key)
+    data = json.dumps(record, ensure_ascii=ascii_only).encode("utf-8", "surrogatepass")
+    quick, general = _outcome(data, usual=True), _outcome(data, usual=False)
+    if isinstance(quick, RawMessage) and isinstance(general, RawMessage):
+        same_time = (quick.receive_time == general.receive_time
+                     or (math.isnan(quick.receive_time) and math.isnan(general.receive_time)))
+        assert (quick.source, quick.topic, quick.payload) == (
+            general.source, general.topic, general.payload) and same_time
+        if quick.recorded is not None:  # kept only when the bytes say what raw_message would
+            assert quick.recorded is data and json.loads(data) == raw_message(quick)
+    else:
+        assert quick == general
 
 
 def test_a_recorded_raw_message_kept_in_part_or_damaged_is_refused() -> None:
