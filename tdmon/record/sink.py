@@ -27,7 +27,6 @@ log = logging.getLogger(__name__)
 Message = Mapping[str, Any]
 
 
-
 class FiniteMessage(dict[str, Any]):
     """A message whose maker found every number in it finite: a plain dict in every other
     respect (the same JSON, the same comparisons).
