@@ -19,7 +19,7 @@ PACKAGE = ROOT / "tdmon"
 
 #: Modules every layer may use: they import nothing of tdmon above them.
 BOTTOM = frozenset({"tdmon.units", "tdmon.errors", "tdmon.vocabulary", "tdmon.messages",
-                    "tdmon.channels"})
+                    "tdmon.channels", "tdmon.slots"})
 
 #: What each layer may import besides itself (module prefixes). None: anything.
 ALLOWED: dict[str, frozenset[str] | None] = {

@@ -459,7 +459,7 @@ class FrictionEstimator:
         if alarm is not None:
             out.append(_alarm(alarm))
         return evolve(w, weight_off=weight_off,
-                       weight_checks=(*w.weight_checks, check)[-_WEIGHT_CHECKS_KEPT:])
+                      weight_checks=(*w.weight_checks, check)[-_WEIGHT_CHECKS_KEPT:])
 
     # -- filters --------------------------------------------------------------------------
 
@@ -475,7 +475,7 @@ class FrictionEstimator:
         if alarm is not None:
             out.append(_alarm(alarm))
         return evolve(w, profile=profile, profile_updates=w.profile_updates + 1,
-                       anomalous_bins=anomalous)
+                      anomalous_bins=anomalous)
 
     def _feed_mu_t(self, w: WindowState, window: Window, estimate: FrictionEstimate,
                    out: list[Output]) -> WindowState:

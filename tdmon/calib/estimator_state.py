@@ -19,9 +19,9 @@ from tdmon.calib.joint import JointSettings, JointState
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
-from tdmon.calib.rigstate import slot_setters
 from tdmon.calib.scatter import Scatter
 from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings
+from tdmon.slots import slot_setters
 
 __all__ = [
     "CalibrationSettings",
@@ -105,7 +105,7 @@ class SampleState:
     def __init__(self, accumulator: WindowAccumulator = _NO_WINDOW,
                  block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT,
                  block_alarmed: bool = False) -> None:
-        # once per frame: see tdmon.calib.rigstate.slot_setters
+        # once per frame: see tdmon.slots
         set_accumulator, set_block_weight, set_block_alarmed = _SAMPLE_STATE_SETTERS
         set_accumulator(self, accumulator)
         set_block_weight(self, block_weight)
@@ -169,7 +169,7 @@ class EstimatorState:
     windows: WindowState
 
     def __init__(self, samples: SampleState, windows: WindowState) -> None:
-        # once per frame: see tdmon.calib.rigstate.slot_setters
+        # once per frame: see tdmon.slots
         set_samples, set_windows = _ESTIMATOR_STATE_SETTERS
         set_samples(self, samples)
         set_windows(self, windows)

@@ -170,7 +170,7 @@ def _seen(state: MuTState, effective_temperature: float | None) -> MuTState:
     if effective_temperature is None or not math.isfinite(effective_temperature):
         return state
     return evolve(state, temperature_min=min(state.temperature_min, effective_temperature),
-                   temperature_max=max(state.temperature_max, effective_temperature))
+                  temperature_max=max(state.temperature_max, effective_temperature))
 
 
 def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Array,

@@ -374,7 +374,7 @@ class FrictionProfile:
             if state.windows_seen.size == depends.size:
                 # a new array: copies of this object (the estimator's) share the old one
                 state = evolve(state, windows_seen=state.windows_seen + depends,
-                                deepest=max(state.deepest, window.bit_depth))
+                               deepest=max(state.deepest, window.bit_depth))
             self.state = state
         return result.accepted
 

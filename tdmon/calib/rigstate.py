@@ -19,13 +19,13 @@ State names are those of the daemon's ``state`` message (docs/architecture.md).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, fields, replace
-from typing import Any, Final
+from dataclasses import dataclass, replace
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tdmon.slots import slot_setters
 from tdmon.vocabulary import MOVING_STATES, RigState
 
 __all__ = [
@@ -39,7 +39,6 @@ __all__ = [
     "classify",
     "detect",
     "detect_series",
-    "slot_setters",
     "with_block_weight",
 ]
 
@@ -172,7 +171,7 @@ class RigSample:
                  hole_depth: float | None = None, torque: float | None = None,
                  wob: float | None = None, block_time: float | None = None,
                  bit_time: float | None = None) -> None:
-        # once per frame: see slot_setters
+        # once per frame: see tdmon.slots
         (set_t, set_hookload, set_bit_depth, set_block_position, set_rpm, set_flow, set_spp,
          set_hole_depth, set_torque, set_wob, set_block_time, set_bit_time) = _SAMPLE_SETTERS
         set_t(self, t)
@@ -215,7 +214,7 @@ class DetectorState:
                  state: RigState = RigState.UNKNOWN, state_since: float = -math.inf,
                  run: int = 0, hang_load: float | None = None, hang_since: float = -math.inf,
                  hang_run: int = 0) -> None:
-        # once per frame: see slot_setters
+        # once per frame: see tdmon.slots
         (set_t, set_bit_depth, set_bit_time, set_block_position, set_block_time,
          set_block_loaded, set_velocity, set_hookload, set_state, set_state_since, set_run,
          set_hang_load, set_hang_since, set_hang_run) = _STATE_SETTERS
@@ -244,26 +243,11 @@ class Detection:
     velocity: float | None
 
     def __init__(self, state: RigState, steady: bool, velocity: float | None) -> None:
-        # once per frame: see slot_setters
+        # once per frame: see tdmon.slots
         set_state, set_steady, set_velocity = _DETECTION_SETTERS
         set_state(self, state)
         set_steady(self, steady)
         set_velocity(self, velocity)
-
-
-def slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
-    """The ``__set__`` of each field's slot, in field order (a frozen, slotted dataclass).
-
-    A sample, a detector state and a detection are made once per frame (so are the monitor's
-    modelled loads and the alarm step's sensor state, which use it too). The ``__init__`` a
-    frozen dataclass gets sets each field through ``object.__setattr__`` (its own
-    ``__setattr__`` refuses), about 0.1 us a field; the slot's descriptor sets it in half that
-    (1.5 -> 0.8 us for a DetectorState, 1.2 -> 0.6 us for a RigSample), as
-    ``tdmon.ingest.types`` does for every input message. Their hand-written ``__init__`` does
-    that and nothing else; ``tests/test_hand_written_inits.py`` checks that it takes the fields,
-    in order, with their defaults, the classes' own tests that the instances stay frozen.
-    """
-    return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
 
 
 _SAMPLE_SETTERS: Final = slot_setters(RigSample)

@@ -19,7 +19,8 @@ from typing import Final
 
 import numpy as np
 
-from tdmon.calib.rigstate import Detection, RigSample, slot_setters
+from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.slots import slot_setters
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
 #: states whose windows are estimated from their surface torque (the rotating ones): only they
@@ -109,7 +110,7 @@ class WindowAccumulator:
 
     def __init__(self, state: RigState = RigState.UNKNOWN, samples: tuple[RigSample, ...] = (),
                  velocities: tuple[float | None, ...] = ()) -> None:
-        # once per steady frame: see tdmon.calib.rigstate.slot_setters
+        # once per steady frame: see tdmon.slots
         set_state, set_samples, set_velocities = _ACCUMULATOR_SETTERS
         set_state(self, state)
         set_samples(self, samples)

@@ -19,9 +19,9 @@ from typing import Any, Final, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from tdmon.calib.rigstate import slot_setters
 from tdmon.daemon.pipeline import Emit, Frame
 from tdmon.record.sink import FiniteMessage
+from tdmon.slots import slot_setters
 from tdmon.vocabulary import CURVE_FOR_STATE, ROTATING_STATES, Operation
 
 # The vocabulary's map as a plain dict keyed by state name: a frame carries its state as a
@@ -47,7 +47,7 @@ class ModelledLoads:
                  torque_rotating: float, band_mu: tuple[float, ...],
                  band_pick_up: tuple[float, ...], band_slack_off: tuple[float, ...]) -> None:
         # once per frame with a new bit depth: the slots set through their descriptors, not
-        # object.__setattr__ (see tdmon.calib.rigstate.slot_setters; 0.85 -> 0.49 us)
+        # object.__setattr__ (see tdmon.slots; 0.85 -> 0.49 us)
         (set_bit_depth, set_pick_up, set_slack_off, set_rotating, set_torque_rotating,
          set_band_mu, set_band_pick_up, set_band_slack_off) = _LOADS_SETTERS
         set_bit_depth(self, bit_depth)

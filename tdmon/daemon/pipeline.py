@@ -404,7 +404,7 @@ class Pipeline:
 
     def _run_steps(self, frame: Frame) -> None:
         self.stats.frames += 1
-        emit = partial(self._emit_result, frame.log_time_ns, frame)
+        emit = self._emitter(frame.log_time_ns, frame)
         for step in self.steps:
             try:
                 step.on_frame(frame, emit)
@@ -429,13 +429,7 @@ class Pipeline:
         if route is None:
             topic = f"/tdmon/{name}"
             route = self._named_routes[name] = (topic, self._sinks_for(topic))
-        topic, sinks = route
-        for sink in sinks:  # _write_to, without the call
-            try:
-                sink.write(topic, log_time_ns, message)
-            except Exception:
-                self.stats.sink_errors += 1
-                log.exception("sink %r failed writing %s", sink, topic)
+        self._write_to(route[1], route[0], log_time_ns, message)
 
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         self._write_to(self._sinks_for(topic), topic, log_time_ns, message)

@@ -5,11 +5,13 @@ from __future__ import annotations
 import base64
 import hashlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from operator import attrgetter
 from typing import Any, Final
 
 import orjson
+
+from tdmon.slots import slot_setters
 
 #: Longest payload kept whole in the ``raw`` and ``rejected`` messages [bytes]. A longer one (an
 #: oversized payload the decoder rejects) is recorded as its first bytes, its size and its
@@ -52,7 +54,7 @@ class RawMessage:
     def __init__(self, source: str, topic: str, payload: bytes, receive_time: float,
                  ack: Callable[[], None] | None = None, redelivered: bool = False,
                  duplicate: bool = False, recorded: bytes | None = None) -> None:
-        # once per input message: see _slot_setters
+        # once per input message: see tdmon.slots
         s, t, p, r, a, d, u, c = _RAW_SETTERS
         s(self, source)
         t(self, topic)
@@ -80,7 +82,7 @@ class Sample:
 
     def __init__(self, channel: str, t: float, value: float, source: str, topic: str,
                  unit: str, receive_time: float, seq: int | None = None) -> None:
-        # once per input message: see _slot_setters
+        # once per input message: see tdmon.slots
         c, tt, v, s, tp, u, r, q = _SAMPLE_SETTERS
         c(self, channel)
         tt(self, t)
@@ -92,23 +94,8 @@ class Sample:
         q(self, seq)
 
 
-def _slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
-    """The ``__set__`` of each field's slot, in field order.
-
-    RawMessage and Sample are made once per input message. The ``__init__`` a frozen
-    dataclass gets sets each field through ``object.__setattr__`` (its own ``__setattr__``
-    refuses), about 0.1 us a field; the slot's descriptor sets it in half that: 0.44 instead
-    of 0.82 us for a RawMessage (docs/benchmarks.md). Their hand-written ``__init__`` does that
-    and nothing else; ``tests/test_hand_written_inits.py`` checks that it takes the fields, in
-    order, with their defaults, ``tests/ingest/test_types.py`` that the instances stay frozen.
-    (:func:`tdmon.calib.rigstate.slot_setters` is the same for the per-frame classes: the
-    layers keep the two apart, calib below ingest, and this module without NumPy.)
-    """
-    return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
-
-
-_RAW_SETTERS: Final = _slot_setters(RawMessage)
-_SAMPLE_SETTERS: Final = _slot_setters(Sample)
+_RAW_SETTERS: Final = slot_setters(RawMessage)
+_SAMPLE_SETTERS: Final = slot_setters(Sample)
 
 
 @dataclass(frozen=True, slots=True)

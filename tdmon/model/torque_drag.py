@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Any, Literal
 
 import numpy as np
@@ -217,9 +217,6 @@ class WellModel:
         self._depth_above = float(self.node_md[0]) + _DEPTH_TOLERANCE
         self._depth_down_to = min(float(string.length), float(self.node_md[-1]))
         self._uniform: dict[float, NDArray[np.float64]] = {}
-        # the survey's TVD and inclination at the grid's nodes (see `_tvd_and_inclination`)
-        self._node_tvd_inclination: (tuple[NDArray[np.float64], NDArray[np.float64]]
-                                     | tuple[()] | None) = None
 
     @property
     def n_elements(self) -> int:
@@ -263,6 +260,15 @@ class WellModel:
             return self._uniform_friction(float(mu))
         return self.friction(mu)
 
+    @cached_property
+    def _node_tvd_inclination(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """The survey's TVD [m] and inclination [rad] at the grid's nodes, interpolated once
+        (None for a grid reaching past the survey: every node is then interpolated)."""
+        try:
+            return tvd_and_inclination(self.well.survey, self.node_md)
+        except ModelError:
+            return None
+
     def _tvd_and_inclination(self, md: NDArray[np.float64]
                              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """`tvd_and_inclination` of the survey at the nodes ``md`` of a march [m], to the
@@ -281,14 +287,10 @@ class WellModel:
                 and np.isfinite(md).all() and (md[1:] - md[:-1] > 0).all()):
             # what the interpolation would refuse, or cannot be taken apart: refused as one
             return tvd_and_inclination(survey, md)
-        if self._node_tvd_inclination is None:
-            try:
-                self._node_tvd_inclination = tvd_and_inclination(survey, nodes)
-            except ModelError:  # a grid reaching past the survey: every node interpolated
-                self._node_tvd_inclination = ()
-        if not self._node_tvd_inclination:
+        at_nodes = self._node_tvd_inclination
+        if at_nodes is None:
             return tvd_and_inclination(survey, md)
-        node_tvd, node_inclination = self._node_tvd_inclination
+        node_tvd, node_inclination = at_nodes
         index = np.searchsorted(nodes, md)  # md <= nodes[-1]: a valid index
         tvd, inclination = node_tvd[index], node_inclination[index]
         off_grid = nodes[index] != md

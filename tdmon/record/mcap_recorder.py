@@ -586,15 +586,7 @@ class McapRecorder:
         or ``flush_interval_s`` later): it must not be changed after ``write``. Never raises for
         I/O problems: see ``error``/``stats``/``on_alarm``.
         """
-        # _enqueue for one message, without the call and the tuple of one entry: twice per
-        # frame of a replay (its state and model messages)
-        with self._lock:
-            queue = self._queue
-            queue.append((topic, log_time_ns, message, None))
-            if len(queue) >= BATCH_SIZE:
-                self._write_queued()
-        if self._pending_alarms:
-            self._fire_alarms()
+        self._enqueue(((topic, log_time_ns, message, None),))
 
     def write_many(self, topic: str, log_times_ns: Sequence[int],
                    messages: Sequence[Message]) -> None:

@@ -229,7 +229,7 @@ def _by_the_rules(payload: bytes) -> object:
 
 
 def _by_orjson(payload: bytes) -> object:
-    """``parse_payload_seq`` without msgspec's quick path (orjson's is taken)."""
+    """``parse_payload_seq`` without msgspec's quick path: the rules on orjson's parse."""
     with pytest.MonkeyPatch.context() as patched:
         patched.setattr(decode, "_read_usual", _refuse_usual)
         return parse_payload_seq(payload)
