@@ -307,13 +307,11 @@ class ReplayResult:
 
 def run_daemon_steps(run: ReplayRun) -> ReplayResult:
     """Rig state, monitor (band mu 0.15-0.35), calibration and alarm steps over a replay."""
-    from tdmon.daemon.calibrate import (
-        AlarmStep,
-        CalibrationSettings,
-        CalibrationStep,
-        RigStateStep,
-    )
-    from tdmon.daemon.monitor import MonitorStep
+    from tdmon.calib.estimator import CalibrationSettings
+    from tdmon.daemon.steps.alarms import AlarmStep
+    from tdmon.daemon.steps.calibrate import CalibrationStep
+    from tdmon.daemon.steps.monitor import MonitorStep
+    from tdmon.daemon.steps.rig_state import RigStateStep
     from tdmon.daemon.wellmodel import grid_model
 
     scenario = run.session.scenario

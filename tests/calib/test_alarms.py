@@ -27,10 +27,13 @@ from tdmon.calib.alarms import (
     sensor_alarms,
     update_band_trend,
 )
+from tdmon.calib.estimator import CalibrationSettings
 from tdmon.calib.rigstate import RigStateThresholds
 from tdmon.calib.windows import Window, WindowSettings
-from tdmon.daemon.calibrate import AlarmStep, CalibrationSettings, CalibrationStep, RigStateStep
 from tdmon.daemon.pipeline import Frame
+from tdmon.daemon.steps.alarms import AlarmStep
+from tdmon.daemon.steps.calibrate import CalibrationStep
+from tdmon.daemon.steps.rig_state import RigStateStep
 from tdmon.model.friction import KAARSTAD_2009
 from tdmon.model.string import DrillString
 from tdmon.model.torque_drag import WellModel
