@@ -214,40 +214,25 @@ def _module_graph() -> dict[str, set[str]]:
     return graph
 
 
+def _reachable(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every node an import path from ``start`` reaches (``start`` itself only round a circle)."""
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        for nxt in graph.get(todo.pop(), ()):
+            if nxt not in seen:
+                seen.add(nxt)
+                todo.append(nxt)
+    return seen
+
+
 def _circles(graph: dict[str, set[str]]) -> list[frozenset[str]]:
-    """The import circles of ``graph``: its strongly connected components of more than one
-    node (Tarjan's algorithm), each the set of nodes that reach each other."""
-    index: dict[str, int] = {}
-    lowest: dict[str, int] = {}
-    stack: list[str] = []
-    on_stack: set[str] = set()
-    found: list[frozenset[str]] = []
-
-    def visit(node: str) -> None:
-        index[node] = lowest[node] = len(index)
-        stack.append(node)
-        on_stack.add(node)
-        for nxt in sorted(graph.get(node, ())):
-            if nxt not in index:
-                visit(nxt)
-                lowest[node] = min(lowest[node], lowest[nxt])
-            elif nxt in on_stack:
-                lowest[node] = min(lowest[node], index[nxt])
-        if lowest[node] == index[node]:  # node is the root of a component: pop it
-            component = set()
-            while True:
-                member = stack.pop()
-                on_stack.discard(member)
-                component.add(member)
-                if member == node:
-                    break
-            if len(component) > 1:
-                found.append(frozenset(component))
-
-    for start in sorted(graph):
-        if start not in index:
-            visit(start)
-    return found
+    """The import circles of ``graph``: each the set of nodes that reach one another (a
+    strongly connected component of more than one node)."""
+    reach = {node: _reachable(graph, node) for node in graph}
+    circles = {frozenset({node} | {other for other in reach[node] if node in reach.get(other, ())})
+               for node in graph if node in reach[node]}
+    return sorted(circles, key=sorted)
 
 
 def _describe(circle: frozenset[str], graph: dict[str, set[str]]) -> str:
