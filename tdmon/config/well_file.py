@@ -4,6 +4,10 @@ The daemon's builder, its steps (model coverage, mu(T), the well and profile mes
 fleet all take one :class:`WellFile`; it sits here, beside the well file's schema
 (:mod:`tdmon.config.well`), so that they all import it from below rather than from each other.
 The model layer cannot hold it: it carries the pydantic ``WellConfig``.
+
+Not the API's ``tdmon.WellFile`` (docs/api.md), which a script gets from ``tdmon.load_well``
+with the friction per element: this one is the daemon's, with the string made to reach the
+bottom of the hole, its tally and the file's digest for reloads.
 """
 
 from __future__ import annotations
