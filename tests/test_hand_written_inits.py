@@ -14,7 +14,7 @@ from tdmon.calib.alarms import SensorState
 from tdmon.calib.estimator_state import EstimatorState, SampleState
 from tdmon.calib.rigstate import Detection, DetectorState, RigSample
 from tdmon.calib.windows import WindowAccumulator
-from tdmon.daemon.monitor import ModelledLoads
+from tdmon.daemon.steps.monitor import ModelledLoads
 from tdmon.ingest.types import RawMessage, Sample
 
 

@@ -249,7 +249,7 @@ def test_model_reexports_the_vocabulary_operation() -> None:
 
 
 def test_state_maps_match_the_daemon_tables_they_replace() -> None:
-    # daemon/monitor.py's CURVE_FOR_STATE before the vocabulary
+    # daemon/steps/monitor.py's CURVE_FOR_STATE before the vocabulary
     assert dict(vocabulary.CURVE_FOR_STATE) == {
         "pick_up": "pick_up", "back_reaming": "pick_up", "slack_off": "slack_off",
         "reaming": "slack_off", "rotating_off_bottom": "rotating", "drilling": "rotating",

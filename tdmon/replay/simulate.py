@@ -164,7 +164,7 @@ def _model_error(scenario: Scenario) -> dict[str, Any]:
             "model_string_length_m": paper.string.length}
 
 
-def session_messages(session: Session) -> list[MessageRecord]:
+def session_messages(session: Session) -> list[MessageRecord]:  # noqa: C901  (complex today; simplify when next touched)
     """Every message of a simulated session, in log-time order (inputs and truth)."""
     scenario = session.scenario
     start = scenario.start

@@ -143,7 +143,7 @@ class _Stream:
         return int(code)
 
 
-def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
+def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,  # noqa: C901  (complex today; simplify when next touched)
                   overrides: Mapping[str, tuple[str, str | None]] | None = None,
                   table: Mapping[str, CurveChoice] = CURVE_TABLE,
                   licence: str | None = None, attribution: str | None = None,

@@ -22,8 +22,8 @@ from mcap.writer import Writer
 from tdmon.config.daemon import ZenohConfig
 from tdmon.daemon.aligner import Aligner
 from tdmon.daemon.inbox import Inbox
-from tdmon.daemon.monitor import MonitorStep
 from tdmon.daemon.pipeline import Pipeline, Sink, Step
+from tdmon.daemon.steps.monitor import MonitorStep
 from tdmon.daemon.steps.rig_state import RigStateStep
 from tdmon.errors import IngestError
 from tdmon.ingest import mcap_source

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from tdmon.config.daemon import load_daemon_config
-from tdmon.daemon.build import read_well_path
+from tdmon.config.well_file import read_well_path
 from tdmon.daemon.pipeline import Frame
 from tdmon.daemon.steps.coverage import CoverageStep
 from tdmon.errors import ConfigError
