@@ -9,6 +9,7 @@ SP 811, appendix B), not from tdmon's table; pint, a peer package, checks the ta
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 from pathlib import Path
@@ -107,7 +108,7 @@ def test_drillers_spellings(text: str, target: str, expected: float) -> None:
 def test_a_stroke_rate_is_read_but_is_no_flow() -> None:
     # spm counts pump strokes: without the pump's displacement it is no flow rate
     assert parse_unit("spm").dimension == units.STROKE_RATE
-    with pytest.raises(UnitError, match="a pump stroke rate, not a flow rate; e.g. 'L/min'"):
+    with pytest.raises(UnitError, match=re.escape("a pump stroke rate, not a flow rate; e.g. 'L")):
         conversion("spm", "m**3/s")
 
 
@@ -188,10 +189,8 @@ def test_pint_only_ever_sees_one_validated_name(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(pint.UnitRegistry, "parse_expression", never)
     for text in ("m*9**9**9", "furlong*parsec/fortnight", "__class__", "kN*(furlong)",
                  "a.b.c", "mile-1", "m/(s*minute)"):
-        try:
+        with contextlib.suppress(UnitError):
             conversion(text, "m")
-        except UnitError:
-            pass
     assert seen and all(re.fullmatch(r"[A-Za-zµ_]+", name) for name in seen), seen
     for memo in (units._conversion_or_reason, units.parse_unit, units._name):
         memo.cache_clear()

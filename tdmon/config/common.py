@@ -51,19 +51,17 @@ def unit_example(target: str) -> str:
 
 def refused_unit(error: UnitError, value: Any, target: str, key: str | None = None) -> str:
     """The reason a quantity's unit is refused, with the key written with a unit that works:
-    ``unknown unit 'tonnes'; write e.g. block_weight = "40 t"``.
+    ``unknown unit 'tonnez'; write e.g. block_weight = "40 kN"``.
 
-    The example keeps the value's number (``"40 tonnes"`` -> ``"40 t"``) and takes the first
-    unit of the target's kind (:func:`tdmon.units.examples`).
+    The example keeps the value's number (``"40 tonnez"`` -> ``"40 kN"``) with the unit
+    :func:`unit_example` suggests for the target.
     """
     try:
         number = split_quantity(value)[0] if isinstance(value, str) else None
     except ValueError:
         number = None
     shown = "1" if number is None else f"{number:g}"
-    suggested = examples(target)
-    example = suggested[0] if suggested else unit_example(target)
-    return f"{error.reason}; write e.g. {key or 'key'} = \"{shown} {example}\""
+    return f"{error.reason}; write e.g. {key or 'key'} = \"{shown} {unit_example(target)}\""
 
 
 def missing_unit(value: Any, target: str, key: str | None = None) -> str | None:
