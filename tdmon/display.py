@@ -169,7 +169,7 @@ class UnitSystem:
         return self.units["rotation"](value)
 
     def quantity_of(self, internal_unit: str) -> Quantity | None:
-        """The kind of quantity whose internal unit is ``internal_unit`` (a pint expression
+        """The kind of quantity whose internal unit is ``internal_unit`` (a unit text
         of tdmon.channels, e.g. ``"N*m"``), or None."""
         for quantity, unit in QUANTITIES.items():
             if unit == internal_unit:

@@ -25,7 +25,7 @@ def quantity_arg(target: str, example: str, *, positive: bool = False) -> Callab
 
     Parameters
     ----------
-    target : the internal unit the value is returned in (a pint expression, e.g. ``"m"``)
+    target : the internal unit the value is returned in (a unit text, e.g. ``"m"``)
     example : a valid value with a unit, quoted in the error message (e.g. ``"6500 ft"``)
     positive : refuse zero and negative values
 
