@@ -205,7 +205,8 @@ class Decoder:
         if cached is not None:
             return cached
         try:
-            factor = conversion(unit, CHANNEL_UNITS[channel][0])
+            # tdmon's own unit names only: no payload makes the daemon import pint
+            factor = conversion(unit, CHANNEL_UNITS[channel][0], pint_names=False)
         except ValueError as exc:
             # units.conversion is itself LRU-cached, so repeated garbage stays cheap
             return f"unit '{_clip(unit)}' not usable for {channel}: {_clip(str(exc), 120)}"

@@ -72,7 +72,10 @@ async def test_a_burst_arrives_whole_in_order_and_its_batched_acks_all_count(
             received.append((raw.topic, raw.payload))
         await publisher
         assert received == messages
-        await asyncio.sleep(0.5)  # the acknowledgements reach the broker
+        # the broker has the acknowledgements once a later QoS 1 publish on the same
+        # connection is acknowledged: it takes one connection's packets in order (was: 0.5 s)
+        assert source._client is not None
+        await source._client.publish("probe/acknowledged", b"", qos=1)
 
     async with MqttSource(config, ["rig/B0/#"], base=None,
                           recent=RecentDeliveries()) as source:
@@ -90,15 +93,18 @@ async def test_qos0_results_are_all_delivered_in_order(mosquitto: Any) -> None:
         if len(got) == n:
             done.set()
 
+    subscribed = threading.Event()
     dashboard = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="dash")
     dashboard.on_message = on_message
+    dashboard.on_subscribe = lambda *_: subscribed.set()
     dashboard.connect("127.0.0.1", mosquitto.port)
     dashboard.subscribe("rig/Q0/tdmon/#", qos=0)
     dashboard.loop_start()
     publisher = MqttPublisher(MqttConfig(port=mosquitto.port, client_id="tdmon-q0"), "rig/Q0",
                               ["model"], qos=0, queue_size=n)
     try:
-        await asyncio.sleep(0.3)  # the subscription is in place
+        # the subscription is in place: the broker's SUBACK came (was: a 0.3 s pause)
+        assert await asyncio.to_thread(subscribed.wait, 60)
         for i in range(n):
             publisher.write("/tdmon/model", 0, {"i": i})
         async with publisher.connect() as client:
