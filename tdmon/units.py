@@ -404,38 +404,57 @@ class _Reader:
             if token.power is not None:
                 power = self.checked_power(token.power)
         elif token.kind == "number":
-            scale, dimension = float(token.text), NONE
-            if not scale > 0:
-                raise self.fail("a factor of 0")
+            scale = self.number(token)
             following = self.peek()
-            if following is not None and following.kind == "power":
-                raise self.fail(f"a number ({token.text}) cannot be raised to a power")
             if following is not None and following.kind == "name" and following.start == token.end:
                 return self.number_and_name(scale, following)
+            dimension = NONE
         elif token.kind == "open":
-            if depth >= _MAX_DEPTH:
-                raise self.fail(f"more than {_MAX_DEPTH} parentheses inside each other")
-            scale, dimension = self.product(depth + 1)
-            closing = self.peek()
-            if closing is None or closing.kind != "close":
-                raise self.fail("a '(' is not closed")
-            self.position += 1
+            scale, dimension = self.parenthesis(depth)
         else:
             raise self.fail(f"'{token.text}' where a unit is expected")
-        following = self.peek()
-        if following is not None and following.kind == "power":
-            if token.power is not None:
-                raise self.fail(f"two powers on '{token.text}'")
-            if following.power is None:
-                raise self.fail("a power must be a whole number")
-            power = self.checked_power(following.power)
-            self.position += 1
-            again = self.peek()
-            if again is not None and again.kind == "power":
-                raise self.fail("a power of a power")
+        power = self.power_after(token, power)
         if power != 1:
             scale, dimension = scale**power, _product(NONE, dimension, power)
         return scale, dimension
+
+    def number(self, token: _Token) -> float:
+        """A number's value as a factor (never 0, never raised to a power)."""
+        scale = float(token.text)
+        if not scale > 0:
+            raise self.fail("a factor of 0")
+        following = self.peek()
+        if following is not None and following.kind == "power":
+            raise self.fail(f"a number ({token.text}) cannot be raised to a power")
+        return scale
+
+    def parenthesis(self, depth: int) -> tuple[float, Dimension]:
+        """What stands between a '(' (just read) and its ')'."""
+        if depth >= _MAX_DEPTH:
+            raise self.fail(f"more than {_MAX_DEPTH} parentheses inside each other")
+        scale, dimension = self.product(depth + 1)
+        closing = self.peek()
+        if closing is None or closing.kind != "close":
+            raise self.fail("a '(' is not closed")
+        self.position += 1
+        return scale, dimension
+
+    def power_after(self, token: _Token, power: int) -> int:
+        """The power of a factor: ``power`` (written against a name), or the one a ``^`` or
+        ``**`` after it gives (never both, never a power of a power)."""
+        following = self.peek()
+        if following is None or following.kind != "power":
+            return power
+        if token.power is not None:
+            raise self.fail(f"two powers on '{token.text}'")
+        if following.power is None:
+            raise self.fail("a power must be a whole number")
+        power = self.checked_power(following.power)
+        self.position += 1
+        again = self.peek()
+        if again is not None and again.kind == "power":
+            raise self.fail("a power of a power")
+        return power
 
     def number_and_name(self, number: float, token: _Token) -> tuple[float, Dimension]:
         """``30m``: the number times the name (and its own power), one factor."""
