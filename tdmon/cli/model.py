@@ -6,6 +6,7 @@ import argparse
 import csv
 import importlib
 import json
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -168,15 +169,18 @@ def _check_bit_depth(path: Path, well: Well, bit_depth: float) -> None:
 
 
 def _run_loads(args: argparse.Namespace) -> int:
+    from tdmon.model.kernels import ENVIRONMENT
     from tdmon.model.torque_drag import torque_drag
 
     well, file_friction = _load(args.well)
     bit_depth = args.bit_depth if args.bit_depth is not None else well.string.length
     _check_bit_depth(args.well, well, bit_depth)
     mu = args.mu if args.mu is not None else file_friction
-    # one march: as plain Python it is done long before numba would have loaded
+    # one march: as plain Python it is done long before numba would have loaded (unless
+    # TDMON_KERNELS chooses; the numbers are the same)
+    engine = None if os.environ.get(ENVIRONMENT) else "python"
     loads = torque_drag(well, bit_depth, mu, method=args.method, wob=args.wob,
-                        bit_torque=args.bit_torque, engine="python")
+                        bit_torque=args.bit_torque, engine=engine)
     if args.json:
         document = {
             "well": well.name,
