@@ -12,8 +12,8 @@ bit (`tests/model/test_kernels.py` compares every `WellModel` call):
     later process compiles. A process still pays numba's import and the cache's load, about a
     second here, on its first call.
 ``"python"``
-    the functions as they are: about 100 times slower per element, but no numba at all. A
-    one-shot evaluation of one well (`tdmon model loads`) is done before numba would have
+    the functions as they are: a few hundred times slower per element, but no numba at all.
+    A one-shot evaluation of one well (`tdmon model loads`) is done before numba would have
     loaded; and it serves where numba is missing or broken.
 
 ``TDMON_KERNELS`` (``numba`` or ``python``) sets the default; a `WellModel` built with
