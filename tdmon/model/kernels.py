@@ -130,5 +130,11 @@ def _compiled() -> types.SimpleNamespace:
         rebound.__qualname__ = function.__qualname__
         rebound.__module__ = function.__module__
         rebound.__doc__ = function.__doc__
-        namespace[name] = numba.njit(cache=True)(rebound)
+        try:
+            namespace[name] = numba.njit(cache=True)(rebound)
+        except RuntimeError as error:  # numba found no cache folder it can write
+            raise ModelError(
+                f"numba cannot cache the model's kernels ({error}): set NUMBA_CACHE_DIR to a "
+                f"writable folder (and run 'tdmon model warmup' with it), or "
+                f"{ENVIRONMENT}=python") from error
     return types.SimpleNamespace(**{name: namespace[name] for name in ENTRY_POINTS})

@@ -71,3 +71,20 @@ def test_after_the_warmup_a_new_process_compiles_nothing(
                          env=env, cwd=ROOT, timeout=600, check=True)
     hits_and_misses = json.loads(new.stdout.strip().splitlines()[-1])
     assert hits_and_misses == [[1, 0]] * len(kernels.ENTRY_POINTS)  # loaded, none compiled
+
+
+def test_without_a_cache_folder_numba_can_write_the_error_says_what_to_do() -> None:
+    """numba's locators find no folder (here: only the one for zipped sources is allowed):
+    loading the numba kernels is a ModelError naming the remedies, not numba's RuntimeError."""
+    script = ("from tdmon.errors import ModelError\n"
+              "from tdmon.model import kernels\n"
+              "try:\n"
+              "    kernels.load('numba')\n"
+              "except ModelError as error:\n"
+              "    print(error)\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_LOCATOR_CLASSES": "ZipCacheLocator"}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env=env, cwd=ROOT, timeout=120, check=True)
+    message = done.stdout.strip()
+    assert "no locator available" in message
+    assert "NUMBA_CACHE_DIR" in message and "TDMON_KERNELS=python" in message
