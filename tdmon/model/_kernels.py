@@ -380,8 +380,8 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
             torques[c, o] = bit_torques[o]
     k = 0  # nodes recorded
     if profile is not None:
-        _record(profile, 0, lower, 0, tb, forces, torques)
-        k = 1
+        _record(profile, k, lower, comp, tb, forces, torques)
+        k += 1
     n = 0  # pieces marched
     n_runs = 0
     # Aadnoy runs: the state at the run's bottom and each case's length-weighted friction
