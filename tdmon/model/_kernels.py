@@ -23,7 +23,10 @@ Where a new force term goes (docs/architecture.md): an extra axial force per ele
 speed) is added where the weight enters, ``axial_weight`` in `_soft_string_piece` and ``lift``
 in `_aadnoy_run`, and reaches them as one more argument of `_march`, per element (and per
 operation, for drag that follows the motion). It changes neither the normal force's derivative
-nor the friction's, so the adjoint takes it through the rerun piece. The bit's force and torque
+nor the friction's, so the adjoint takes it through the rerun piece. A piece's buoyed weight
+and radius are read once, in `_march` (per component today; a weight that varies with the
+densities inside and outside each element changes that read), and the adjoint takes them
+from its tape. The bit's force and torque
 (WOB, bit torque) are the march's starting values, ``bit_forces`` and ``bit_torques``; what a
 sensor reads of the top force (sheave efficiency, dead-line sensor, block acceleration) is not
 the loops' business: `WellModel` returns the top force and adds the block weight outside them.
@@ -305,16 +308,17 @@ def _aadnoy_run(force, torque, geometry, length, kind, mu, axial_factor, torque_
 # What a march writes besides the top loads, when asked (None otherwise):
 # - a profile: per recorded node (bit first) its MD, the index of the component below it, its
 #   unit tangent, and per (case, operation) the axial force and torque there;
-# - a tape, for the adjoint of one case and one operation: per piece its element, component,
-#   the force at its bottom and its soft-string geometry (kk, ke, ee, dtvd) or, for Aadnoy, its
-#   length in column 0; per Aadnoy run its first piece (and, after the last run, one past the
-#   last piece), curve kind, component, the force at its bottom and (top inclination, bottom
-#   inclination, dogleg, cosine and sine of the mean inclination, length, friction).
+# - a tape, for the adjoint of one case and one operation: per piece its element, the force at
+#   its bottom and (kk, ke, ee, dtvd, weight, radius) for the soft string or its length in
+#   column 0 for Aadnoy; per Aadnoy run its first piece (and, after the last run, one past the
+#   last piece), curve kind, the force at its bottom and (top inclination, bottom inclination,
+#   dogleg, cosine and sine of the mean inclination, length, friction, weight, radius). The
+#   backward pass reads the weight and radius the forward pass used from the tape.
 
 _Profile = namedtuple("_Profile", ["md", "component", "tangent", "force", "torque"])
 _Tape = namedtuple("_Tape", [
-    "piece_element", "piece_component", "piece_force", "piece_values", "run_first",
-    "run_kind", "run_component", "run_force", "run_values"])
+    "piece_element", "piece_force", "piece_values", "run_first", "run_kind", "run_force",
+    "run_values"])
 
 
 def _record(profile, k, md, comp, tangent, forces, torques):
@@ -409,7 +413,6 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
         radius = well.component_radius[comp]
         if tape is not None:
             tape.piece_element[n] = j
-            tape.piece_component[n] = comp
             tape.piece_force[n] = forces[0, 0]
         if method == SOFT_STRING:
             if at_component_top or lower < node_md[j + 1]:
@@ -424,6 +427,8 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
                 tape.piece_values[n, 1] = ke
                 tape.piece_values[n, 2] = ee
                 tape.piece_values[n, 3] = dtvd
+                tape.piece_values[n, 4] = weight
+                tape.piece_values[n, 5] = radius
             for c in range(n_case):
                 mu = mu_cases[c, j]
                 for o in range(n_op):
@@ -446,8 +451,8 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
                                 run_mu_length, run_length, kind, axial_factors, torque_factors,
                                 weight, radius)
                 if tape is not None:
-                    _tape_run(tape, n_runs, n, kind, comp, run_force[0, 0], geometry,
-                              run_length, run_mu_length[0] / run_length)
+                    _tape_run(tape, n_runs, n, kind, run_force[0, 0], geometry, run_length,
+                              run_mu_length[0] / run_length, weight, radius)
                     n_runs += 1
                 for c in range(n_case):
                     run_mu = run_mu_length[c] / run_length
@@ -476,11 +481,10 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
     return k, n, n_runs
 
 
-def _tape_run(tape, r, last_piece, kind, comp, bottom_force, geometry, length, mu):
+def _tape_run(tape, r, last_piece, kind, bottom_force, geometry, length, mu, weight, radius):
     """Keep run ``r`` (its last piece ``last_piece``) on the tape."""
     tape.run_first[r + 1] = last_piece + 1
     tape.run_kind[r] = kind
-    tape.run_component[r] = comp
     tape.run_force[r] = bottom_force
     top_inc, bottom_inc, theta, cos_mean, sin_mean = geometry
     tape.run_values[r, 0] = top_inc
@@ -490,6 +494,8 @@ def _tape_run(tape, r, last_piece, kind, comp, bottom_force, geometry, length, m
     tape.run_values[r, 4] = sin_mean
     tape.run_values[r, 5] = length
     tape.run_values[r, 6] = mu
+    tape.run_values[r, 7] = weight
+    tape.run_values[r, 8] = radius
 
 
 # --- the entry points ---
@@ -668,38 +674,33 @@ def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_
     """
     well = _unpack(well_real, well_index)
     size = well.node_md.size + well.component_top.size  # more than the pieces
-    tape = _Tape(np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64),
-                 np.empty(size), np.empty((size, 4)), np.zeros(size + 1, dtype=np.int64),
-                 np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64),
-                 np.empty(size), np.empty((size, 7)))
+    tape = _Tape(np.empty(size, dtype=np.int64), np.empty(size), np.empty((size, 6)),
+                 np.zeros(size + 1, dtype=np.int64), np.empty(size, dtype=np.int64),
+                 np.empty(size), np.empty((size, 9)))
     forces = np.empty((1, 1))
     torques = np.empty((1, 1))
     _, n_pieces, n_runs = _march(
         well, method, mu.reshape((1, mu.size)), bit_depth, np.full(1, bit_force),
         np.full(1, bit_torque), np.full(1, axial_factor), np.full(1, torque_factor), forces,
         torques, None, tape)
-    weights = well.component_weight
-    radii = well.component_radius
     gradient = np.zeros(mu.size)
     lam_force = force_seed
     if method == SOFT_STRING:
+        pieces = tape.piece_values
         for p in range(n_pieces - 1, -1, -1):
-            c = tape.piece_component[p]
             e = tape.piece_element[p]
-            values = tape.piece_values
             lam_force, d_mu = _soft_string_piece_adjoint(
-                tape.piece_force[p], values[p, 0], values[p, 1], values[p, 2], values[p, 3],
-                weights[c], radii[c], mu[e], axial_factor, torque_factor, lam_force,
+                tape.piece_force[p], pieces[p, 0], pieces[p, 1], pieces[p, 2], pieces[p, 3],
+                pieces[p, 4], pieces[p, 5], mu[e], axial_factor, torque_factor, lam_force,
                 torque_seed)
             gradient[e] += d_mu
     else:
         runs = tape.run_values
         for r in range(n_runs - 1, -1, -1):
-            c = tape.run_component[r]
             geometry = (runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4])
             lam_force, d_run_mu = _aadnoy_run_adjoint(
                 tape.run_force[r], geometry, runs[r, 5], tape.run_kind[r], runs[r, 6],
-                axial_factor, torque_factor, weights[c], radii[c], lam_force, torque_seed)
+                axial_factor, torque_factor, runs[r, 7], runs[r, 8], lam_force, torque_seed)
             # the run's friction is the length-weighted mean of its pieces' elements'
             scale = d_run_mu / runs[r, 5]
             for p in range(tape.run_first[r], tape.run_first[r + 1]):
