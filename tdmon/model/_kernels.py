@@ -18,18 +18,20 @@ piece are written once, in `_soft_string_piece` (weight and friction of the soft
 `_aadnoy_run` (Aadnoy's closed forms over a run); the adjoint's backward pass reruns
 `_soft_string_piece` for the values it differentiates.
 
-Where a new force term goes (docs/architecture.md): an extra axial force per element (issue
-30's pressure-area and viscous drag, computed outside the loops from the mud and the block
-speed) is added where the weight enters, ``axial_weight`` in `_soft_string_piece` and ``lift``
-in `_aadnoy_run`, and reaches them as one more argument of `_march`, per element (and per
-operation, for drag that follows the motion). It changes neither the normal force's derivative
-nor the friction's, so the adjoint takes it through the rerun piece. A piece's buoyed weight
-and radius are read once, in `_march` (per component today; a weight that varies with the
-densities inside and outside each element changes that read), and the adjoint takes them
-from its tape. The bit's force and torque
-(WOB, bit torque) are the march's starting values, ``bit_forces`` and ``bit_torques``; what a
-sensor reads of the top force (sheave efficiency, dead-line sensor, block acceleration) is not
-the loops' business: `WellModel` returns the top force and adds the block weight outside them.
+Where a new force term goes (docs/architecture.md): an extra axial force per element (issue 30's
+pressure-area and viscous drag, computed outside the loops from the mud and the block speed) is
+added where the weight enters, ``axial_weight`` in `_soft_string_piece` and next to the weight
+terms of `_aadnoy_run`'s closed forms, and reaches them as one more argument of `_march`, per
+element (and per operation, for drag that follows the motion). In the soft string it adds
+nothing to the adjoint's derivatives (it depends on neither the force nor the friction) and the
+backward pass gets its values through the rerun piece; in Aadnoy's closed forms
+`_aadnoy_run_adjoint` takes it where it takes the weight's lift. A piece's buoyed weight and
+radius are read once, in `_march` (per component today; a weight that varies with the densities
+inside and outside each element changes that read), and the adjoint takes them from its tape.
+The bit's force and torque (WOB, bit torque) are the march's starting values, ``bit_forces`` and
+``bit_torques``. What a sensor reads of the top force (sheave efficiency, dead-line sensor,
+block acceleration) is not the loops' business: `WellModel` adds the block weight to the top
+force outside them, and a measurement model belongs there too.
 
 This module imports no numba. `tdmon.model.kernels` runs every function here either compiled
 by numba (``njit(cache=True)``) or as it is, plain Python, with the same numbers bit for bit:
