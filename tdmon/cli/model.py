@@ -90,7 +90,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         help="compile the model's kernels into numba's cache (the set-up scripts run it)",
         description=(
             "Compile the torque-and-drag model's kernels with numba and store them in numba's "
-            "on-disk cache (about a minute; seconds when they are there already), so that no "
+            "on-disk cache (a minute or two; seconds when they are there already), so that no "
             "later command or daemon compiles them. The cache is the package's "
             "tdmon/model/__pycache__, or numba's user-wide cache folder when that is not "
             "writable (NUMBA_CACHE_DIR overrides both): run it as the user that runs tdmon. "
