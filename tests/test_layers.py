@@ -49,8 +49,6 @@ KNOWN: dict[tuple[str, str], str] = {}
 KNOWN_CYCLES: dict[frozenset[str], str] = {
     frozenset({"tdmon.record.mcap_recorder", "tdmon.record.sink"}):
         "RecorderStats moves to the sink contract (issue 27)",
-    frozenset({"tdmon.model._kernels", "tdmon.model.kernels"}):
-        "the kernels' constants move out of kernels.py (issue 27)",
 }
 
 
