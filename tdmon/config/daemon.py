@@ -280,7 +280,7 @@ class OpcUaConfig(_Model):
     # node (0: every value the server gets), and how many values it queues per node in between
     publishing_interval: Seconds = Field(default=1.0, gt=0)
     sampling_interval: Seconds = Field(default=0.0, ge=0)
-    queue_size: int = Field(default=10, ge=1, le=100_000)
+    queue_size: int = Field(default=100, ge=1, le=100_000)
     # a request unanswered for this long, or a server whose state cannot be read for this long
     # (checked every timeout / 2), counts as lost: the daemon reconnects
     timeout: Seconds = Field(default=10.0, gt=0)
@@ -346,6 +346,8 @@ class OpcUaConfig(_Model):
                 object.__setattr__(self, key, path)
             if base is not None and not path.is_file():
                 raise CrossFieldError(key, f"no such file: {path}")
+            if key == "password_file" and base is not None:
+                warn_if_readable_by_others(path, "sources.opcua.password_file")
         if self.password_env is not None and self.password_env not in os.environ:
             raise CrossFieldError("password_env",
                                   f"environment variable {self.password_env} is not set")
