@@ -1,4 +1,4 @@
-"""Sources (MQTT, Zenoh, MCAP replay, WITS0, OPC UA) and the pure payload decoders kept apart from them.
+"""Sources (MQTT, Zenoh, MCAP replay, WITS0, OPC UA) and the pure decoders kept apart from them.
 
 ``decode`` (bytes -> Sample | Rejected, no I/O), ``types`` (RawMessage, Sample, Rejected and
 their daemon message shapes), ``mqtt`` / ``zenoh_io`` / ``mcap_source`` (async context
