@@ -16,7 +16,7 @@ from tdmon.config.daemon import (
 )
 from tdmon.daemon.daemon import SourceSpec
 from tdmon.daemon.wiring import Entry, Table, Wiring
-from tdmon.errors import ConfigError
+from tdmon.errors import ConfigError, IngestError
 from tdmon.ingest.decode import topic_for
 from tdmon.ingest.mcap_source import McapSource
 from tdmon.ingest.mqtt import MqttSource, RecentDeliveries
@@ -87,10 +87,14 @@ async def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
 
 async def opcua_source(wiring: Wiring, section: OpcUaConfig) -> None:
     """Subscribe to the rig's OPC UA server; each configured node goes in as samples on its
-    channel's topic (docs/opcua.md). asyncua is imported when the source first connects."""
-    from tdmon.ingest.opcua_source import OpcUaSource
+    channel's topic (docs/opcua.md). Without asyncua the daemon does not start."""
+    from tdmon.ingest.opcua_source import OpcUaSource, import_asyncua
 
     config = wiring.config
+    try:
+        import_asyncua()
+    except IngestError as exc:
+        raise ConfigError(str(config.source_file), "sources.opcua", str(exc)) from None
     topics = {spec.channel: topic_for(config.prefix, spec.topic)
               for spec in config.channel_specs()}
     max_pending = config.queues.ingest

@@ -107,7 +107,9 @@ class OpcUaSource:
         self.max_pending = max_pending
         self._client: Client | None = None
         self._subscription: Subscription | None = None
-        self._pending: asyncio.Queue[RawMessage | IngestError] = asyncio.Queue()
+        # notifications for the pipeline; None only wakes the reader after a failure
+        self._pending: asyncio.Queue[RawMessage | None] = asyncio.Queue()
+        self._lost: IngestError | None = None
         self._pump: asyncio.Task[None] | None = None
         self._items: dict[int, _Item] = {}
 
@@ -119,12 +121,13 @@ class OpcUaSource:
         ua = asyncua.ua
         config = self.config
         self._pending = asyncio.Queue(maxsize=self.max_pending)
+        self._lost = None
         self._items = {}
         client = asyncua.Client(config.endpoint, timeout=config.timeout,
                                 watchdog_intervall=config.timeout / 2)
         client.session_timeout = SESSION_TIMEOUT_MS
         client.name = client.description = "tdmon"
-        client.connection_lost_callback = self._lost
+        client.connection_lost_callback = self._on_connection_lost
         self._client = client
         try:
             await self._secure(client, asyncua)
@@ -159,11 +162,13 @@ class OpcUaSource:
         return self
 
     async def __anext__(self) -> RawMessage:
-        item = await self._pending.get()
-        if isinstance(item, IngestError):
-            self._pending.put_nowait(item)  # raised again if asked again
-            raise item
-        return item
+        while True:
+            # what arrived before a failure is handed out first, then the failure is raised
+            if self._lost is not None and self._pending.empty():
+                raise self._lost
+            item = await self._pending.get()
+            if item is not None:
+                return item
 
     # -- connecting ---------------------------------------------------------------------------
 
@@ -296,22 +301,21 @@ class OpcUaSource:
             elif isinstance(event, StatusChangeEvent):
                 status = event.notification.Status
                 if not status.is_good():
-                    await self._put_error(IngestError(
-                        f"{self.describe()}: the server ended the subscription ({status.name})"))
+                    self._fail(IngestError(f"{self.describe()}: the server ended the "
+                                           f"subscription ({status.name})"))
                     return
-        await self._put_error(IngestError(f"{self.describe()}: the subscription ended"))
+        self._fail(IngestError(f"{self.describe()}: the subscription ended"))
 
-    async def _lost(self, exc: Exception) -> None:
+    async def _on_connection_lost(self, exc: Exception) -> None:
         # asyncua's supervisor found the connection gone (it does not reconnect: ours does)
-        await self._put_error(IngestError(f"{self.describe()}: connection lost: "
-                                          f"{_reason(exc)}"))
+        self._fail(IngestError(f"{self.describe()}: connection lost: {_reason(exc)}"))
 
-    async def _put_error(self, error: IngestError) -> None:
+    def _fail(self, error: IngestError) -> None:
+        """Remember the first failure and wake the reader (a full queue wakes it anyway)."""
+        if self._lost is None:
+            self._lost = error
         with contextlib.suppress(asyncio.QueueFull):
-            # an error goes in even when the queue is full: it is what the reader must see
-            if self._pending.full():
-                self._pending.get_nowait()
-            self._pending.put_nowait(error)
+            self._pending.put_nowait(None)
 
     async def _close(self) -> None:
         if self._pump is not None:

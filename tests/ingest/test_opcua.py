@@ -345,3 +345,21 @@ def test_publish_serves_a_replay_to_a_subscriber(free_tcp_port: Callable[[], int
         want = [(step.t, step.values[channel]) for step in steps if channel in step.values]
         assert [t for t, _ in got] == [t for t, _ in want], channel
         assert [v for _, v in got] == pytest.approx([v for _, v in want], rel=1e-12), channel
+
+
+async def test_without_asyncua_the_daemon_does_not_start(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from tdmon.daemon.build import build_daemon
+    from tdmon.daemon.monitor import GridLoadModel
+
+    monkeypatch.setitem(sys.modules, "asyncua", None)  # what an install without it gives
+    config = parse_daemon_config({"prefix": "rig/T", "sources": {"opcua": {
+        "endpoint": "opc.tcp://127.0.0.1:4840", "nodes": {"hookload": "i=1"}}}},
+        tmp_path / "daemon.toml")
+    model = GridLoadModel.from_function(
+        lambda depths, mu: (depths, depths, depths, depths), [0.0, 1000.0], 0.25, (0.1,))
+    with pytest.raises(ConfigError) as error:
+        async with build_daemon(config, model=model):
+            pass
+    assert error.value.key == "sources.opcua"
+    assert "pip install 'tdmon[opcua]'" in error.value.reason
