@@ -363,3 +363,20 @@ async def test_without_asyncua_the_daemon_does_not_start(tmp_path: Path,
             pass
     assert error.value.key == "sources.opcua"
     assert "pip install 'tdmon[opcua]'" in error.value.reason
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--opcua", "opc.tcp://127.0.0.1:4840", "--speed", "max"],
+     "--opcua needs --speed N (real time x N): OPC UA has no flow control"),
+    (["--opcua", "tcp://127.0.0.1:4840"], "--opcua 'tcp://127.0.0.1:4840': expected "
+                                          "opc.tcp://HOST:PORT"),
+    (["--opcua", "opc.tcp://127.0.0.1:4840", "--wits0", "tcp://127.0.0.1:5001"],
+     "give one of --wits0 and --opcua"),
+])
+def test_publish_mistakes_are_one_line(capsys: pytest.CaptureFixture[str], args: list[str],
+                                       message: str) -> None:
+    from tdmon.cli import main
+
+    assert main(["publish", str(REPLAY), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
