@@ -100,6 +100,7 @@ class OpcUaRigServer:
         self.steps_written = 0
         self.subscriptions: set[int] = set()
         self._server: Any = None
+        self._ua: Any = None  # asyncua.ua, once entered
         self._nodes: dict[str, Any] = {}
         self._factors = {channel: conversion(CHANNEL_UNITS[channel][0], SERVED_UNITS[channel][0])
                          for channel in self.channels}
@@ -121,7 +122,7 @@ class OpcUaRigServer:
 
     async def __aenter__(self) -> OpcUaRigServer:
         asyncua = import_asyncua()
-        ua = asyncua.ua
+        ua = self._ua = asyncua.ua
         from asyncua.common.callback import CallbackType
 
         server = asyncua.Server(user_manager=_Users(self.users) if self.users else None)
@@ -188,8 +189,7 @@ class OpcUaRigServer:
     async def write(self, step: Step) -> None:
         """Write the step's values (SI, converted to :data:`SERVED_UNITS`) with the step's
         time as source timestamp; channels the server does not hold are left out."""
-        asyncua = import_asyncua()
-        ua = asyncua.ua
+        ua = self._ua
         stamp = datetime.fromtimestamp(step.t, UTC)
         now = datetime.now(UTC)
         for channel, value in step.values.items():
@@ -205,7 +205,7 @@ class OpcUaRigServer:
     async def write_status(self, channel: str, t: float, status: str) -> None:
         """Set ``channel``'s quality to ``status`` (e.g. ``"BadSensorFailure"``) at ``t``
         [Unix s], without a value: a rig's sensor failing."""
-        ua = import_asyncua().ua
+        ua = self._ua
         await self._server.write_attribute_value(self._nodes[channel].nodeid, ua.DataValue(
             StatusCode=ua.StatusCode(getattr(ua.StatusCodes, status)),
             SourceTimestamp=datetime.fromtimestamp(t, UTC), ServerTimestamp=datetime.now(UTC)))

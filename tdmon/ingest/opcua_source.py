@@ -94,8 +94,9 @@ class OpcUaSource:
     ----------
     config : the ``[sources.opcua]`` section
     topics : channel -> full topic of its samples (``<prefix>/<topic>``)
-    max_pending : notifications held for the pipeline before the subscription's own queue
-        takes the rest (beyond that asyncua drops the oldest and the source reconnects)
+    max_pending : notifications held for the pipeline; as many more wait in the
+        subscription's own queue, and a pipeline further behind than that counts as a lost
+        connection (asyncua's DISCONNECT overflow policy): the source fails and is reopened
     """
 
     name = "opcua"
