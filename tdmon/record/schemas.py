@@ -30,7 +30,7 @@ DRAFT: Final = "https://json-schema.org/draft/2020-12/schema"
 
 TOPIC_PREFIX: Final = "/tdmon/"
 
-SOURCES: Final = ("mqtt", "zenoh", "mcap", "wits0")
+SOURCES: Final = ("mqtt", "zenoh", "mcap", "wits0", "opcua")
 PAYLOAD_ENCODINGS: Final = ("utf-8", "base64")
 # The enumerations of the vocabulary, as plain strings (the schema is serialised to JSON).
 RIG_STATES: Final = tuple(state.value for state in RigState)
