@@ -178,8 +178,9 @@ _NAME_TABLE: dict[str, tuple[float, Dimension]] = {
     "g": (1e-3, MASS), "t": (1e3, MASS), "tonne": (1e3, MASS),
     "lb": (_POUND, MASS), "lbm": (_POUND, MASS), "lbs": (_POUND, MASS),
     # time
-    "s": (1.0, TIME), "sec": (1.0, TIME), "min": (60.0, TIME), "h": (3600.0, TIME),
-    "hr": (3600.0, TIME), "d": (86400.0, TIME), "day": (86400.0, TIME),
+    "s": (1.0, TIME), "sec": (1.0, TIME), "second": (1.0, TIME), "min": (60.0, TIME),
+    "minute": (60.0, TIME), "h": (3600.0, TIME), "hr": (3600.0, TIME), "hour": (3600.0, TIME),
+    "d": (86400.0, TIME), "day": (86400.0, TIME),
     # force: kgf and tf are a kilogram and a tonne under standard gravity, kip 1000 lbf
     "N": (1.0, FORCE), "lbf": (_POUND_FORCE, FORCE), "kip": (1e3 * _POUND_FORCE, FORCE),
     "kgf": (GRAVITY, FORCE), "tf": (1e3 * GRAVITY, FORCE), "kdaN": (1e4, FORCE),

@@ -329,6 +329,12 @@ class OpcUaConfig(_Model):
                 if getattr(self, key) is None:
                     raise CrossFieldError(key, f"security policy '{self.security_policy}' "
                                           "needs the client's certificate and private_key")
+        self._check_password()
+        self._resolve_files((info.context or {}).get("base_dir"))
+        return self
+
+    def _check_password(self) -> None:
+        """One way to give the password, with a user name; its variable set."""
         given = [key for key in ("password", "password_env", "password_file")
                  if getattr(self, key) is not None]
         if len(given) > 1:
@@ -336,22 +342,25 @@ class OpcUaConfig(_Model):
                                   f"password_file, not {' and '.join(given)}")
         if given and self.username is None:
             raise CrossFieldError("username", f"{given[0]} needs a username")
-        base = (info.context or {}).get("base_dir")
+        if self.password_env is not None and self.password_env not in os.environ:
+            raise CrossFieldError("password_env",
+                                  f"environment variable {self.password_env} is not set")
+
+    def _resolve_files(self, base: str | Path | None) -> None:
+        """Certificate, key and password files relative to the daemon file, and there."""
+        if base is None:
+            return
         for key in ("certificate", "private_key", "server_certificate", "password_file"):
             path = getattr(self, key)
             if path is None:
                 continue
-            if base is not None and not path.is_absolute():
+            if not path.is_absolute():
                 path = Path(base) / path
                 object.__setattr__(self, key, path)
-            if base is not None and not path.is_file():
+            if not path.is_file():
                 raise CrossFieldError(key, f"no such file: {path}")
-            if key == "password_file" and base is not None:
+            if key == "password_file":
                 warn_if_readable_by_others(path, "sources.opcua.password_file")
-        if self.password_env is not None and self.password_env not in os.environ:
-            raise CrossFieldError("password_env",
-                                  f"environment variable {self.password_env} is not set")
-        return self
 
     def resolved_password(self) -> str | None:
         """The password from ``password``, the ``password_env`` variable or the first line of

@@ -38,15 +38,15 @@ UNECE_NAMESPACE: Final = "http://www.opcfoundation.org/UA/units/un/cefact"
 UNECE_UNITS: Final[Mapping[str, str]] = {
     "NEW": "N", "B47": "kN", "C78": "lbf", "NU": "N*m", "B48": "kN*m", "85": "ft*lbf",
     "MTR": "m", "FOT": "ft", "PAL": "Pa", "KPA": "kPa", "BAR": "bar", "PS": "psi",
-    "RPM": "revolution/minute", "M46": "revolution/minute", "2A": "rad/s",
-    "MQS": "m**3/s", "MQH": "m**3/h", "L2": "L/min", "G2": "gallon/minute",
+    "RPM": "rpm", "M46": "rpm", "2A": "rad/s",
+    "MQS": "m**3/s", "MQH": "m**3/h", "L2": "L/min", "G2": "gpm",
     "KMQ": "kg/m**3", "GE": "lb/gallon", "CEL": "degC", "FAH": "degF", "KEL": "K",
 }
 
 # DisplayName spellings (UNECE symbols) that tdmon.units does not read as they are
 _SYMBOLS: Final[Mapping[str, str]] = {
-    "°C": "degC", "°F": "degF", "r/min": "revolution/minute", "rpm": "revolution/minute",
-    "lbf/in²": "psi", "l/min": "L/min", "gal (US) /min": "gallon/minute",
+    "°C": "degC", "°F": "degF", "r/min": "rpm", "rpm": "rpm",
+    "lbf/in²": "psi", "l/min": "L/min", "gal (US) /min": "gpm",
     "lb/gal (US)": "lb/gallon",
 }
 

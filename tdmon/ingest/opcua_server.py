@@ -49,7 +49,7 @@ SERVED_UNITS: Final[Mapping[str, tuple[str, str, str]]] = {
     "bit_depth": ("m", "MTR", "m"),
     "hole_depth": ("m", "MTR", "m"),
     "block_position": ("m", "MTR", "m"),
-    "rpm": ("revolution/minute", "RPM", "r/min"),
+    "rpm": ("rpm", "RPM", "r/min"),
     "flow_in": ("L/min", "L2", "l/min"),
     "spp": ("bar", "BAR", "bar"),
     "wob": ("kN", "B47", "kN"),

@@ -140,13 +140,13 @@ RIG_ACTIVITY_MNEMONICS: Final = frozenset({"rigactivitycode"})
 #: Rotation rates: WITSML's ``c/s`` (cycles per second), ``rpm`` and ``1/min`` are revolutions,
 #: which pint must be told (its ``c`` is the speed of light, and ``1/min`` would be radians).
 WITSML_UNITS: Final[Mapping[str, str]] = {
-    "c/s": "revolution/second", "rpm": "revolution/minute", "1/min": "revolution/minute",
-    "rev/min": "revolution/minute", "1/s": "revolution/second",
+    "c/s": "rps", "rpm": "rpm", "1/min": "rpm",
+    "rev/min": "rpm", "1/s": "rps",
     "N.m": "N*m", "kN.m": "kN*m", "daN.m": "daN*m", "ft.lbf": "ft*lbf",
     "kft.lbf": "kft*lbf", "lbf.ft": "lbf*ft", "klbf.ft": "klbf*ft",
-    "kkgf": "kkgf", "tonf": "metric_ton_force", "kdaN": "kN*10",
+    "kkgf": "kkgf", "tonf": "tf", "kdaN": "kN*10",
     "m3/s": "m**3/s", "m3/min": "m**3/min", "m3/h": "m**3/h", "L/min": "L/min",
-    "gpm": "gallon/minute", "galUS/min": "gallon/minute", "bbl/min": "oil_barrel/minute",
+    "gpm": "gpm", "galUS/min": "gpm", "bbl/min": "bbl/min",
     "ft3/min": "ft**3/min",
     "kg/m3": "kg/m**3", "g/cm3": "g/cm**3", "kg/L": "kg/L", "lbm/galUS": "lb/gallon",
     "ppg": "ppg", "sg": "sg", "SG": "sg", "lbm/ft3": "lb/ft**3",

@@ -229,7 +229,7 @@ async def test_node_ids_browse_paths_namespace_uris_and_missing_nodes() -> None:
                                       "BadNodeIdUnknown")
     for channel, value, unit in (("hookload", 1000.0, "kN"), ("torque", 20.0, "kN*m"),
                                  ("rpm", 3.0 * 60 / (2 * 3.141592653589793),
-                                  "revolution/minute")):
+                                  "rpm")):
         first, *steps = got[channel]
         assert first["status"] == "BadWaitingForInitialData" and "error" in first
         assert [s["t"] for s in steps] == [T0, T0 + 1, T0 + 2]
@@ -350,7 +350,7 @@ def test_publish_serves_a_replay_to_a_subscriber(free_tcp_port: Callable[[], int
 async def test_without_asyncua_the_daemon_does_not_start(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     from tdmon.daemon.build import build_daemon
-    from tdmon.daemon.monitor import GridLoadModel
+    from tdmon.daemon.steps.monitor import GridLoadModel
 
     monkeypatch.setitem(sys.modules, "asyncua", None)  # what an install without it gives
     config = parse_daemon_config({"prefix": "rig/T", "sources": {"opcua": {

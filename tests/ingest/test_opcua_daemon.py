@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from tdmon.config.daemon import DaemonConfig, parse_daemon_config
 from tdmon.daemon.build import build_daemon
-from tdmon.daemon.monitor import GridLoadModel
+from tdmon.daemon.steps.monitor import GridLoadModel
 from tdmon.daemon.supervisor import Backoff
 from tdmon.ingest.opcua_server import OpcUaRigServer, OpcUaSender, step_payload
 from tdmon.ingest.publish import publish, recording_messages

@@ -230,7 +230,7 @@ def test_reader_streams_blocks_then_rows() -> None:
 
 
 def test_unit_table() -> None:
-    assert pint_unit("c/s") == "revolution/second"
+    assert pint_unit("c/s") == "rps"
     assert pint_unit("kN.m") == "kN*m"
     assert pint_unit("g/cm3") == "g/cm**3"
     assert pint_unit("unitless") is None
