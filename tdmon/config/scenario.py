@@ -175,9 +175,11 @@ class NoiseTable(NoiseConfig):
     @classmethod
     def _absolute_per_channel(cls, value: Any, info: ValidationInfo) -> Any:
         if (info.context or {}).get(UNITS_REQUIRED) and value not in (0, 0.0):
-            raise ValueError(f"the {info.field_name} is in each channel's unit: give it per "
-                             f"channel, e.g. [noise.channels.torque] {info.field_name} = "
-                             "\"0.5 kN m\"")
+            what, example = (("absolute noise", '[noise.channels.bit_depth] absolute = "5 mm"')
+                             if info.field_name == "absolute" else
+                             ("zero offset", '[noise.channels.torque] offset = "0.5 kN m"'))
+            raise ValueError(f"the {what} is in each channel's unit: give it per channel, "
+                             f"e.g. {example}")
         return value
 
     @field_validator("channels")
