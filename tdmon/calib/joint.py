@@ -40,14 +40,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tdmon.calib.frozen import evolve
 from tdmon.calib.kalman import KalmanState, Linearisation, iterated_update, predict
 from tdmon.calib.windows import Window
 from tdmon.errors import ModelError
@@ -267,7 +266,7 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
             gated += 1
     recent = [r for r in recent if window.t_end - r[0] <= settings.horizon
               and abs(depth - r[1]) <= settings.horizon_depth]
-    return evolve(state, t=window.t_end, bit_depth=depth, recent=tuple(recent), gated=gated)
+    return replace(state, t=window.t_end, bit_depth=depth, recent=tuple(recent), gated=gated)
 
 
 @dataclass(frozen=True)

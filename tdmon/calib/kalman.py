@@ -26,13 +26,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Generic, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-
-from tdmon.calib.frozen import evolve
 
 __all__ = [
     "IteratedUpdate",
@@ -96,7 +94,7 @@ def predict(state: S, process_std: ArrayLike) -> S:
     # diagonal would (-0.0 becomes 0.0), then the diagonal takes q^2
     covariance = state.covariance + 0.0
     covariance.flat[::state.mean.size + 1] += q**2
-    return evolve(state, covariance=covariance)
+    return replace(state, covariance=covariance)
 
 
 #: A state of more components than this takes the Joseph form multiplied out, O(n^2) (the
@@ -154,8 +152,8 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
         covariance = a @ state.covariance @ a.T + noise_variance * (column * gain)
     symmetric = covariance + covariance.T
     symmetric *= 0.5
-    return evolve(state, mean=mean, covariance=symmetric, updates=state.updates + 1,
-                  innovation=innovation, innovation_variance=s)
+    return replace(state, mean=mean, covariance=symmetric, updates=state.updates + 1,
+                   innovation=innovation, innovation_variance=s)
 
 
 def _mean_step(state: KalmanState, measured: float, predicted: float, h: Array,

@@ -21,14 +21,13 @@ results are keyed like the family's own arguments so ``FrictionModel(family, par
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.calib import kalman
 from tdmon.calib.backcalc import base_friction, window_measurement
-from tdmon.calib.frozen import evolve
 from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
@@ -169,8 +168,8 @@ def _seen(state: MuTState, effective_temperature: float | None) -> MuTState:
     [degC] (unchanged when None or not finite)."""
     if effective_temperature is None or not math.isfinite(effective_temperature):
         return state
-    return evolve(state, temperature_min=min(state.temperature_min, effective_temperature),
-                  temperature_max=max(state.temperature_max, effective_temperature))
+    return replace(state, temperature_min=min(state.temperature_min, effective_temperature),
+                   temperature_max=max(state.temperature_max, effective_temperature))
 
 
 def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Array,
