@@ -61,6 +61,7 @@ from tdmon.calib.scatter import Scatter, add_window, scatter_std
 from tdmon.calib.weightcheck import block_weight_alarm, weight_check
 from tdmon.calib.windows import Window, add_sample, close
 from tdmon.errors import FitError, ModelError
+from tdmon.messages import estimate_message
 from tdmon.model.friction import FrictionModel
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Fluid
@@ -390,12 +391,11 @@ class FrictionEstimator:
         except ModelError:
             difference = math.nan
         operation = OPERATION_FOR_STATE.get(window.state, window.state)
-        out.append(Output("estimate", {
-            "t": window.t_end, "kind": EstimateKind.JOINT, "operation": str(operation),
-            "mu": fields.pop("mu"), "mu_std": fields.pop("mu_std"),
-            "bit_depth_m": window.bit_depth, **fields,
-            "weight_difference_N": difference if math.isfinite(difference) else None,
-            "scatter": taus, "mu_single": self._single_frictions(w)}))
+        out.append(Output("estimate", estimate_message(
+            window.t_end, EstimateKind.JOINT, operation, fields.pop("mu"), fields.pop("mu_std"),
+            bit_depth_m=window.bit_depth, **fields,
+            weight_difference_N=difference if math.isfinite(difference) else None,
+            scatter=taus, mu_single=self._single_frictions(w))))
         mismatch, alarm = mismatch_alarm(
             w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
             float(joint.mean[1]), float(fields["weight_factor_std"]), float(joint.mean[0]),

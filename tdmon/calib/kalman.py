@@ -105,7 +105,7 @@ _EXPANDED_FROM = 16
 
 
 def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
-           noise_variance: float, *, bounds: tuple[float, float] | None = None) -> S:
+           noise_variance: float, *, bounds: tuple[ArrayLike, ArrayLike] | None = None) -> S:
     """Kalman update with one scalar measurement, Joseph form; bad input returns ``state``.
 
     Parameters
@@ -115,7 +115,8 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     predicted : the measurement model at the prior mean, ``h(x)`` [units of the measurement]
     jacobian : ``H = dh/dx``, shape (n,) [units of the measurement per unit of the state]
     noise_variance : measurement variance ``R`` > 0 [units of the measurement squared]
-    bounds : the posterior mean is clipped to these [units of the state] (None: not clipped)
+    bounds : the posterior mean is clipped to these, one for all components or one per
+        component [units of the state] (None: not clipped)
 
     Returns
     -------
@@ -157,7 +158,7 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
 
 
 def _mean_step(state: KalmanState, measured: float, predicted: float, h: Array,
-               noise_variance: float, bounds: tuple[float, float] | None
+               noise_variance: float, bounds: tuple[ArrayLike, ArrayLike] | None
                ) -> tuple[Array, Array, float, float, Array] | None:
     """The first half of :func:`update`: (posterior mean, gain, innovation, its variance,
     ``P H^T``), or None where :func:`update` keeps the prior. The covariance, the costly half
@@ -236,7 +237,7 @@ class IteratedUpdate(Generic[S, L]):
 
 def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], *,
                     iterations: int = 1, gate: float | None = None,
-                    bounds: tuple[float, float] | None = None) -> IteratedUpdate[S, L]:
+                    bounds: tuple[ArrayLike, ArrayLike] | None = None) -> IteratedUpdate[S, L]:
     """Iterated extended Kalman update with one nonlinear scalar measurement.
 
     Parameters
@@ -297,7 +298,8 @@ def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], 
 
 
 def update_batch(state: S, measured: ArrayLike, predicted: ArrayLike, jacobian: ArrayLike,
-                 noise_variance: ArrayLike, *, bounds: tuple[float, float] | None = None) -> S:
+                 noise_variance: ArrayLike, *,
+                 bounds: tuple[ArrayLike, ArrayLike] | None = None) -> S:
     """Update with several linear scalar measurements whose errors are independent.
 
     Parameters
