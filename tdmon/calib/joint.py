@@ -48,7 +48,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tdmon.calib.kalman import KalmanState, Linearisation, iterated_update, predict
-from tdmon.calib.parameters import JOINT_PARAMETERS, WEIGHT_FACTOR, EstimatedParameters
+from tdmon.calib.parameters import (
+    JOINT_PARAMETERS,
+    WEIGHT_FACTOR,
+    EstimatedParameters,
+    join_words,
+)
 from tdmon.calib.windows import Window
 from tdmon.errors import ModelError
 from tdmon.model.torque_drag import WellModel
@@ -326,7 +331,9 @@ def identifiability(state: JointState, settings: JointSettings) -> Identifiabili
     moving = {k for k in kinds if k in ("pick_up", "slack_off")}
     weighing = {k for k in kinds if k not in moving}
     if not kinds:
-        statement = f"no window yet: {friction} and {parameters.labels()} are the prior"
+        statement = ("no window yet: "
+                     + join_words([friction, *(p.label for p in parameters.others)])
+                     + " are the prior")
     elif len(moving) == 1 and not weighing:
         which = next(iter(moving)).replace("_", "-")
         what = first.key.replace("_", " ")

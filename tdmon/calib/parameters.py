@@ -301,7 +301,7 @@ class EstimatedParameters(Sequence[EstimatedParameter]):
             add(self.correlation_field(i, j), "number",
                 f"correlation of {self.parameters[i].label} and {self.parameters[j].label} [-]")
         add("identifiable", "boolean",
-            f"{friction.noun} and {self.nouns()} separated by the data")
+            join_words([friction.noun, *(p.noun for p in others)]) + " separated by the data")
         add("identifiability", "text", "the verdict in words")
         add(self.joint_field, "number", f"{friction.label} of the joint estimate [-]")
         add(f"{self.joint_field}_std", "number", "its standard deviation [-]")
@@ -317,10 +317,6 @@ class EstimatedParameters(Sequence[EstimatedParameter]):
     def nouns(self) -> str:
         """What the parameters beside the friction measure, joined: ``string weight``."""
         return join_words(p.noun for p in self.others)
-
-    def labels(self) -> str:
-        """The names of the parameters beside the friction, joined: ``weight factor``."""
-        return join_words(p.label for p in self.others)
 
 
 def join_words(words: Iterable[str]) -> str:

@@ -286,10 +286,11 @@ def joint_verdict(estimates: Sequence[dict[str, Any]],
     parameter's value and standard deviation under its name, its words from its declaration
     (:mod:`tdmon.calib.parameters`)."""
     friction, nouns = parameters.friction, parameters.nouns()
+    together = join_words([friction.noun, *(p.noun for p in parameters.others)])
     joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
     if not joint:
         return {"status": "none", "estimates": 0,
-                "words": f"No joint estimate of {friction.noun} and {nouns} in this recording "
+                "words": f"No joint estimate of {together} in this recording "
                          "(calibration off, or no window)."}
     separated = [e for e in joint if e.get("identifiable")]
     last = (separated or joint)[-1]
@@ -314,13 +315,13 @@ def joint_verdict(estimates: Sequence[dict[str, Any]],
             reading = parameter.read(value)
             read.append(text if reading is None else f"{reading} ({text})")
         verdict["words"] = (
-            f"{friction.noun.capitalize()} and {nouns} separated in {len(separated)} of "
+            f"{together[:1].upper()}{together[1:]} separated in {len(separated)} of "
             f"{len(joint)} updates; the last at {_num(last.get('bit_depth_m')):.0f} m MD: "
             f"{friction.text(_num(last.get('mu')), _num(last.get('mu_std')))} with "
             f"{join_words(read)}.")
     else:
         verdict["words"] = (
-            f"{friction.noun.capitalize()} and {nouns} could not be separated ({len(joint)} "
+            f"{together[:1].upper()}{together[1:]} could not be separated ({len(joint)} "
             f"updates): {last.get('identifiability')}; the {friction.label}s above assume the "
             f"modelled {nouns}.")
     return verdict
