@@ -37,7 +37,6 @@ __all__ = [
     "classify",
     "detect",
     "detect_series",
-    "with_block_weight",
 ]
 
 STATES: tuple[RigState, ...] = tuple(RigState)
@@ -104,22 +103,6 @@ class RigStateThresholds:
     settle_samples: int = 1
     hang_tolerance: float = 20e3
     hang_tolerance_fraction: float = 0.04
-
-
-def with_block_weight(thresholds: RigStateThresholds, block_weight: float
-                      ) -> RigStateThresholds:
-    """``dataclasses.replace(thresholds, block_weight=block_weight)`` at a seventh of its cost.
-
-    The calibration hands the rig-state detector the block weight it learns in the slips, a
-    new value with almost every in-slips sample. :class:`RigStateThresholds` has no
-    ``__post_init__`` and every field is an ``__init__`` argument, so a copy of its fields with
-    the new block weight is exactly what ``replace`` builds (a test keeps it so).
-    """
-    copied = object.__new__(RigStateThresholds)
-    fields = copied.__dict__
-    fields.update(thresholds.__dict__)
-    fields["block_weight"] = block_weight
-    return copied
 
 
 HANGING_STATES: frozenset[RigState] = frozenset(
