@@ -334,7 +334,9 @@ def identifiability(state: JointState, settings: JointSettings) -> Identifiabili
         statement = ("no window yet: "
                      + join_words([friction, *(p.label for p in parameters.others)])
                      + " are the prior")
-    elif len(moving) == 1 and not weighing:
+    elif len(moving) == 1 and not weighing and first.name == WEIGHT_FACTOR.name:
+        # what pick-up or slack-off alone leaves open for the weight (another parameter says
+        # what separates it when its measurement model is written)
         which = next(iter(moving)).replace("_", "-")
         what = first.key.replace("_", " ")
         statement = (f"{which} only: {what} and {friction} not separable, {friction} given "

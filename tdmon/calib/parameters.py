@@ -109,6 +109,9 @@ class EstimatedParameter:
         if self.shown not in get_args(Shown):
             raise ValueError(f"estimated parameter {self.name}: shown {self.shown!r} is not one "
                              f"of {', '.join(get_args(Shown))}")
+        if self.unit != ("N" if self.shown == "force" else "1"):
+            raise ValueError(f"estimated parameter {self.name}: shown as {self.shown}, its unit "
+                             f"is {'N' if self.shown == 'force' else '1'}, not {self.unit!r}")
         low, high = self.bounds
         numbers = (self.prior, self.prior_std, self.drift_per_hour, self.drift_per_100m, low,
                    high)

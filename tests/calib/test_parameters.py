@@ -104,6 +104,8 @@ def test_a_declaration_says_everything_and_says_it_once() -> None:
         EstimatedParameter(**{k: v for k, v in vars(OFFSET).items() if k != "truth"})
     with pytest.raises(ValueError, match="shown 'kN'"):
         replace(OFFSET, shown="kN")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="its unit is N, not 'kN'"):
+        replace(OFFSET, unit="kN")
     with pytest.raises(ValueError, match="bounds around the prior"):
         replace(OFFSET, bounds=(1.0, 2e5))
     with pytest.raises(ValueError, match="positive prior_std"):
