@@ -34,6 +34,7 @@ import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Final, Literal, NamedTuple, get_args, overload
 
 __all__ = [
@@ -290,6 +291,11 @@ class EstimatedParameters(Sequence[EstimatedParameter]):
         """The ``joint`` estimate's fields after the common ones (``t``, ``kind``,
         ``operation``, ``mu``, ``mu_std``) and ``bit_depth_m``, in the message's order, up to
         the estimator's own (``windows``, ``residuals`` and after)."""
+        return self._message_fields
+
+    @cached_property
+    def _message_fields(self) -> tuple[MessageField, ...]:
+        # made once per list: the estimator asks for them with every joint estimate
         friction, others = self.friction, self.others
         fields: list[MessageField] = []
 
