@@ -287,26 +287,6 @@ def test_stuck_torque_flags_only_windows_that_use_torque() -> None:
     assert rotating and all("torque_stuck" in w.flags and w.low_confidence for w in rotating)
 
 
-
-def test_with_block_weight_is_replace() -> None:
-    # the calibration's fast copy of the thresholds with a learnt block weight must stay what
-    # dataclasses.replace builds: no __post_init__ to skip, every field an __init__ argument
-    import dataclasses
-
-    from tdmon.calib.rigstate import with_block_weight
-
-    assert not hasattr(RigStateThresholds, "__post_init__")
-    assert all(f.init for f in dataclasses.fields(RigStateThresholds))
-    for thresholds in (RigStateThresholds(), TH,
-                       RigStateThresholds(block_weight=3e5, settle_samples=4, max_gap=9.0)):
-        copied = with_block_weight(thresholds, 412e3)
-        assert copied == dataclasses.replace(thresholds, block_weight=412e3)
-        assert copied.block_weight == 412e3 and thresholds.block_weight != 412e3
-        assert type(copied) is RigStateThresholds
-        with pytest.raises(dataclasses.FrozenInstanceError):
-            copied.block_weight = 1.0  # type: ignore[misc]
-
-
 def test_detector_values_are_built_frozen_compared_and_copied_like_dataclasses() -> None:
     import dataclasses
     import pickle

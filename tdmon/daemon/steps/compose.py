@@ -65,8 +65,8 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     setup = mu_t_setup(config, well_file, model.grid)
     cal = config.calibration
     settings = CalibrationSettings(mu_t_mode=setup.mode, joint=JointSettings(
-        weight_factor=cal.weight_factor, weight_factor_std=cal.weight_factor_std,
-        mismatch_tolerance=cal.weight_mismatch_tolerance))
+        mismatch_tolerance=cal.weight_mismatch_tolerance).with_prior(
+        "weight_factor", cal.weight_factor, cal.weight_factor_std))
     try:
         calibration = CalibrationStep(
             model, rig_state, settings, temperature=setup.temperature if setup.law else None,
