@@ -19,9 +19,9 @@ from tdmon.ingest.wits0_source import REJECT_TOPIC, Wits0Source
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for
 
 
-async def zenoh_source(wiring: Wiring, section: ZenohConfig) -> None:
+def zenoh_source(wiring: Wiring, section: ZenohConfig) -> None:
     """Subscribe to everything under the prefix on the section's session."""
-    session = await wiring.zenoh_session(section)
+    session = wiring.zenoh_session(section)
     key_expr = key_expr_for(wiring.config.prefix)
     ignore = (wiring.own_prefix,)
     max_buffer = wiring.config.queues.ingest
@@ -32,7 +32,7 @@ async def zenoh_source(wiring: Wiring, section: ZenohConfig) -> None:
     wiring.sources.append(SourceSpec("zenoh", open_zenoh))
 
 
-async def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
+def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
     """Subscribe to ``<prefix>/#`` on the section's broker."""
     subscribe = [f"{wiring.config.prefix}/#"]
     ignore = (wiring.own_prefix,)
@@ -45,7 +45,7 @@ async def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
     wiring.sources.append(SourceSpec("mqtt", open_mqtt))
 
 
-async def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
+def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
     """Replay a recording (a finite source: the daemon may stop when it is done)."""
     path = wiring.config.resolve(section.path)
     speed = None if section.speed == "max" else float(section.speed)
@@ -56,7 +56,7 @@ async def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
     wiring.sources.append(SourceSpec("mcap", open_mcap, finite=True))
 
 
-async def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
+def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
     """Read a rig's WITS0 feed; its items go in as samples on the configured channel topics
     (docs/wits0.md). The item map is checked here, where the codec's unit table is."""
     config = wiring.config

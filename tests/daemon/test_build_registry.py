@@ -134,19 +134,19 @@ async def test_a_failed_build_finishes_the_recording(tmp_path: Path) -> None:
     assert is_finished(recording)
 
 
-async def test_a_new_source_is_one_row(tmp_path: Path) -> None:
+def test_a_new_source_is_one_row(tmp_path: Path) -> None:
     config = make_config({"sources": MCAP}, tmp_path)
 
-    async def tagged(wiring: Wiring, section: McapSourceConfig) -> None:
+    def tagged(wiring: Wiring, section: McapSourceConfig) -> None:
         path = wiring.config.resolve(section.path)
         wiring.sources.append(SourceSpec(f"tagged {path.name}", lambda: McapSource(path)))
 
-    async def never(wiring: Wiring, section: ZenohConfig) -> None:
+    def never(wiring: Wiring, section: ZenohConfig) -> None:
         raise AssertionError("built a section that is not configured")
 
     table: Table = {"tagged": Entry(lambda c: c.sources.mcap, tagged),
              "absent": Entry(lambda c: c.sources.zenoh, never)}
     wiring = Wiring(config, Stats())
-    await wire(table, wiring)
+    wire(table, wiring)
     assert [spec.name for spec in wiring.sources] == ["tagged replay.mcap"]
     assert wiring.sinks == [] and wiring.connected == []
