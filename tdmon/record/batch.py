@@ -70,9 +70,12 @@ class Encoded(NamedTuple):
     """The log time of each of ``datas`` [ns since the Unix epoch]."""
     nonfinite: int
     """How many of them had a NaN or an infinity, written as ``null``."""
-    refused: list[str]
+    refused: Sequence[str]
     """Why each message left out is not JSON (a value no encoder takes, a row that makes no
     message)."""
+
+
+_NOTHING_REFUSED: Final[Sequence[str]] = ()
 
 
 class Batch:
@@ -144,14 +147,20 @@ class Batch:
         if held is not None:
             datas = held(self.items)
             if datas is not None:
-                return Encoded(datas, self.log_times_ns, 0, [])
+                return Encoded(datas, self.log_times_ns, 0, _NOTHING_REFUSED)
         try:
             messages = self.messages()
+            if len(messages) == 1:  # a step's message: several per frame
+                message = messages[0]
+                data = _dumps(message)
+                nonfinite = b"null" in data and has_nonfinite(message)
+                return Encoded([data], self.log_times_ns, int(nonfinite), _NOTHING_REFUSED)
             # every message in one C loop; numpy values through ``default``
             datas = list(map(_dumps, messages))
         except Exception:  # a message orjson refuses, an item that makes no message
             return self._encode_each()
-        return Encoded(datas, self.log_times_ns, _count_nonfinite(messages, datas), [])
+        return Encoded(datas, self.log_times_ns, _count_nonfinite(messages, datas),
+                       _NOTHING_REFUSED)
 
     def _encode_each(self) -> Encoded:
         """``_encode`` one message at a time: those that are not JSON are left out."""

@@ -33,7 +33,6 @@ import shutil
 import threading
 import time
 import weakref
-from collections import Counter
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
@@ -436,10 +435,11 @@ class McapRecorder(Recorder):
         ``flush_interval_s`` later): its messages must not be changed after this. Never raises
         for I/O problems: see ``error``/``stats``/``on_alarm``.
         """
+        count = len(batch.items)
         with self._lock:
             self._queue.append(batch)
-            self._queued += len(batch)
-            self._accepted += len(batch)
+            self._queued += count
+            self._accepted += count
             if self._queued >= BATCH_SIZE:
                 self._write_queued()
         if self._pending_alarms:
@@ -525,20 +525,24 @@ class McapRecorder(Recorder):
             return
         stats = self._stats
         channels = self._channels
-        per_topic: Counter[str] = Counter()
+        per_topic: dict[str, int] = {}
+        written = 0
         # The writer reports a failed write (only ever when a chunk goes to disk) through the
         # output, and refuses every write after it: looked at once per queue, whose messages
         # are then all lost with what the file held unflushed.
         for batch in queue:
             datas, times, nonfinite, refused = batch.encoded()
-            stats.nonfinite_replaced += nonfinite
+            if nonfinite:
+                stats.nonfinite_replaced += nonfinite
             for why in refused:
                 self._count_unencodable(why)
-            log_message = channels.get(batch.topic) or self._channel(batch.topic)
+            topic = batch.topic
+            log_message = channels.get(topic) or self._channel(topic)
             for data, log_time_ns in zip(datas, times, strict=True):
                 log_message(data, log_time_ns)
-            per_topic[batch.topic] += len(datas)
-        self._written(current, now, per_topic, per_topic.total())
+            per_topic[topic] = per_topic.get(topic, 0) + len(datas)
+            written += len(datas)
+        self._written(current, now, per_topic, written)
 
     def _count_unencodable(self, why: str) -> None:
         """One message that could not be recorded at all (``unencodable`` and ``lost``)."""
