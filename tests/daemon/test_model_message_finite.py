@@ -74,7 +74,7 @@ def test_the_encoding_finds_every_non_finite_number_and_only_those(
     # twice in one batch, beside a message with a null and no NaN: each found where it is
     plain = {"t": 1.0, "residual": {"hookload_N": None}}
     encoded = Batch("/tdmon/model", [0, 1, 2], [message, plain, message]).encoded()
-    assert encoded.refused == [] and len(encoded.datas) == 3
+    assert not encoded.refused and len(encoded.datas) == 3
     assert encoded.nonfinite == 2 * _refused_by_json(message)
     back = json.loads(encoded.datas[0])
     assert not _refused_by_json(back)  # NaN and infinities as null: strict JSON

@@ -124,7 +124,7 @@ def test_non_finite_numbers_become_null_and_are_counted() -> None:
             for data in encoded.datas]
     assert back == [{"a": None, "b": [1.0, None], "c": {"d": None}}, messages[1],
                     {"a": [2.0, None]}]
-    assert encoded.nonfinite == 2 and encoded.refused == []
+    assert encoded.nonfinite == 2 and not encoded.refused
 
 
 def test_numpy_values_are_written_as_their_numbers() -> None:
