@@ -56,8 +56,10 @@ from tdmon.config.daemon import (
     SourcesConfig,
     load_daemon_config,
 )
+from tdmon.record.batch import Batch
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import RecordedMessage
+from tdmon.record.sink import Sink as RecordSink
 from tdmon.record.synthetic import synthetic_messages
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -166,18 +168,16 @@ def rerun_views(stream: list[RecordedMessage]) -> float:
         return time.perf_counter() - start
 
 
-class NullSink:
-    """Takes every message and does nothing: the daemon then builds the raw/sample messages
-    it skips when no sink wants them, so this separates that cost from the recorder's own."""
+class NullSink(RecordSink):
+    """Takes every message, makes it and does nothing else: the raw/sample messages are
+    otherwise not made when no sink wants them, so this separates that cost from the
+    recorder's own."""
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
+    def write_batch(self, batch: Batch) -> None:
+        batch.messages()
 
 
-class BareWriter:
+class BareWriter(RecordSink):
     """The floor of recording in the daemon's process: each message encoded with orjson and
     handed to foxglove-sdk's MCAP writer (zstd level 1 in 1 MiB chunks, as the recorder), and
     nothing else: no queue, counters, check for NaN, flushes, rotation or failure handling."""
@@ -204,13 +204,10 @@ class BareWriter:
                                               context=self._context).base.log
         return log
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        self._log(topic)(self._dumps(message), log_time_ns)
-
-    def write_many(self, topic: str, log_times_ns: list[int],
-                   messages: list[dict[str, Any]]) -> None:
-        log = self._log(topic)
-        for data, log_time_ns in zip(map(self._dumps, messages), log_times_ns, strict=True):
+    def write_batch(self, batch: Batch) -> None:
+        log = self._log(batch.topic)
+        for data, log_time_ns in zip(map(self._dumps, batch.messages()), batch.log_times_ns,
+                                     strict=True):
             log(data, log_time_ns)
 
     def close(self) -> None:

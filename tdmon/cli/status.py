@@ -15,12 +15,14 @@ import time
 from datetime import datetime
 from typing import Any, Final, TextIO
 
+from tdmon.record.sink import MessageSink
+
 __all__ = ["StatusLine"]
 
 _SEVERE: Final = ("warning", "critical")
 
 
-class StatusLine:
+class StatusLine(MessageSink):
     """Collects the latest daemon results and prints one status every ``every`` seconds.
 
     Parameters
@@ -29,8 +31,7 @@ class StatusLine:
     stream : where to print (stderr by default); a terminal gets one line rewritten in place
     """
 
-    topics: Final = frozenset({"/tdmon/state", "/tdmon/estimate", "/tdmon/alarm",
-                               "/tdmon/status"})
+    topics = frozenset({"/tdmon/state", "/tdmon/estimate", "/tdmon/alarm", "/tdmon/status"})
 
     def __init__(self, every: float, stream: TextIO | None = None) -> None:
         self.every = every

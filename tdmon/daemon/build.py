@@ -136,10 +136,10 @@ async def build_daemon(
     stats = Stats()
     wiring = Wiring(config, stats)
     try:
-        await wire(SINKS, wiring)
+        wire(SINKS, wiring)
         wiring.sinks.extend(extra_sinks)
-        await wire(SOURCES, wiring)
-        await wire(PUBLISHERS, wiring)
+        wire(SOURCES, wiring)
+        wire(PUBLISHERS, wiring)
         sources = wiring.sources
 
         pipeline = assemble_pipeline(config, well, steps, wiring.sinks, stats)

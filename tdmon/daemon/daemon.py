@@ -20,7 +20,7 @@ import asyncio
 import logging
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Callable, Iterable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -29,6 +29,7 @@ from tdmon.daemon.inbox import Inbox
 from tdmon.daemon.pipeline import Pipeline
 from tdmon.daemon.supervisor import Backoff, supervise
 from tdmon.ingest.types import RawMessage
+from tdmon.record.sink import Recorder
 from tdmon.vocabulary import ConnectionState
 
 log = logging.getLogger(__name__)
@@ -48,8 +49,8 @@ class SourceSpec:
 
 
 class ConnectedPublisher(Protocol):
-    """A sink that needs a supervised connection (e.g. MQTT): it queues in ``write`` and sends
-    in ``pump``."""
+    """A sink that needs a supervised connection (e.g. MQTT): it queues in ``write_batch`` and
+    sends in ``pump``."""
 
     name: str
 
@@ -59,31 +60,32 @@ class ConnectedPublisher(Protocol):
 
     async def drain(self, timeout: float) -> bool: ...
 
+    @property
+    def pending(self) -> int:
+        """Messages queued and not sent yet."""
+        ...
+
 
 class AckWindow:
-    """Acknowledgements waiting for the recorder to flush what they acknowledge.
+    """Acknowledgements waiting for the recorders to have what they acknowledge in their files.
 
-    ``recorders`` are the sinks that hold messages in memory before their file (they have
-    ``flush()`` and ``stats.flushes``); without any, a message is acknowledged as soon as it is
-    processed. Every ``check_s`` the window reads the recorders' flush count; when it has grown
-    since the previous reading, every acknowledgement that was already waiting at that reading
-    may go (the recorder's own flush, every ``[recorder] flush_interval``, came after those
-    messages were written). The broker sends only a limited number of unacknowledged messages
-    (mosquitto's ``max_inflight_messages``), so waiting for the next scheduled flush could
-    starve it; the window flushes the recorders itself when ``batch`` acknowledgements wait,
-    when at least ``idle_min`` wait and no message has come for ``idle_s`` (the broker is
-    waiting for us), or when the oldest has waited ``max_age_s``.
-
-    A recorder in another process (``durable_mark``, ``is_durable``, ``request_flush``: the
-    :class:`~tdmon.record.writer_process.RecorderProcess`) is never waited for: every
-    ``check_s`` the window notes a mark of what is waiting, asks for a flush instead of
-    flushing where the rules above would flush, and lets acknowledgements go once their mark
-    is in the file. Only ``force`` (shutdown) flushes and waits.
+    ``recorders`` are the flight recorders (:class:`~tdmon.record.sink.Recorder`; the list may
+    grow while the daemon runs, as a fleet's rigs appear); without any, a message is
+    acknowledged as soon as it is processed. The window never waits for a recorder: every
+    ``check_s`` it takes each recorder's mark of what was written (``durable_mark``), and lets
+    the acknowledgements that were waiting then go once every mark is in the file
+    (``is_durable``; the recorder's own flush, every ``[recorder] flush_interval``, puts it
+    there). The broker sends only a limited number of unacknowledged messages (mosquitto's
+    ``max_inflight_messages``), so waiting for the next scheduled flush could starve it: the
+    window asks the recorders for a flush (``request_flush``) when ``batch``
+    acknowledgements wait, when at least ``idle_min`` wait and no message has come for
+    ``idle_s`` (the broker is waiting for us), or when the oldest has waited ``max_age_s``.
+    Only ``force`` (shutdown) flushes, waits and acknowledges everything.
     """
 
-    def __init__(self, recorders: Iterable[Any], batch: int = 500, idle_s: float = 0.05,
+    def __init__(self, recorders: Sequence[Recorder], batch: int = 500, idle_s: float = 0.05,
                  idle_min: int = 16, max_age_s: float = 5.0, check_s: float = 0.05) -> None:
-        self.recorders = list(recorders)
+        self.recorders = recorders
         self.batch = batch
         self.idle_s = idle_s
         self.idle_min = idle_min
@@ -91,20 +93,13 @@ class AckWindow:
         self.check_s = check_s
         self._pending: deque[tuple[float, Callable[[], None]]] = deque()
         self._last_check = float("-inf")
-        self._flushes_seen = 0
-        self._covered = 0  # leading entries that were waiting when _flushes_seen was read
-        self._marked = bool(self.recorders) and all(
-            callable(getattr(r, "durable_mark", None)) for r in self.recorders)
-        # (leading entries waiting when the marks were taken, each recorder's mark then)
-        self._marks: deque[tuple[int, list[Any]]] = deque()
+        # (leading entries waiting when the marks were taken, each recorder and its mark)
+        self._marks: deque[tuple[int, list[tuple[Recorder, int]]]] = deque()
         self.acknowledged = 0
         self.forced_flushes = 0
 
     def __len__(self) -> int:
         return len(self._pending)
-
-    def flushes(self) -> int:
-        return sum(int(recorder.stats.flushes) for recorder in self.recorders)
 
     def add(self, acks: list[Callable[[], None]], now: float) -> None:
         """Acknowledgements of messages just written; released by :meth:`release`."""
@@ -114,56 +109,48 @@ class AckWindow:
         self._pending.extend((now, ack) for ack in acks)
 
     def release(self, now: float, idle: float, force: bool = False) -> None:
-        """Acknowledge what the recorders have flushed; flush them first when it is time
-        (``idle``: seconds since the last message arrived; ``force``: always)."""
-        pending = self._pending
+        """Acknowledge what the recorders have in their files; ask for a flush first when it
+        is time (``idle``: seconds since the last message arrived); with ``force``, flush,
+        wait and acknowledge everything."""
+        pending, marks = self._pending, self._marks
         if not pending:
             return
+        if force:
+            self._release_all()
+            return
+        self._mark(now, idle)
+        released = 0
+        while marks and all(recorder.is_durable(mark) for recorder, mark in marks[0][1]):
+            released = marks.popleft()[0]
+        if released:
+            for index, (waiting, taken) in enumerate(marks):
+                marks[index] = (waiting - released, taken)
+            self._ack([pending.popleft()[1] for _ in range(released)])
+
+    def _release_all(self) -> None:
+        """Flush every recorder, wait, and acknowledge everything pending."""
+        for recorder in self.recorders:
+            recorder.flush()  # a failed recorder flushes nothing: monitoring goes on
+        self.forced_flushes += 1
+        self._marks.clear()
+        self._ack([ack for _, ack in self._pending])
+        self._pending.clear()
+
+    def _mark(self, now: float, idle: float) -> None:
+        """Take the recorders' durability marks for what is pending, and ask them to flush
+        when a batch is due (full, idle, or its oldest too old)."""
+        pending, marks = self._pending, self._marks
         count = len(pending)
         due = (count >= self.batch or (idle >= self.idle_s and count >= self.idle_min)
                or now - pending[0][0] >= self.max_age_s)
-        if self._marked and not force:
-            self._release_marked(now, due)
-            return
-        if force or due:
-            for recorder in self.recorders:
-                recorder.flush()  # a failed recorder flushes nothing: monitoring goes on
-            self.forced_flushes += 1
-            acks = [ack for _, ack in pending]
-            pending.clear()
-            self._covered = 0
-            self._marks.clear()
-            self._ack(acks)
-            return
-        if now - self._last_check < self.check_s:
-            return
-        self._last_check = now
-        flushes = self.flushes()  # a snapshot of each recorder's counters: not per message
-        if flushes > self._flushes_seen:
-            acks = [pending.popleft()[1] for _ in range(self._covered)]
-            self._ack(acks)
-        self._flushes_seen = flushes
-        self._covered = len(pending)
-
-    def _release_marked(self, now: float, due: bool) -> None:
-        """``release`` for recorders in another process: marks, flush requests, no waiting."""
-        pending, marks = self._pending, self._marks
         if due or now - self._last_check >= self.check_s:
             self._last_check = now
-            if not marks or marks[-1][0] < len(pending):
-                marks.append((len(pending), [r.durable_mark() for r in self.recorders]))
+            if not marks or marks[-1][0] < count:
+                marks.append((count, [(r, r.durable_mark()) for r in self.recorders]))
             if due:
                 for recorder in self.recorders:
                     recorder.request_flush()
                 self.forced_flushes += 1
-        released = 0
-        while marks and all(r.is_durable(m) for r, m in zip(self.recorders, marks[0][1],
-                                                             strict=True)):
-            released = marks.popleft()[0]
-        if released:
-            for index, (count, taken) in enumerate(marks):
-                marks[index] = (count - released, taken)
-            self._ack([pending.popleft()[1] for _ in range(released)])
 
     def _ack(self, acks: list[Callable[[], None]]) -> None:
         for ack in acks:
@@ -172,14 +159,6 @@ class AckWindow:
             except Exception:  # a transport that cannot acknowledge resends: not fatal
                 log.debug("acknowledgement failed", exc_info=True)
         self.acknowledged += len(acks)
-
-
-def recorders_of(sinks: Iterable[Any]) -> list[Any]:
-    """The sinks that buffer before their file: a ``flush()`` and ``stats.flushes``."""
-    return [sink for sink in sinks
-            if callable(getattr(sink, "flush", None))
-            and isinstance(getattr(type(sink), "stats", None), property)
-            and hasattr(sink.stats, "flushes")]
 
 
 class Daemon:
@@ -210,7 +189,7 @@ class Daemon:
         self.connections: dict[str, str] = {}
         self.queue: Inbox | None = None
         self.started = asyncio.Event()
-        self.acks = AckWindow(())
+        self.acks = AckWindow([])
         self._accepting = True
         self._last_arrival = time.monotonic()
 
@@ -218,7 +197,7 @@ class Daemon:
         stop = stop or asyncio.Event()
         queue = Inbox(self.queue_size)
         self.queue = queue
-        self.acks = AckWindow(recorders_of(self.pipeline.sinks))
+        self.acks = AckWindow(self.pipeline.recorders)
         self._accepting = True
         source_tasks = [
             asyncio.create_task(self._supervise_source(spec, queue), name=f"source {spec.name}")
@@ -352,7 +331,7 @@ class Daemon:
         self.emit_status()
         for publisher in self.publishers:
             if not await publisher.drain(self.drain_timeout):
-                lost = int(getattr(publisher, "pending", 0))
+                lost = publisher.pending
                 self.pipeline.stats.dropped += lost
                 log.error("%s: %d results unsent after %.0f s at shutdown, dropped",
                           publisher.name, lost, self.drain_timeout)

@@ -4,8 +4,10 @@ A fleet daemon file (``[[rigs]]`` and/or ``[fleet]``, docs/daemon.md "Many rigs"
 ``prefix``; the sources subscribe once to everything under it and :class:`FleetPipeline` routes
 each message by its topic to the rig it belongs to. Each rig is a plain single-rig
 :class:`~tdmon.daemon.pipeline.Pipeline` built from ``config.for_rig(...)`` (the same decoder,
-aligner and steps as ``tdmon run`` with one rig), writing to its own recorder (its own folder:
-each rig's recording replays on its own) and publishing on ``<rig prefix>/tdmon/<name>``.
+aligner and steps as ``tdmon run`` with one rig), with its sinks wired from the single-rig
+tables (:data:`~tdmon.daemon.sinks.SINKS`, :data:`~tdmon.daemon.sinks.PUBLISHERS`): its own
+recorder (its own folder: each rig's recording replays on its own), publishing on
+``<rig prefix>/tdmon/<name>``.
 
 Shared between rigs: the sources (one Zenoh session and subscription, or one MQTT
 connection), the publishers' sessions, the compiled kernels (per process anyway) and what is
@@ -13,8 +15,9 @@ read from a well file: rigs with the same well file and ``[monitor]`` settings s
 ``Well`` and the precomputed load grid (:class:`WellCache`).
 
 :class:`FleetPipeline` offers what :class:`~tdmon.daemon.daemon.Daemon` needs of a pipeline
-(``process``, ``tick``, ``flush``, ``emit_status``, ``close_sinks``, ``sinks``, ``stats``), so
-supervision, backpressure, acknowledgements and shutdown are the single-rig daemon's own.
+(``process``, ``tick``, ``flush``, ``emit_status``, ``close_sinks``, ``recorders``,
+``stats``), so supervision, backpressure, acknowledgements and shutdown are the single-rig
+daemon's own.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import contextlib
 import gc
 import logging
 from collections.abc import AsyncIterator, Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,13 +35,14 @@ from tdmon.config.well_file import WellFile, read_well_file
 from tdmon.daemon.build import Built, assemble_pipeline, rig_steps
 from tdmon.daemon.daemon import Daemon
 from tdmon.daemon.pipeline import Pipeline, Sink, Stats
-from tdmon.daemon.sinks import _publish_mqtt, _publish_zenoh
+from tdmon.daemon.sinks import PUBLISHERS, SINKS
 from tdmon.daemon.sources import SOURCES
 from tdmon.daemon.steps.monitor import LoadModel
 from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
 from tdmon.errors import TdmonError
 from tdmon.ingest.types import RawMessage
+from tdmon.record.sink import Recorder
 
 log = logging.getLogger(__name__)
 
@@ -95,75 +99,6 @@ class WellCache:
         return len(self._files)
 
 
-class _RoundStats:
-    """``flushes`` of :class:`FleetRecorders`: rounds in which every recorder flushed."""
-
-    def __init__(self, owner: FleetRecorders) -> None:
-        self._owner = owner
-
-    @property
-    def flushes(self) -> int:
-        return self._owner.rounds()
-
-
-class FleetRecorders:
-    """The rigs' recorders as one, for the daemon's acknowledgement window.
-
-    A message is acknowledged once its rig's recorder has flushed it; which rig a waiting
-    acknowledgement belongs to is not kept, so a flush counts only when every rig's recorder
-    has flushed since the previous one (a round). Rigs found later join the next round.
-    """
-
-    def __init__(self) -> None:
-        self.recorders: list[Any] = []
-        self._seen: list[int] = []
-        self._rounds = 0
-        self._stats = _RoundStats(self)
-
-    @property
-    def stats(self) -> _RoundStats:
-        return self._stats
-
-    def add(self, recorder: Any) -> None:
-        self.recorders.append(recorder)
-        self._seen.append(int(recorder.stats.flushes))
-
-    def rounds(self) -> int:
-        now = [int(recorder.stats.flushes) for recorder in self.recorders]
-        if now and all(count > seen for count, seen in zip(now, self._seen, strict=True)):
-            self._rounds += 1
-            self._seen = now
-        return self._rounds
-
-    def flush(self) -> None:
-        for recorder in self.recorders:
-            recorder.flush()
-
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        """Never written to: each rig writes to its own recorder."""
-
-    def close(self) -> None:
-        """Each rig closes its own recorder."""
-
-
-@dataclass
-class _RigPublisher:
-    """A rig's results on its own prefix through the fleet's one MQTT publisher."""
-
-    shared: Any  # tdmon.ingest.mqtt.MqttPublisher
-    prefix: str
-    topics: frozenset[str] = field(init=False)
-
-    def __post_init__(self) -> None:
-        self.topics = self.shared.topics
-
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        self.shared.enqueue(f"{self.prefix}/tdmon/{topic.rsplit('/', 1)[-1]}", message)
-
-    def close(self) -> None:
-        """The shared publisher is the daemon's to close."""
-
-
 @dataclass
 class Rig:
     """One rig of the fleet: its prefix, configuration and pipeline."""
@@ -184,14 +119,15 @@ class FleetPipeline:
 
     def __init__(self, config: DaemonConfig,
                  make_rig: Callable[[str, RigConfig | None], Rig | None],
-                 recorders: FleetRecorders | None = None) -> None:
+                 stats: Stats | None = None) -> None:
         self.root = config.prefix
         self.listed = {rig.prefix: rig for rig in config.rigs}
         self.discover = config.fleet is not None and config.fleet.discover
         self.max_rigs = config.fleet.max_rigs if config.fleet is not None else len(self.listed)
         self.make_rig = make_rig
-        self.recorders = recorders
-        self.stats = Stats()
+        #: every rig's flight recorders, for the daemon's acknowledgements (grows with rigs)
+        self.recorders: list[Recorder] = []
+        self.stats = stats or Stats()
         self.rigs: dict[str, Rig] = {}
         self.refused: set[str] = set()
         self.unrouted = 0
@@ -203,11 +139,6 @@ class FleetPipeline:
         except BaseException:
             self.close_sinks()  # the rigs built so far: the daemon will not
             raise
-
-    @property
-    def sinks(self) -> list[Sink]:
-        """What the acknowledgement window waits for: the rigs' recorders as one."""
-        return [self.recorders] if self.recorders is not None else []
 
     def _add(self, prefix: str, rig: RigConfig | None, found: bool = True) -> Pipeline | None:
         """Build rig ``prefix``. A rig listed in the file that cannot be built stops the
@@ -225,6 +156,7 @@ class FleetPipeline:
             self.refused.add(prefix)
             return None
         self.rigs[prefix] = built
+        self.recorders.extend(built.pipeline.recorders)
         # What a rig keeps for its life (well model, filters, recorder) goes to the permanent
         # generation: a full collection then scans only what came after. Without it, building
         # rigs grows the tracked heap until full collections take 0.15-0.25 s each (measured
@@ -342,28 +274,19 @@ async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
     closes them, so their ``close`` must bear being called again). ``Built.pipeline`` is the
     :class:`FleetPipeline`; its ``rigs`` hold each rig's own pipeline.
     """
-    from tdmon.ingest.mqtt import MqttPublisher
-    from tdmon.ingest.zenoh_io import ZenohPublisher
-
     stats = Stats()
     wiring = Wiring(config, stats)
     cache = WellCache()
-    names = list(config.publish.names)
-    recorders = FleetRecorders() if config.recorder.enabled else None
     fleet: FleetPipeline | None = None
     try:
-        await wire(SOURCES, wiring)
-        zenoh_section = _publish_zenoh(config)
-        zenoh_session = (None if zenoh_section is None
-                         else await wiring.zenoh_session(zenoh_section))
-        mqtt_section = _publish_mqtt(config)
-        mqtt_shared: MqttPublisher | None = None
-        if mqtt_section is not None:
-            mqtt_shared = MqttPublisher(mqtt_section, config.prefix, names,
-                                        qos=config.publish.qos,
-                                        queue_size=config.queues.publish,
-                                        on_drop=stats.count_drop, base=wiring.base)
-            wiring.connected.append(mqtt_shared)
+        wire(SOURCES, wiring)
+        # What the rigs' publishers share (Zenoh sessions, the MQTT connection the daemon
+        # supervises) is opened now, before any rig exists: the publishers' rows are wired once
+        # for the fleet's own prefix, and those sinks closed unused.
+        shared = wiring.for_rig(config)
+        wire(PUBLISHERS, shared)
+        for sink in shared.owned:
+            sink.close()
         wells = (None if config.fleet is None or config.fleet.wells is None
                  else config.resolve(config.fleet.wells))
 
@@ -380,36 +303,26 @@ async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
                 return None
             well_file = cache.well_file(rig_config)
             model = cache.model(rig_config, well_file)
-            sinks: list[Sink] = []
-            pipeline_box: list[Pipeline] = []
-            if recorders is not None:
-                from tdmon.record.mcap_recorder import McapRecorder
-
-                section = rig_config.recorder
-                recorder = McapRecorder(
-                    rig_config.resolve(section.output) / rig_folder_name(prefix),
-                    prefix=rig_folder_name(prefix),
-                    rotate_s=section.rotation,
-                    flush_interval_s=section.flush_interval,
-                    on_alarm=lambda message: pipeline_box[0].emit("alarm", message)
-                    if pipeline_box else None,
-                )
-                recorders.add(recorder)
-                sinks.append(recorder)
-            if extra_rig_sinks is not None:
-                sinks.extend(extra_rig_sinks(prefix))
-            sinks.extend(extra_sinks)
-            if zenoh_session is not None:
-                sinks.append(ZenohPublisher(zenoh_session, prefix, names))
-            if mqtt_shared is not None:
-                sinks.append(_RigPublisher(mqtt_shared, prefix))
-            steps = rig_steps(rig_config, well_file, model)
+            rig_wiring = wiring.for_rig(rig_config)
+            try:
+                # the sinks of a single rig, the same tables in the same order
+                wire(SINKS, rig_wiring)
+                if extra_rig_sinks is not None:
+                    rig_wiring.sinks.extend(extra_rig_sinks(prefix))
+                rig_wiring.sinks.extend(extra_sinks)
+                wire(PUBLISHERS, rig_wiring)
+                steps = rig_steps(rig_config, well_file, model)
+            except BaseException:
+                for sink in rig_wiring.owned:
+                    sink.close()
+                raise
             well_obj = None if well_file is None else well_file.well
-            pipeline = assemble_pipeline(rig_config, well_obj, steps, sinks, Stats())
-            pipeline_box.append(pipeline)
+            pipeline = assemble_pipeline(rig_config, well_obj, steps, rig_wiring.sinks,
+                                         rig_wiring.stats)
+            rig_wiring.pipeline = pipeline
             return Rig(prefix, rig_config, pipeline)
 
-        fleet = FleetPipeline(config, make_rig, recorders)
+        fleet = FleetPipeline(config, make_rig, stats)
         sources = wiring.sources
         if stop_when_sources_done is None:
             stop_when_sources_done = bool(sources) and all(s.finite for s in sources)

@@ -7,15 +7,14 @@ be driven by tests without any transport.
 Plug-in points for other issues:
 
 * a **sink** (:class:`tdmon.record.sink.Sink`: the MCAP recorder, Rerun, publishers) receives
-  every message the daemon produces: ``write(topic: str, log_time_ns: int, message: dict) ->
-  None`` and ``close() -> None``, with ``topic`` = ``/tdmon/<name>``. A sink that only wants
-  some topics may say so with a ``topics`` attribute (a collection of topics); messages nobody
-  wants are then not even built, which matters for the per-message ``raw`` and ``sample``
-  dicts. Raw input and rejections reach every sink before any later step sees the sample; so
-  do samples when messages come one at a time (``process``). The daemon hands queued
-  messages over in bursts (``process_burst``): a burst's raw input is written before any of
-  it is decoded, its samples after its last message's steps, each in one ``write_many`` of a
-  sink that has one (docs/daemon.md, "Bursts").
+  every message the daemon produces in :class:`~tdmon.record.batch.Batch` es of one topic
+  (``/tdmon/<name>``): ``write_batch(batch)``, and ``close()`` once. A sink takes the topics
+  in its ``topics`` (None: all); a message no sink takes is not even made, which matters for
+  the per-message ``raw`` and ``sample`` dicts. Raw input and rejections reach every sink
+  before any later step sees the sample; so do samples when messages come one at a time
+  (``process``). The daemon hands queued messages over in bursts (``process_burst``): a
+  burst's raw input is written before any of it is decoded, its samples after its last
+  message's steps, each topic as one batch (docs/daemon.md, "Bursts").
 * a **step** (rig state, monitor, back-calculation, alarms) sees each aligned frame in order:
   ``on_frame(frame, emit)`` and ``close(emit)``; ``emit(name, message)`` sends a result to all
   sinks and leaves it in ``frame.results[name]`` for the steps after it.
@@ -34,22 +33,17 @@ from tdmon.daemon.clock import ClockGuard, ClockJump
 from tdmon.daemon.loss import LossDetector
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
-    RAW_ROW,
-    RECORDED,
     RECORDED_PAYLOAD_BYTES,
-    SAMPLE_ROW,
+    SAMPLE_ITEMS,
     RawMessage,
     Rejected,
     Sample,
-    raw_message,
-    raw_row_message,
+    raw_items,
     rejected_message,
-    sample_message,
-    sample_row_message,
-    samples_json,
 )
 from tdmon.messages import alarm_message, status_message
-from tdmon.record.sink import Sink
+from tdmon.record.batch import Batch
+from tdmon.record.sink import Recorder, Sink
 from tdmon.vocabulary import AlarmKind, RigState, Severity
 
 __all__ = ["Emit", "Frame", "FrameSource", "Pipeline", "Sink", "Stats", "Step"]
@@ -135,6 +129,14 @@ class FrameSource(Protocol):
 
     def flush(self) -> list[Frame]: ...
 
+    def take_jumps(self) -> Sequence[ClockJump]:
+        """The rig clock's jumps back seen since the last call."""
+        ...
+
+    def silence(self, now: float) -> tuple[tuple[str, float], ...]:
+        """The channels that went stale in a silence of the whole stream, once per silence."""
+        ...
+
 
 @dataclass(slots=True)
 class _HeldSamples:
@@ -142,15 +144,6 @@ class _HeldSamples:
 
     log_times: list[int]
     samples: list[Sample]
-
-
-def _recorded_bytes(raws: Sequence[RawMessage], limit: int) -> list[bytes] | None:
-    """A replay of tdmon's own recording: the raw messages as it held them
-    (``RawMessage.recorded``), when every one is there and short enough for its payload to be
-    kept whole (``limit`` [bytes]; a recorded message is longer than its payload); else
-    None."""
-    kept = list(map(RECORDED, raws))  # bytes (never empty) or None each
-    return kept if all(kept) and max(map(len, kept)) <= limit else None
 
 
 class Pipeline:
@@ -171,12 +164,10 @@ class Pipeline:
         # the rig clock against the receive time (docs/daemon.md, "Clock faults"); None: no
         # future check, as for a pipeline built by hand
         self.clock = clock
-        # an aligner that can see the rig clock go back says so here (FrameSource does not
-        # require it)
-        self._take_jumps: Callable[[], Sequence[ClockJump]] | None = getattr(
-            aligner, "take_jumps", None)
         self.steps = list(steps)
         self.sinks = list(sinks)
+        #: the sinks that are flight recorders (the daemon acknowledges input by their marks)
+        self.recorders = [sink for sink in self.sinks if isinstance(sink, Recorder)]
         self.stats = stats or Stats()
         self._monotonic = monotonic
         self._closed = False
@@ -185,8 +176,8 @@ class Pipeline:
         self._named_routes: dict[str, tuple[str, list[Sink]]] = {}
         # Payloads the decoder may accept are recorded whole (so they replay); longer ones,
         # which it rejects, as a bounded prefix with their size and hash.
-        self._recorded_payload_bytes = max(RECORDED_PAYLOAD_BYTES,
-                                           getattr(decoder, "max_payload_bytes", 0))
+        self._recorded_payload_bytes = max(RECORDED_PAYLOAD_BYTES, decoder.max_payload_bytes)
+        self._raw_items = raw_items(self._recorded_payload_bytes)
         self.loss = LossDetector()
         # the log time [ns] of messages that belong to no input (status, what the steps emit
         # at the end, recorder alarms): the wall clock live, the latest input's time in a
@@ -210,18 +201,16 @@ class Pipeline:
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
+        if isinstance(sink, Recorder):
+            self.recorders.append(sink)
         self._routes.clear()
         self._named_routes.clear()
 
     def _sinks_for(self, topic: str) -> list[Sink]:
         route = self._routes.get(topic)
         if route is None:
-            route = []
-            for sink in self.sinks:
-                wanted = getattr(sink, "topics", None)
-                if wanted is None or topic in wanted:
-                    route.append(sink)
-            self._routes[topic] = route
+            route = self._routes[topic] = [
+                sink for sink in self.sinks if sink.topics is None or topic in sink.topics]
         return route
 
     def process(self, raw: RawMessage) -> Sample | Rejected:
@@ -234,26 +223,21 @@ class Pipeline:
         if sinks:
             # the input's time first: an alarm the write raises (a recorder's) carries it
             self._input_ns = log_ns
-            self._write_to(sinks, "/tdmon/raw", log_ns,
-                           raw_message(raw, self._recorded_payload_bytes))
+            self._write_batch(sinks, Batch("/tdmon/raw", (log_ns,), (raw,), self._raw_items))
         return self._process(raw, log_ns, None)
 
     def process_burst(self, raws: Sequence[RawMessage]) -> None:
         """Handle several messages completely, in order, as ``process`` does one by one, with
         their ``raw`` and ``sample`` messages handed to the sinks together: every raw input
-        before the first is decoded, the samples after the last one's steps (one
-        ``write_many`` per sink and topic where the sink has it; docs/daemon.md, "Bursts")."""
+        before the first is decoded, the samples after the last one's steps (one batch per
+        topic; docs/daemon.md, "Bursts")."""
         if not raws:
             return
         sinks = self._sinks_for("/tdmon/raw")
         log_times = [int(raw.receive_time * 1e9) for raw in raws]
         if sinks:
             self._input_ns = log_times[0]
-            limit = self._recorded_payload_bytes
-            self._write_rows(sinks, "/tdmon/raw", log_times, raws, RAW_ROW,
-                             partial(raw_row_message, max_bytes=limit),
-                             lambda: [raw_message(raw, limit) for raw in raws],
-                             partial(_recorded_bytes, raws, limit))
+            self._write_batch(sinks, Batch("/tdmon/raw", log_times, raws, self._raw_items))
         held = _HeldSamples([], [])
         process = self._process
         try:
@@ -261,11 +245,8 @@ class Pipeline:
                 process(raw, log_ns, held)
         finally:
             if held.samples:
-                samples = held.samples
-                self._write_rows(self._sinks_for("/tdmon/sample"), "/tdmon/sample",
-                                 held.log_times, samples, SAMPLE_ROW, sample_row_message,
-                                 lambda: list(map(sample_message, samples)),
-                                 lambda: samples_json(samples))
+                self._write_batch(self._sinks_for("/tdmon/sample"), Batch(
+                    "/tdmon/sample", held.log_times, held.samples, SAMPLE_ITEMS))
 
     def _process(self, raw: RawMessage, log_ns: int, held: _HeldSamples | None
                  ) -> Sample | Rejected:
@@ -294,11 +275,18 @@ class Pipeline:
             sinks = self._sinks_for("/tdmon/sample")
         if sinks:
             if held is None:
-                self._write_to(sinks, "/tdmon/sample", log_ns, sample_message(decoded))
+                self._write_batch(sinks, Batch("/tdmon/sample", (log_ns,), (decoded,),
+                                               SAMPLE_ITEMS))
             else:
                 held.log_times.append(log_ns)
                 held.samples.append(decoded)
-        loss = self.loss
+        self._align(decoded, jump, log_ns)
+        return decoded
+
+    def _align(self, decoded: Sample, jump: ClockJump | None, log_ns: int) -> None:
+        """A recorded sample through the loss detector and the aligner, and the frames it
+        completes through the steps."""
+        stats, loss = self.stats, self.loss
         if jump is not None:
             loss.reanchor()
         for alarm in loss.observe(decoded):
@@ -311,15 +299,13 @@ class Pipeline:
         frames = aligner.push(decoded, self._monotonic())
         stats.duplicates = aligner.duplicates
         stats.out_of_order = aligner.out_of_order
-        if self._take_jumps is not None:
-            for jump in self._take_jumps():
-                if self.clock is not None:
-                    self.clock.reanchor(jump.offset)
-                loss.reanchor()
-                self._clock_jump(jump, log_ns)
+        for jump in aligner.take_jumps():
+            if self.clock is not None:
+                self.clock.reanchor(jump.offset)
+            loss.reanchor()
+            self._clock_jump(jump, log_ns)
         for frame in frames:
             self._run_steps(frame)
-        return decoded
 
     def _reject(self, rejected: Rejected, log_ns: int) -> Rejected:
         stats = self.stats
@@ -346,8 +332,7 @@ class Pipeline:
         now = self._monotonic()
         for frame in self.aligner.expire(now):
             self._run_steps(frame)
-        silence = getattr(self.aligner, "silence", None)  # not part of FrameSource
-        gone = silence(now) if silence is not None else ()
+        gone = self.aligner.silence(now)
         if gone:
             from tdmon.calib.alarms import stale_gap_alarm
 
@@ -434,67 +419,17 @@ class Pipeline:
     def _write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
         self._write_to(self._sinks_for(topic), topic, log_time_ns, message)
 
-    def _write_rows(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
-                    items: Sequence[Any], row_of: Callable[[Any], tuple[Any, ...]],
-                    make: Callable[[Any], dict[str, Any]],
-                    messages: Callable[[], list[dict[str, Any]]],
-                    encoded: Callable[[], list[bytes] | None] | None = None) -> None:
-        """A burst's messages of one topic: a sink with ``write_rows`` gets each item's row
-        (``row_of``) and the function that makes its message of a row (``make``); a sink with
-        ``write_encoded_many`` gets the messages' JSON bytes where ``encoded()`` gives them;
-        the others the messages (``messages()``; docs/daemon.md, "Bursts"); each made once
-        for all."""
-        rows: list[tuple[Any, ...]] | None = None
-        datas: list[bytes] | None = None
-        asked = False  # whether encoded() was called
-        plain: list[Sink] = []
-        for sink in sinks:
-            write_rows = getattr(sink, "write_rows", None)
-            if write_rows is not None:
-                if rows is None:
-                    rows = list(map(row_of, items))
-                try:
-                    write_rows(topic, log_times_ns, make, rows)
-                except Exception:
-                    self.stats.sink_errors += 1
-                    log.exception("sink %r failed writing %d messages on %s", sink,
-                                  len(rows), topic)
-                continue
-            write_encoded = getattr(sink, "write_encoded_many", None)
-            if write_encoded is not None and encoded is not None and not asked:
-                datas, asked = encoded(), True
-            if write_encoded is None or datas is None:
-                plain.append(sink)
-                continue
-            try:
-                write_encoded(topic, log_times_ns, datas)
-            except Exception:
-                self.stats.sink_errors += 1
-                log.exception("sink %r failed writing %d messages on %s", sink,
-                              len(datas), topic)
-        if plain:
-            self._write_many(plain, topic, log_times_ns, messages())
-
-    def _write_many(self, sinks: list[Sink], topic: str, log_times_ns: list[int],
-                    messages: list[dict[str, Any]]) -> None:
-        for sink in sinks:
-            many = getattr(sink, "write_many", None)
-            if many is None:
-                for log_time_ns, message in zip(log_times_ns, messages, strict=True):
-                    self._write_to((sink,), topic, log_time_ns, message)
-                continue
-            try:
-                many(topic, log_times_ns, messages)
-            except Exception:
-                self.stats.sink_errors += 1
-                log.exception("sink %r failed writing %d messages on %s", sink, len(messages),
-                              topic)
-
     def _write_to(self, sinks: Sequence[Sink], topic: str, log_time_ns: int,
                   message: dict[str, Any]) -> None:
+        if sinks:
+            self._write_batch(sinks, Batch(topic, (log_time_ns,), (message,)))
+
+    def _write_batch(self, sinks: Sequence[Sink], batch: Batch) -> None:
+        """Hand ``batch`` to each of ``sinks``; one that raises is logged and counted."""
         for sink in sinks:
             try:
-                sink.write(topic, log_time_ns, message)
+                sink.write_batch(batch)
             except Exception:
                 self.stats.sink_errors += 1
-                log.exception("sink %r failed writing %s", sink, topic)
+                log.exception("sink %r failed writing %d message(s) on %s", sink, len(batch),
+                              batch.topic)

@@ -3,13 +3,15 @@
 :data:`SINKS` (the flight recorder, Rerun) come before the caller's own sinks, so that the
 recording gets every message first; :data:`PUBLISHERS` (``[publish]``) after them. A new sink
 is its module (a :class:`~tdmon.record.sink.Sink`), a configuration section and one builder
-and row here.
+and row here. A fleet daemon wires each rig's sinks from these tables too
+(:meth:`~tdmon.daemon.wiring.Wiring.for_rig`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
+from typing import Any
 
 from tdmon.config.daemon import DaemonConfig, MqttConfig, RecorderConfig, RerunConfig, ZenohConfig
 from tdmon.daemon.wiring import Entry, Table, Wiring
@@ -20,27 +22,32 @@ from tdmon.record.sink import Recorder
 log = logging.getLogger(__name__)
 
 
-async def folder_recorder(wiring: Wiring, section: RecorderConfig) -> None:
+def folder_recorder(wiring: Wiring, section: RecorderConfig) -> None:
     """Record everything to rotating MCAP files in the configured folder, from a child process
     or this one (``process``); its health alarms go through the pipeline like any other
-    alarm."""
+    alarm. A rig of a fleet records in this process, into a folder of its own named after its
+    prefix (:func:`rig_folder_name`): a process per rig would each want a core."""
     from tdmon.record.mcap_recorder import McapRecorder
     from tdmon.record.writer_process import RecorderProcess
 
-    in_child = section.process == "child" or (section.process == "auto" and usable_cores() > 1)
+    config = wiring.config
+    folder, options = config.resolve(section.output), dict[str, Any]()
+    if wiring.in_fleet:
+        name = rig_folder_name(config.prefix)
+        folder, options, in_child = folder / name, {"prefix": name}, False
+    else:
+        in_child = section.process == "child" or (section.process == "auto"
+                                                  and usable_cores() > 1)
     recorder_type = RecorderProcess if in_child else McapRecorder
-    recorder: Recorder = recorder_type(
-        wiring.config.resolve(section.output),
-        rotate_s=section.rotation,
-        flush_interval_s=section.flush_interval,
-        on_alarm=wiring.emit_alarm,
-    )
+    recorder: Recorder = recorder_type(folder, rotate_s=section.rotation,
+                                       flush_interval_s=section.flush_interval,
+                                       on_alarm=wiring.emit_alarm, **options)
     log.info("recording into %s (%s)", recorder.path,
              "from its own process" if in_child else "in the daemon's process")
     wiring.add_sink(recorder)
 
 
-async def rerun_views(wiring: Wiring, section: RerunConfig) -> None:
+def rerun_views(wiring: Wiring, section: RerunConfig) -> None:
     """Rerun views, to an .rrd file (``mode = 'file'``) or served live (``'live'``)."""
     from tdmon.record.rerun_views import RerunViews
 
@@ -49,21 +56,26 @@ async def rerun_views(wiring: Wiring, section: RerunConfig) -> None:
     wiring.add_sink(RerunViews(rrd, live_port=live_port))
 
 
-async def zenoh_publisher(wiring: Wiring, section: ZenohConfig) -> None:
+def zenoh_publisher(wiring: Wiring, section: ZenohConfig) -> None:
     """Results on ``<prefix>/tdmon/<name>`` over Zenoh."""
-    session = await wiring.zenoh_session(section)
+    session = wiring.zenoh_session(section)
     config = wiring.config
-    wiring.add_publisher(ZenohPublisher(session, config.prefix, list(config.publish.names)))
+    wiring.add_sink(ZenohPublisher(session, config.prefix, list(config.publish.names)))
 
 
-async def mqtt_publisher(wiring: Wiring, section: MqttConfig) -> None:
+def mqtt_publisher(wiring: Wiring, section: MqttConfig) -> None:
     """Results on ``<prefix>/tdmon/<name>`` over MQTT; queued, sent on a supervised
-    connection, drops counted in the status."""
+    connection (one per section: a fleet's rigs share it), drops counted in the status."""
     config = wiring.config
-    publisher = MqttPublisher(section, config.prefix, list(config.publish.names),
-                              qos=config.publish.qos, queue_size=config.queues.publish,
-                              on_drop=wiring.stats.count_drop, base=wiring.base)
-    wiring.add_publisher(publisher, publisher)
+    publisher = wiring.connection(section, lambda: MqttPublisher(
+        section, config.prefix, list(config.publish.names), qos=config.publish.qos,
+        queue_size=config.queues.publish, on_drop=wiring.count_drop, base=wiring.base))
+    wiring.add_sink(publisher.for_prefix(config.prefix))
+
+
+def rig_folder_name(prefix: str) -> str:
+    """The recording folder (and file name prefix) of rig ``prefix``: "rig/F4" -> "rig_F4"."""
+    return prefix.replace("/", "_")
 
 
 def usable_cores() -> int:

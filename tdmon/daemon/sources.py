@@ -25,9 +25,9 @@ from tdmon.ingest.wits0_source import REJECT_TOPIC, Wits0Source
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for
 
 
-async def zenoh_source(wiring: Wiring, section: ZenohConfig) -> None:
+def zenoh_source(wiring: Wiring, section: ZenohConfig) -> None:
     """Subscribe to everything under the prefix on the section's session."""
-    session = await wiring.zenoh_session(section)
+    session = wiring.zenoh_session(section)
     key_expr = key_expr_for(wiring.config.prefix)
     ignore = (wiring.own_prefix,)
     max_buffer = wiring.config.queues.ingest
@@ -38,7 +38,7 @@ async def zenoh_source(wiring: Wiring, section: ZenohConfig) -> None:
     wiring.sources.append(SourceSpec("zenoh", open_zenoh))
 
 
-async def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
+def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
     """Subscribe to ``<prefix>/#`` on the section's broker."""
     subscribe = [f"{wiring.config.prefix}/#"]
     ignore = (wiring.own_prefix,)
@@ -51,7 +51,7 @@ async def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
     wiring.sources.append(SourceSpec("mqtt", open_mqtt))
 
 
-async def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
+def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
     """Replay a recording (a finite source: the daemon may stop when it is done)."""
     path = wiring.config.resolve(section.path)
     speed = None if section.speed == "max" else float(section.speed)
@@ -62,7 +62,7 @@ async def mcap_source(wiring: Wiring, section: McapSourceConfig) -> None:
     wiring.sources.append(SourceSpec("mcap", open_mcap, finite=True))
 
 
-async def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
+def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
     """Read a rig's WITS0 feed; its items go in as samples on the configured channel topics
     (docs/wits0.md). The item map is checked here, where the codec's unit table is."""
     config = wiring.config
@@ -85,7 +85,7 @@ async def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
     wiring.sources.append(SourceSpec("wits0", open_wits0))
 
 
-async def opcua_source(wiring: Wiring, section: OpcUaConfig) -> None:
+def opcua_source(wiring: Wiring, section: OpcUaConfig) -> None:
     """Subscribe to the rig's OPC UA server; each configured node goes in as samples on its
     channel's topic (docs/opcua.md). Without asyncua the daemon does not start."""
     from tdmon.ingest.opcua_source import OpcUaSource, import_asyncua

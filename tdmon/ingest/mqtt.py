@@ -27,8 +27,9 @@ from paho.mqtt.reasoncodes import ReasonCode
 
 from tdmon.config.daemon import MqttConfig
 from tdmon.errors import IngestError
-from tdmon.ingest.result_json import encode_result
 from tdmon.ingest.types import RawMessage
+from tdmon.record.batch import Batch
+from tdmon.record.sink import Sink
 
 log = logging.getLogger(__name__)
 
@@ -421,12 +422,13 @@ async def _quiet_exit(client: aiomqtt.Client) -> None:
         log.debug("mqtt disconnect: %s", exc)
 
 
-class MqttPublisher:
+class MqttPublisher(Sink):
     """Sink publishing result messages as JSON on ``<prefix>/tdmon/<name>``.
 
-    ``write`` only queues (the sink protocol is synchronous); the daemon's supervisor keeps a
+    ``write_batch`` only queues (sinks are synchronous); the daemon's supervisor keeps a
     connection open with :meth:`connect` and runs :meth:`pump` on it. When the queue is full
-    the oldest message is dropped and counted through ``on_drop``, never silently.
+    the oldest message is dropped and counted through ``on_drop``, never silently. The rigs of
+    a fleet daemon share one publisher, each through its own prefix (:meth:`for_prefix`).
     """
 
     def __init__(
@@ -456,21 +458,29 @@ class MqttPublisher:
         self.dropped = 0
         self.published = 0
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        name = topic.rsplit("/", 1)[-1]
+    def write_batch(self, batch: Batch) -> None:
+        self.enqueue(self.prefix, batch)
+
+    def for_prefix(self, prefix: str) -> Sink:
+        """A sink publishing on ``<prefix>/tdmon/<name>`` through this publisher (itself for
+        its own prefix)."""
+        prefix = prefix.strip("/")
+        return self if prefix == self.prefix else _PrefixedResults(self, prefix)
+
+    def enqueue(self, prefix: str, batch: Batch) -> None:
+        """Queue the messages of ``batch`` for ``<prefix>/tdmon/<name>``."""
+        name = batch.topic.rsplit("/", 1)[-1]
         if name not in self.names:
             return
-        self.enqueue(f"{self.prefix}/tdmon/{name}", message)
-
-    def enqueue(self, topic: str, message: dict[str, Any]) -> None:
-        """Queue ``message`` for the full MQTT ``topic`` (a fleet daemon's rigs share one
-        publisher, each on its own prefix)."""
-        if len(self._queue) >= self._queue_size:
-            self._queue.popleft()
-            self.dropped += 1
-            if self._on_drop is not None:
-                self._on_drop(1)
-        self._queue.append((topic, encode_result(message)))
+        topic = f"{prefix}/tdmon/{name}"
+        queue = self._queue
+        for data in batch.encoded().datas:
+            if len(queue) >= self._queue_size:
+                queue.popleft()
+                self.dropped += 1
+                if self._on_drop is not None:
+                    self._on_drop(1)
+            queue.append((topic, data))
         self._idle.clear()
         self._wake.set()
 
@@ -547,6 +557,18 @@ class MqttPublisher:
     @property
     def pending(self) -> int:
         return len(self._queue)
+
+
+class _PrefixedResults(Sink):
+    """A rig's results on its own prefix through a shared :class:`MqttPublisher`."""
+
+    def __init__(self, publisher: MqttPublisher, prefix: str) -> None:
+        self.publisher = publisher
+        self.prefix = prefix
+        self.topics = publisher.topics
+
+    def write_batch(self, batch: Batch) -> None:
+        self.publisher.enqueue(self.prefix, batch)
 
 
 class _PublisherConnection:

@@ -1,4 +1,5 @@
-"""Value types that cross the ingest boundary: what a source yields and what a decoder returns."""
+"""Value types that cross the ingest boundary: what a source yields and what a decoder returns,
+and the daemon messages made of them (``raw``, ``sample``, ``rejected``)."""
 
 from __future__ import annotations
 
@@ -6,12 +7,11 @@ import base64
 import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from operator import attrgetter
 from typing import Any, Final
 
-import orjson
-
-from tdmon.slots import slot_setters
+from tdmon.record.batch import Items
 
 #: Longest payload kept whole in the ``raw`` and ``rejected`` messages [bytes]. A longer one (an
 #: oversized payload the decoder rejects) is recorded as its first bytes, its size and its
@@ -21,7 +21,7 @@ from tdmon.slots import slot_setters
 RECORDED_PAYLOAD_BYTES: Final = 4096
 
 
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class RawMessage:
     """One message as a transport delivered it.
 
@@ -51,22 +51,8 @@ class RawMessage:
     duplicate: bool = False
     recorded: bytes | None = field(default=None, compare=False, repr=False)
 
-    def __init__(self, source: str, topic: str, payload: bytes, receive_time: float,
-                 ack: Callable[[], None] | None = None, redelivered: bool = False,
-                 duplicate: bool = False, recorded: bytes | None = None) -> None:
-        # once per input message: see tdmon.slots
-        s, t, p, r, a, d, u, c = _RAW_SETTERS
-        s(self, source)
-        t(self, topic)
-        p(self, payload)
-        r(self, receive_time)
-        a(self, ack)
-        d(self, redelivered)
-        u(self, duplicate)
-        c(self, recorded)
 
-
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class Sample:
     """A decoded, unit-converted measurement on a canonical channel (value in SI)."""
 
@@ -79,23 +65,6 @@ class Sample:
     receive_time: float
     seq: int | None = None
     """The payload's optional message counter (per topic), for loss detection."""
-
-    def __init__(self, channel: str, t: float, value: float, source: str, topic: str,
-                 unit: str, receive_time: float, seq: int | None = None) -> None:
-        # once per input message: see tdmon.slots
-        c, tt, v, s, tp, u, r, q = _SAMPLE_SETTERS
-        c(self, channel)
-        tt(self, t)
-        v(self, value)
-        s(self, source)
-        tp(self, topic)
-        u(self, unit)
-        r(self, receive_time)
-        q(self, seq)
-
-
-_RAW_SETTERS: Final = slot_setters(RawMessage)
-_SAMPLE_SETTERS: Final = slot_setters(Sample)
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,63 +151,45 @@ def sample_message(sample: Sample) -> dict[str, Any]:
 #: The fields a ``sample`` message holds, in its order.
 SAMPLE_FIELDS: Final = ("channel", "t", "value", "unit", "source", "topic")
 
-#: A RawMessage's fields its ``raw`` message is made of, as one tuple (a *row*), and a Sample's
-#: for its ``sample`` message: what a sink with ``write_rows`` is handed instead of the dicts
-#: (docs/daemon.md, "Bursts"), taken in C without building a dict per message.
-RAW_ROW: Final = attrgetter("source", "topic", "payload", "receive_time")
-SAMPLE_ROW: Final = attrgetter(*SAMPLE_FIELDS)
-
-#: A RawMessage's ``recorded`` bytes, taken in C for a burst.
-RECORDED: Final = attrgetter("recorded")
+#: A RawMessage's fields its ``raw`` message is made of, as one tuple (its *row*), and a
+#: Sample's for its ``sample`` message: the plain values a batch of them pickles as
+#: (:class:`tdmon.record.batch.Items`), taken in C without building a dict per message.
+_RAW_ROW: Final = attrgetter("source", "topic", "payload", "receive_time")
+_SAMPLE_ROW: Final = attrgetter(*SAMPLE_FIELDS)
+_RECORDED: Final = attrgetter("recorded")
 
 
 def raw_row_message(row: tuple[str, str, bytes, float],
                     max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
-    """:func:`raw_message` of a :data:`RAW_ROW` (where the rows went: the recorder's
-    process)."""
+    """:func:`raw_message` of a RawMessage's row."""
     return raw_message(RawMessage(*row), max_bytes)
 
 
 def sample_row_message(row: tuple[str, float, float, str, str, str]) -> dict[str, Any]:
-    """:func:`sample_message` of a :data:`SAMPLE_ROW`."""
+    """:func:`sample_message` of a Sample's row."""
     return dict(zip(SAMPLE_FIELDS, row, strict=True))
 
 
-#: Per (channel, unit, source, topic): the JSON bytes of a ``sample`` message before its time,
-#: and after its value (see :func:`samples_json`); bounded, a new key past it is not kept.
-_SAMPLE_JSON_PARTS: dict[tuple[str, str, str, str], tuple[bytes, bytes]] = {}
-_SAMPLE_JSON_KEYS: Final = 1024
+def recorded_raw(raws: Sequence[RawMessage], max_bytes: int) -> list[bytes] | None:
+    """The ``raw`` messages of ``raws`` as a recording of tdmon held them
+    (``RawMessage.recorded``: a replay of tdmon's own recording), when every one is there and
+    short enough for its payload to be kept whole (``max_bytes`` [bytes]; a recorded message
+    is longer than its payload); else None."""
+    kept = list(map(_RECORDED, raws))  # bytes (never empty) or None each
+    return kept if all(kept) and max(map(len, kept)) <= max_bytes else None
 
 
-def samples_json(samples: Sequence[Sample]) -> list[bytes] | None:
-    """The ``sample`` messages of ``samples`` as the JSON bytes orjson writes of
-    :func:`sample_message`'s dicts; None when a time or value is not finite (its message
-    needs the recorder's NaN handling).
+def raw_items(max_bytes: int = RECORDED_PAYLOAD_BYTES) -> Items:
+    """RawMessages as the items of a batch of ``raw`` messages (payloads bounded to
+    ``max_bytes`` [bytes] as in :func:`bounded_payload`)."""
+    return Items(message=partial(raw_message, max_bytes=max_bytes), row=_RAW_ROW,
+                 from_row=partial(raw_row_message, max_bytes=max_bytes),
+                 encoded=partial(recorded_raw, max_bytes=max_bytes))
 
-    A burst's samples, once per input message: a rig's channel, unit, source and topic are
-    the same for all its messages, so their JSON is made once and each message joins it with
-    its time and value: with the in-process recorder's writing, 0.97 instead of 1.21 us a
-    sample (docs/benchmarks.md).
-    ``tests/daemon/test_bursts.py`` holds the bytes to orjson's of the dicts.
-    """
-    parts = _SAMPLE_JSON_PARTS
-    dumps = orjson.dumps
-    datas: list[bytes] = []
-    for sample in samples:
-        key = (sample.channel, sample.unit, sample.source, sample.topic)
-        known = parts.get(key)
-        if known is None:
-            head = b'{"channel":' + dumps(sample.channel) + b',"t":'
-            tail = (b',"unit":' + dumps(sample.unit) + b',"source":' + dumps(sample.source)
-                    + b',"topic":' + dumps(sample.topic) + b"}")
-            known = head, tail
-            if len(parts) < _SAMPLE_JSON_KEYS:
-                parts[key] = known
-        t, value = dumps(sample.t), dumps(sample.value)
-        if t == b"null" or value == b"null":  # orjson's NaN or infinity
-            return None
-        datas.append(b"".join((known[0], t, b',"value":', value, known[1])))
-    return datas
+
+#: Samples as the items of a batch of ``sample`` messages.
+SAMPLE_ITEMS: Final = Items(message=sample_message, row=_SAMPLE_ROW,
+                            from_row=sample_row_message)
 
 
 def rejected_message(rejected: Rejected,

@@ -25,8 +25,9 @@ import zenoh
 
 from tdmon.config.daemon import ZenohConfig
 from tdmon.errors import IngestError
-from tdmon.ingest.result_json import encode_result
 from tdmon.ingest.types import RawMessage
+from tdmon.record.batch import Batch
+from tdmon.record.sink import Sink
 
 #: Samples taken from zenoh's channel and handed to the daemon at once, at most.
 BATCH = 256
@@ -158,7 +159,7 @@ class ZenohSource:
         return self._held.popleft()
 
 
-class ZenohPublisher:
+class ZenohPublisher(Sink):
     """Sink putting result messages as JSON on ``<prefix>/tdmon/<name>``.
 
     zenoh queues internally and ``put`` returns at once unless the link is congested; with
@@ -175,8 +176,8 @@ class ZenohPublisher:
         self.published = 0
         self._closed = False
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        name = topic.rsplit("/", 1)[-1]
+    def write_batch(self, batch: Batch) -> None:
+        name = batch.topic.rsplit("/", 1)[-1]
         if name not in self.names or self._closed:
             return
         publisher = self._publishers.get(name)
@@ -187,10 +188,11 @@ class ZenohPublisher:
                     congestion_control=zenoh.CongestionControl.BLOCK,
                 )
                 self._publishers[name] = publisher
-            publisher.put(encode_result(message))
+            for data in batch.encoded().datas:
+                publisher.put(data)
+                self.published += 1
         except zenoh.ZError as exc:
             raise IngestError(f"zenoh: cannot publish '{name}': {exc}") from exc
-        self.published += 1
 
     def close(self) -> None:
         self._closed = True

@@ -4,9 +4,11 @@ Design points (docs/recording.md):
 
 * JSON messages, one JSON Schema per channel, registered in a file with its first message;
   integer-nanosecond log times; zstd chunks.
-* Fast path: ``write`` only queues the message; every ``BATCH_SIZE`` messages (and before any
-  flush, statistics read or close) the queue is encoded with orjson and handed to the compiled
-  MCAP writer of foxglove-sdk (docs/benchmarks.md: the recorder's share of the daemon).
+* Fast path: ``write_batch`` only queues the batch; once ``BATCH_SIZE`` messages wait (and
+  before any flush, statistics read or close) each queued batch's JSON bytes
+  (:meth:`~tdmon.record.batch.Batch.encoded`: orjson, or the bytes a replayed recording held)
+  are handed to the compiled MCAP writer of foxglove-sdk (docs/benchmarks.md: the recorder's
+  share of the daemon).
 * ``Writer.flush()`` at least every ``flush_interval_s`` (also from a background thread when
   the pipeline is quiet): a SIGKILLed writer then loses at most that much, and the footer-less
   file it leaves is rewritten by :func:`tdmon.record.recover.recover_folder` on the next start.
@@ -24,7 +26,6 @@ import contextlib
 import errno
 import fcntl
 import io
-import json
 import logging
 import os
 import re
@@ -32,27 +33,21 @@ import shutil
 import threading
 import time
 import weakref
-from bisect import bisect_right
-from collections import Counter
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 from datetime import UTC, datetime
-from functools import partial
-from itertools import accumulate, repeat
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final
 
-import orjson
 from foxglove import Channel, Context, Schema, open_mcap
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions, MCAPWriter
 
 from tdmon import __version__
 from tdmon.errors import RecordError
-from tdmon.ingest.result_json import numpy_default, replace_nonfinite
 from tdmon.messages import alarm_message
 from tdmon.record import schemas
-from tdmon.record.sink import AlarmHook, FiniteMessage, Message, call_alarm_hook
+from tdmon.record.batch import Batch
+from tdmon.record.sink import AlarmHook, Recorder, RecorderStats, call_alarm_hook
 from tdmon.vocabulary import AlarmKind, Severity
 
 if TYPE_CHECKING:
@@ -64,13 +59,9 @@ MIB: Final = 1024 * 1024
 LIBRARY: Final = f"tdmon {__version__}"
 FILE_PATTERN: Final = re.compile(r"^(?P<prefix>.+)_(?P<seq>\d{5,})_(?P<start>\d{8}T\d{6}Z)\.mcap$")
 
-#: Messages queued by ``write`` before they are encoded and written in one go: the lock, the
-#: clock and the rotation check are paid per batch, not per message.
+#: Messages queued by ``write_batch`` before they are encoded and written in one go: the lock,
+#: the clock and the rotation check are paid per queue, not per message.
 BATCH_SIZE: Final = 256
-
-#: ``write_many`` with at least this many messages writes them at once, not through the queue
-#: (the daemon's bursts of raw input and samples): no per-message tuples, one channel.
-DIRECT_BATCH: Final = 32
 
 #: Uncompressed bytes per MCAP chunk by default. The writer fills a chunk, then compresses it:
 #: at 1 MiB the chunk fits a core's second-level cache beside the pipeline (with another job
@@ -92,126 +83,6 @@ COMPRESSIONS: Final[dict[str, MCAPCompression | None]] = {
 logging.getLogger("foxglove").setLevel(logging.ERROR)
 
 
-# the stdlib encoder: for what orjson refuses (non-string keys, integers beyond 64 bits) and to
-# find whether a ``null`` in orjson's output was a NaN/inf (json refuses those, orjson writes
-# them as null). One encoder object: json.dumps with options builds a new one per call.
-_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=numpy_default)
-
-
-def _encode_slow(message: Any) -> tuple[bytes, bool]:
-    try:
-        return _ENCODER.encode(message).encode(), False
-    except ValueError:
-        cleaned = replace_nonfinite(message)
-        return _ENCODER.encode(cleaned).encode(), True
-
-
-def encode_message(message: Message) -> tuple[bytes, bool]:
-    """JSON bytes of a message, and whether a NaN/inf had to be replaced by ``null``.
-
-    orjson (about ten times faster than the json module) writes NaN and infinities as ``null``
-    without saying so; only a message whose bytes contain ``null`` is checked again with the
-    json module, which refuses them. Raises ``TypeError``/``ValueError`` for something that is
-    not JSON at all.
-    """
-    try:
-        # numpy values through ``default`` (``tolist``), not orjson's own numpy option: the
-        # same numbers as the json module writes (float32 included)
-        data = orjson.dumps(message, default=numpy_default)
-    except TypeError:  # orjson.JSONEncodeError: a key that is not a string, a huge integer...
-        return _encode_slow(message)
-    return data, b"null" in data and _has_nonfinite(message)
-
-
-#: the types of the values that are never a NaN or an infinity
-_NEVER_NONFINITE: Final = frozenset((str, int, bool, type(None)))
-
-# numpy values through ``default`` (``tolist``), not orjson's own numpy option: the same numbers
-# as the json module writes (float32 included)
-_dumps: Final = partial(orjson.dumps, default=numpy_default)
-
-
-def _has_nonfinite(message: Any) -> bool:
-    """Whether a NaN or an infinity is somewhere in ``message``.
-
-    Walks plain dicts, lists, tuples, floats and strings (the daemon's messages; a model
-    message with a null took ~5x longer through the json module); anything else (numpy values,
-    other types) is left to :func:`_refused_by_json`, which encodes the whole message again.
-    Recursive: orjson refuses a message nested deeper than 255 levels, long before Python's
-    recursion limit, so no message that reaches this check is too deep for it.
-    """
-    if type(message) is FiniteMessage:
-        return False  # its maker checked it
-    try:
-        return _nonfinite_in((message,))
-    except _NotPlain:
-        return _refused_by_json(message)
-
-
-class _NotPlain(Exception):
-    """A value the walk leaves to the json module (a numpy value, an object)."""
-
-
-def _nonfinite_in(values: Iterable[Any]) -> bool:
-    for item in values:
-        kind = type(item)
-        if kind is float:
-            if item - item != 0.0:  # nan - nan and inf - inf are nan
-                return True
-        elif kind is dict:
-            if _nonfinite_in(item.values()):
-                return True
-        elif kind is list or kind is tuple:
-            # a list of plain numbers (a model's band, a profile's bins) in one C loop: a
-            # finite float sum means every element is finite; a NaN or an infinity makes it
-            # non-finite, and so may an overflow, hence the walk then
-            try:
-                total = sum(item, 0.0)
-            except (TypeError, OverflowError):
-                # a long list of texts and nulls (a profile's reasons per bin): its element
-                # types gathered in one C loop, not each element walked
-                if len(item) >= 16 and set(map(type, item)) <= _NEVER_NONFINITE:
-                    continue
-            else:
-                if type(total) is float and total - total == 0.0:
-                    continue
-            if _nonfinite_in(item):
-                return True
-        elif kind not in _NEVER_NONFINITE and not isinstance(item, (str, int)):
-            # str and int subclasses (the vocabulary's enums, bool) are never non-finite
-            raise _NotPlain
-    return False
-
-
-def _holding_null(datas: list[bytes | None]) -> list[int]:
-    """The indices of the encoded messages whose bytes hold ``null`` (None: not encoded)."""
-    encoded: list[bytes] = ([data or b"" for data in datas] if None in datas
-                            else datas)  # type: ignore[assignment]  # no None in it
-    joined = b"".join(encoded)
-    found = joined.find(b"null")
-    if found < 0:
-        return []
-    ends = list(accumulate(map(len, encoded)))
-    indices: list[int] = []
-    while found >= 0:
-        # a null does not straddle two messages: each is a whole JSON value
-        index = bisect_right(ends, found)
-        indices.append(index)
-        found = joined.find(b"null", ends[index])
-    return indices
-
-
-def _refused_by_json(message: Any) -> bool:
-    """Whether the json module refuses ``message`` for a NaN/inf (orjson wrote null)."""
-    try:
-        _ENCODER.encode(message)
-    except ValueError:
-        return True
-    except (TypeError, RecursionError):  # something only orjson writes (a datetime...)
-        return False
-    return False
-
-
 def file_name(prefix: str, sequence: int, start: datetime) -> str:
     """``<prefix>_<sequence:05d>_<UTC start YYYYmmddTHHMMSSZ>.mcap``: sorts in recording order."""
     return f"{prefix}_{sequence:05d}_{start.astimezone(UTC):%Y%m%dT%H%M%SZ}.mcap"
@@ -225,28 +96,6 @@ def next_sequence(folder: Path, prefix: str) -> int:
         if match and match["prefix"] == prefix:
             highest = max(highest, int(match["seq"]))
     return highest + 1
-
-
-@dataclass
-class RecorderStats:
-    """Counters of a recorder since it was created (a snapshot; see ``McapRecorder.stats``)."""
-
-    written: int = 0
-    """Messages handed to the MCAP writer and not later lost with a failed file."""
-    lost: int = 0
-    """Messages accepted but not recorded (failure state, or lost with a failed file)."""
-    nonfinite_replaced: int = 0
-    """Messages in which a NaN/inf was recorded as ``null``."""
-    unencodable: int = 0
-    """Messages that are not JSON at all (counted in ``lost`` too)."""
-    untyped_topics: int = 0
-    """Topics written without a registered schema (recorded with a permissive schema)."""
-    files: list[Path] = field(default_factory=list)
-    """Every file opened, in order (the last one is current unless the recorder failed)."""
-    flushes: int = 0
-    failures: int = 0
-    per_topic: dict[str, int] = field(default_factory=dict)
-    """Messages written per topic."""
 
 
 class _Output:
@@ -407,7 +256,7 @@ def _finish_at_exit(writer: MCAPWriter, stream: io.BufferedWriter[Any],
             lock.release()
 
 
-class McapRecorder:
+class McapRecorder(Recorder):
     """A :class:`~tdmon.record.sink.Recorder` writing MCAP files to ``folder``.
 
     Parameters
@@ -434,7 +283,7 @@ class McapRecorder:
         Called with an ``alarm`` message (``kind`` ``recorder_failed`` / ``recorder_resumed``)
         when recording fails or resumes, and ``recording_recovered`` for each unfinished file
         of an earlier run rewritten at start-up (``recover``). Always called from
-        ``write``/``flush``/``retry``/``close``, i.e. on the caller's thread (a failure the
+        ``write_batch``/``flush``/``retry``/``close``, i.e. on the caller's thread (a failure the
         background flusher finds is reported on the next call), and without the recorder's
         lock held, so it may write the alarm back into the recorder.
     retry_s
@@ -496,7 +345,10 @@ class McapRecorder:
             compression_level=ZSTD_LEVEL if codec == MCAPCompression.Zstd else 0)
         self._context = Context()
         self._channels: dict[str, Any] = {}  # topic -> its channel's log(data, log_time)
-        self._queue: list[tuple[str, int, Any, bool | None]] = []
+        self._queue: list[Batch] = []
+        self._queued = 0  # messages in the queue
+        # durability marks: messages accepted so far, and how many of them a flush covered
+        self._accepted = self._flushed = 0
         self._topics: dict[str, dict[str, Any]] = {
             topic: dict(schema) for topic, schema in schemas.TOPIC_SCHEMAS.items()
         }
@@ -558,13 +410,10 @@ class McapRecorder:
     def stats(self) -> RecorderStats:
         with self._lock:
             self._write_queued()
-            snapshot = RecorderStats(**vars(self._stats))
-            snapshot.files = list(self._stats.files)
-            snapshot.per_topic = dict(self._stats.per_topic)
-            return snapshot
+            return self._stats.copy()
 
     @property
-    def topics(self) -> dict[str, dict[str, Any]]:
+    def registered_topics(self) -> dict[str, dict[str, Any]]:
         """Registered topics and their schemas."""
         return dict(self._topics)
 
@@ -579,49 +428,20 @@ class McapRecorder:
             self._topics[topic] = dict(schema)
         self._fire_alarms()
 
-    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
-        """Record one message at ``log_time_ns`` [ns since the Unix epoch].
+    def write_batch(self, batch: Batch) -> None:
+        """Record a batch of messages at their log times [ns since the Unix epoch].
 
-        The message is queued and encoded with the next batch (at most ``BATCH_SIZE`` messages
-        or ``flush_interval_s`` later): it must not be changed after ``write``. Never raises for
-        I/O problems: see ``error``/``stats``/``on_alarm``.
+        The batch is queued and encoded with the next ones (at most ``BATCH_SIZE`` messages or
+        ``flush_interval_s`` later): its messages must not be changed after this. Never raises
+        for I/O problems: see ``error``/``stats``/``on_alarm``.
         """
-        self._enqueue(((topic, log_time_ns, message, None),))
-
-    def write_many(self, topic: str, log_times_ns: Sequence[int],
-                   messages: Sequence[Message]) -> None:
-        """Record several messages of one topic, ``log_times_ns[i]`` for ``messages[i]``: as
-        many ``write`` calls, for a fraction of their cost (the daemon's raw input and samples
-        of a burst, docs/recording.md)."""
-        self._take_many(topic, log_times_ns, messages, None, self._write_batch)
-
-    def write_encoded(self, topic: str, log_time_ns: int, data: bytes,
-                      replaced: bool = False) -> None:
-        """Record one message already encoded as JSON bytes (``replaced``: a NaN/inf in it was
-        written as ``null``). Never raises for I/O problems, like ``write``."""
-        self._enqueue(((topic, log_time_ns, data, replaced),))
-
-    def write_encoded_many(self, topic: str, log_times_ns: Sequence[int],
-                           datas: Sequence[bytes]) -> None:
-        """``write_encoded`` for several messages of one topic, none with a NaN/inf replaced:
-        as ``write_many`` for messages already JSON (a replay's raw input as its recording
-        held it, a burst's samples: docs/daemon.md, "Bursts")."""
-        self._take_many(topic, log_times_ns, datas, False, self._log_batch)
-
-    def _take_many(self, topic: str, log_times_ns: Sequence[int], items: Sequence[Any],
-                   flag: bool | None, write_batch: Callable[[str, Sequence[int], Any], None]
-                   ) -> None:
-        """``write_many`` of messages (``flag`` None) or of their bytes (False): fewer than
-        ``DIRECT_BATCH`` are queued, more are a batch already and go to the file at once
-        (``write_batch``), after what was queued before them."""
-        if len(log_times_ns) != len(items):
-            raise ValueError(f"{len(log_times_ns)} log times for {len(items)} messages")
-        if len(items) < DIRECT_BATCH:
-            self._enqueue(zip(repeat(topic), log_times_ns, items, repeat(flag)))
-            return
+        count = len(batch.items)
         with self._lock:
-            self._write_queued()
-            write_batch(topic, log_times_ns, items)
+            self._queue.append(batch)
+            self._queued += count
+            self._accepted += count
+            if self._queued >= BATCH_SIZE:
+                self._write_queued()
         if self._pending_alarms:
             self._fire_alarms()
 
@@ -643,12 +463,20 @@ class McapRecorder:
         with self._lock:
             self._write_queued()
             if self._file is not None:
-                try:
-                    self._file.flush()
-                    self._stats.flushes += 1
-                except OSError as exc:
-                    self._fail(exc)
+                self._flush_file(self._file)
         self._fire_alarms()
+
+    def durable_mark(self) -> int:
+        """A mark of everything written so far: the messages accepted."""
+        return self._accepted
+
+    def is_durable(self, mark: int) -> bool:
+        """Whether a flush covered the messages ``mark`` counts (or the recorder failed)."""
+        return self._flushed >= mark or self._error is not None
+
+    def request_flush(self) -> None:
+        """Flush now: in this process a flush is as quick as a request for one."""
+        self.flush()
 
     def close(self) -> None:
         """Finish the current file (summary, footer) and stop; safe to call twice."""
@@ -665,6 +493,7 @@ class McapRecorder:
             if current is not None:
                 try:
                     current.finish()
+                    self._flushed = self._accepted
                 except OSError as exc:
                     self._file = current
                     self._fail(exc)
@@ -684,64 +513,53 @@ class McapRecorder:
 
     # -- internals ---------------------------------------------------------------------------
 
-    def _enqueue(self, entries: Iterable[tuple[str, int, Any, bool | None]]) -> None:
-        """Queue ``(topic, log time, message or its bytes, replaced flag or None)`` entries;
-        the queue is written once it holds ``BATCH_SIZE``."""
-        with self._lock:
-            queue = self._queue
-            queue.extend(entries)
-            if len(queue) >= BATCH_SIZE:
-                self._write_queued()
-        if self._pending_alarms:
-            self._fire_alarms()
-
     def _write_queued(self) -> None:
-        """Encode the queued messages and hand them to the file (call with the lock held)."""
+        """Encode the queued batches and hand them to the file (call with the lock held)."""
         queue = self._queue
         if not queue:
             return
-        self._queue = []
-        current, now = self._file_for(len(queue))
+        count = self._queued
+        self._queue, self._queued = [], 0
+        current, now = self._file_for(count)
         if current is None:
             return
-        # one tuple per field: the loops below run over them in C (zip, map, Counter)
-        topics, times, messages, flags = zip(*queue, strict=True)
-        datas = self._encode(topics, messages, flags)
-        if None in datas:  # a message that is not JSON: counted by _encode, left out here
-            kept = [i for i, data in enumerate(datas) if data is not None]
-            topics = tuple(topics[i] for i in kept)
-            times = tuple(times[i] for i in kept)
-            datas = [datas[i] for i in kept]
+        stats = self._stats
         channels = self._channels
-        for topic in set(topics).difference(channels):
-            self._channel(topic)
+        per_topic: dict[str, int] = {}
+        written = 0
         # The writer reports a failed write (only ever when a chunk goes to disk) through the
-        # output, and refuses every write after it: looked at once per batch, whose messages
+        # output, and refuses every write after it: looked at once per queue, whose messages
         # are then all lost with what the file held unflushed.
-        for topic, data, log_time_ns in zip(topics, datas, times, strict=True):
-            channels[topic](data, log_time_ns)
-        self._written(current, now, Counter(topics), len(datas))
+        for batch in queue:
+            datas, times, nonfinite, refused = batch.encoded()
+            if nonfinite:
+                stats.nonfinite_replaced += nonfinite
+            for why in refused:
+                self._count_unencodable(why)
+            topic = batch.topic
+            log_message = channels.get(topic) or self._channel(topic)
+            for data, log_time_ns in zip(datas, times, strict=True):
+                log_message(data, log_time_ns)
+            per_topic[topic] = per_topic.get(topic, 0) + len(datas)
+            written += len(datas)
+        self._written(current, now, per_topic, written)
 
-    def _write_batch(self, topic: str, times: Sequence[int], messages: Sequence[Any]) -> None:
-        """``_write_queued`` for a batch of one topic handed over whole (``write_many``): no
-        queue between, one channel (call with the lock held)."""
-        count = len(messages)
-        datas = self._encode([topic] * count, messages, [None] * count)
-        if None in datas:
-            times = [t for t, data in zip(times, datas, strict=True) if data is not None]
-            datas = [data for data in datas if data is not None]
-        self._log_batch(topic, times, datas)  # type: ignore[arg-type]  # no None left
+    def _count_unencodable(self, why: str) -> None:
+        """One message that could not be recorded at all (``unencodable`` and ``lost``)."""
+        self._stats.unencodable += 1
+        self._stats.lost += 1
+        log.error("%s; not recorded", why)
 
-    def _log_batch(self, topic: str, times: Sequence[int], datas: Sequence[bytes]) -> None:
-        """Hand a batch of one topic's encoded messages to the file (call with the lock
-        held)."""
-        current, now = self._file_for(len(datas))
-        if current is None:
+    def _flush_file(self, current: _McapFile) -> None:
+        """Flush ``current`` (with the queue written): everything accepted is in the file
+        (call with the lock held)."""
+        try:
+            current.flush()
+        except OSError as exc:
+            self._fail(exc)
             return
-        log_message = self._channels.get(topic) or self._channel(topic)
-        for data, log_time_ns in zip(datas, times, strict=True):
-            log_message(data, log_time_ns)
-        self._written(current, now, {topic: len(datas)}, len(datas))
+        self._stats.flushes += 1
+        self._flushed = self._accepted
 
     def _file_for(self, count: int) -> tuple[_McapFile | None, float]:
         """The file the next ``count`` messages go to, rotated when due, and the clock; None
@@ -767,7 +585,7 @@ class McapRecorder:
 
     def _written(self, current: _McapFile, now: float, per_topic: Mapping[str, int],
                  written: int) -> None:
-        """The counters after a batch went to the writer, or its loss if the writer failed;
+        """The counters after a queue went to the writer, or its loss if the writer failed;
         the flush when the interval is over."""
         stats = self._stats
         output = current.output
@@ -781,57 +599,7 @@ class McapRecorder:
         current.unflushed += written
         stats.written += written
         if now - current.last_flush >= self.flush_interval_s:
-            try:
-                current.flush()
-                stats.flushes += 1
-            except OSError as exc:
-                self._fail(exc)
-
-    def _encode(self, topics: Sequence[str], messages: Sequence[Any],
-                flags: Sequence[bool | None]) -> list[bytes | None]:
-        """The JSON bytes of each queued message (``flags``: None for a message to encode,
-        else it is bytes already and says whether a NaN/inf was replaced); None for one that
-        is not JSON (counted)."""
-        stats = self._stats
-        encoded = flags.count(None)
-        try:
-            if encoded == len(flags):  # the usual batch: every message to encode, in C
-                datas: list[bytes | None] = list(map(_dumps, messages))
-            else:
-                datas = [_dumps(message) if flag is None else message
-                         for message, flag in zip(messages, flags, strict=True)]
-        except TypeError:  # one message orjson refuses: each alone, the json module's way
-            datas = [self._encode_one(topic, message) if flag is None else message
-                     for topic, message, flag in zip(topics, messages, flags, strict=True)]
-        if encoded != len(flags):
-            stats.nonfinite_replaced += flags.count(True)
-        # orjson writes NaN/inf as null without a word: the messages holding a null are
-        # checked, found by searching the batch's joined bytes; not those encoded before
-        # (their flag says) nor those their maker checked (FiniteMessage: the model message
-        # of every frame, which holds a null almost always; its search and walk cost ~2 us)
-        if encoded:
-            unchecked = [data if flag is None and type(message) is not FiniteMessage else None
-                         for message, data, flag in zip(messages, datas, flags, strict=True)]
-            for index in _holding_null(unchecked):
-                if _has_nonfinite(messages[index]):
-                    stats.nonfinite_replaced += 1
-        return datas
-
-    def _encode_one(self, topic: str, message: Any) -> bytes | None:
-        try:
-            return encode_message(message)[0]
-        except (TypeError, ValueError, RecursionError) as exc:
-            self.count_unencodable(f"message on {topic} is not JSON: {exc}")
-            return None
-
-    def count_unencodable(self, why: str) -> None:
-        """Count one message that could not be recorded at all (``stats.unencodable`` and
-        ``lost``), e.g. one :class:`~tdmon.record.writer_process.RecorderProcess` could not
-        make of its row; ``why`` goes to the log."""
-        with self._lock:
-            self._stats.unencodable += 1
-            self._stats.lost += 1
-        log.error("%s; not recorded", why)
+            self._flush_file(current)
 
     def _channel(self, topic: str) -> Any:
         """The channel of ``topic`` (its ``log``), created on its first message."""
@@ -967,11 +735,7 @@ class McapRecorder:
             elif self._queue and now - current.last_flush >= self.flush_interval_s:
                 self._write_queued()  # flushes: the interval is over
             elif current.unflushed and now - current.last_flush >= self.flush_interval_s:
-                try:
-                    current.flush()
-                    self._stats.flushes += 1
-                except OSError as exc:
-                    self._fail(exc)
+                self._flush_file(current)
         # Alarms found here stay pending until the next write/flush/retry/close: the hook then
         # runs on the caller's thread (the daemon's event loop), never on the flusher's.
 
@@ -979,8 +743,6 @@ class McapRecorder:
 __all__ = [
     "FILE_PATTERN",
     "McapRecorder",
-    "RecorderStats",
-    "encode_message",
     "file_name",
     "next_sequence",
 ]

@@ -47,7 +47,7 @@ from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameter
 from tdmon.channels import CHANNEL_UNITS
 from tdmon.display import UnitSystem, current
 from tdmon.errors import RecordError
-from tdmon.record.sink import Message
+from tdmon.record.sink import Message, MessageSink
 from tdmon.vocabulary import EstimateKind, Operation, Severity
 
 log = logging.getLogger(__name__)
@@ -101,7 +101,7 @@ def _colour(mu: float, low: float = 0.1, high: float = 0.4) -> tuple[int, int, i
     return (int(40 + 215 * x), int(120 * (1 - abs(2 * x - 1)) + 40), int(255 - 215 * x))
 
 
-class RerunViews:
+class RerunViews(MessageSink):
     """A :class:`~tdmon.record.sink.Sink` building the tdmon Rerun recording.
 
     Parameters

@@ -1,107 +1,185 @@
-"""The sink and recorder protocols every consumer of daemon messages implements
-(docs/architecture.md).
+"""The sink contract every consumer of daemon messages meets (docs/architecture.md).
 
-:class:`Sink` is the one plug-in point of the pipeline's output (recorders, Rerun views,
-publishers, test probes); :class:`Recorder` is what the daemon, the replay driver and the CLI
-use of a flight recorder, whichever process it writes from
-(:class:`~tdmon.record.mcap_recorder.McapRecorder` in this one,
-:class:`~tdmon.record.writer_process.RecorderProcess` in a child).
+A :class:`Sink` takes :class:`~tdmon.record.batch.Batch` es (``write_batch``) and is closed
+once (``close``); it declares the topics it takes (``topics``). The pipeline knows nothing
+else of it: a sink asks the batch for the form it needs (messages, JSON bytes, rows), and a
+single message is a batch of one. :class:`MessageSink` is the base of the simple sinks that
+take one message at a time; :class:`Recorder` is a flight recorder, whichever process it
+writes from (:class:`~tdmon.record.mcap_recorder.McapRecorder` in this one,
+:class:`~tdmon.record.writer_process.RecorderProcess` in a child), with the marks the daemon
+acknowledges its input by; :class:`TestingSink` keeps what it is given.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Collection, Mapping
+from dataclasses import dataclass, field
+from itertools import repeat
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import Any
 
 from tdmon.errors import RecordError
+from tdmon.record.batch import Batch
 
-if TYPE_CHECKING:  # mcap_recorder imports this module
-    from tdmon.record.mcap_recorder import RecorderStats
+__all__ = ["AlarmHook", "Message", "MessageSink", "Recorder", "RecorderStats", "Sink",
+           "TestingSink", "call_alarm_hook"]
 
 log = logging.getLogger(__name__)
 
-#: A message as the daemon produces it: a JSON object (dict) of the shapes in schemas.py.
-#: Sinks that only read a message may accept any Mapping.
+#: A message as a sink reads it: a JSON object of the shapes in ``schemas.py`` (the daemon
+#: makes dicts; a sink that only reads one may take any mapping).
 Message = Mapping[str, Any]
-
-
-class FiniteMessage(dict[str, Any]):
-    """A message whose maker found every number in it finite: a plain dict in every other
-    respect (the same JSON, the same comparisons).
-
-    A recorder writes NaN and infinities as ``null`` and counts each message that had one, so
-    it searches every message whose JSON holds a ``null`` for them; the monitor's ``model``
-    message, made once per frame, holds one almost always (a residual off its curve), and its
-    numbers are checked where they are made at a fraction of that search's cost (the
-    in-process recorder: ~2 us less per message). Pickled as itself, from a plain dict's copy
-    (the default for a dict subclass takes twice as long); the recorder in a child process is
-    handed a plain dict's copy instead, which pickles faster still.
-    """
-
-    __slots__ = ()
-
-    def __reduce__(self) -> tuple[type[FiniteMessage], tuple[dict[str, Any]]]:
-        return FiniteMessage, (dict(self),)
-
 
 #: Called with an ``alarm``-shaped dict when a sink changes health (fails, resumes).
 AlarmHook = Callable[[dict[str, Any]], None]
 
 
-@runtime_checkable
-class Sink(Protocol):
-    """Synchronous sink: the daemon calls ``write`` for every message and ``close`` once.
+class Sink(ABC):
+    """Where the daemon's messages go: ``write_batch`` for every batch, ``close`` once.
 
-    The pipeline hands each sink the dict it built (a fresh one per message); a sink that does
-    network I/O queues inside ``write``. A sink that only wants some topics may say so with a
-    ``topics`` attribute (a collection of topics): messages nobody wants are then not built.
-    A sink may also have ``write_many(topic, log_times_ns, messages)`` for several messages of
-    one topic at once; the daemon then hands it a burst's raw input and samples that way
-    (docs/daemon.md, "Bursts"), and one ``write`` per message otherwise. A sink with
-    ``write_rows(topic, log_times_ns, make, rows)`` gets those two as rows of plain values
-    instead, with ``make`` (a picklable function) that makes each row's message (the recorder
-    in a child process makes them there). A sink with ``write_encoded_many(topic,
-    log_times_ns, datas)`` gets a replay's raw input as the JSON bytes its recording held,
-    when they are there for the whole burst, and a burst's samples as JSON bytes (the
-    in-process recorder writes them as they are).
+    Synchronous: a sink that does network I/O queues inside ``write_batch``, and none raises
+    into the pipeline for an I/O failure (a sink that raises is logged and counted in
+    ``sink_errors``).
     """
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        """Take one message; must not raise into the caller's pipeline on I/O failure."""
+    #: The topics this sink takes; None: every topic. The pipeline hands it no other, and a
+    #: message that no sink takes is never made.
+    topics: Collection[str] | None = None
 
-    def close(self) -> None:
+    @abstractmethod
+    def write_batch(self, batch: Batch) -> None:
+        """Take a batch of messages of one topic."""
+
+    def close(self) -> None:  # noqa: B027 - most sinks hold nothing to release
         """Flush and release everything; idempotent."""
 
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        """Take one message (a batch of one), e.g. when writing a recording directly."""
+        self.write_batch(Batch.one(topic, log_time_ns, message))
 
-class Recorder(Sink, Protocol):
+
+class MessageSink(Sink):
+    """A sink that takes its messages one at a time: a subclass defines ``write``."""
+
+    @abstractmethod
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        """Take one message (``log_time_ns`` [ns since the Unix epoch])."""
+
+    def write_batch(self, batch: Batch) -> None:
+        write, topic = self.write, batch.topic
+        for log_time_ns, message in zip(batch.log_times_ns, batch.messages(), strict=True):
+            write(topic, log_time_ns, message)
+
+
+@dataclass
+class RecorderStats:
+    """Counters of a recorder since it was created (a snapshot: ``Recorder.stats``)."""
+
+    written: int = 0
+    """Messages handed to the MCAP writer and not later lost with a failed file."""
+    lost: int = 0
+    """Messages accepted but not recorded (failure state, or lost with a failed file)."""
+    nonfinite_replaced: int = 0
+    """Messages in which a NaN/inf was recorded as ``null``."""
+    unencodable: int = 0
+    """Messages that are not JSON at all (counted in ``lost`` too)."""
+    untyped_topics: int = 0
+    """Topics written without a registered schema (recorded with a permissive schema)."""
+    files: list[Path] = field(default_factory=list)
+    """Every file opened, in order (the last one is current unless the recorder failed)."""
+    flushes: int = 0
+    failures: int = 0
+    per_topic: dict[str, int] = field(default_factory=dict)
+    """Messages written per topic."""
+
+    def copy(self) -> RecorderStats:
+        """A snapshot that later counting does not change."""
+        copied = RecorderStats(**vars(self))
+        copied.files = list(self.files)
+        copied.per_topic = dict(self.per_topic)
+        return copied
+
+
+class Recorder(Sink):
     """A flight recorder: a sink writing MCAP that reports its health instead of raising.
 
     Failures while recording put it in a failure state (``error``) and are reported through
     its alarm hook; messages it could not record are counted in ``stats.lost``.
+
+    Durability marks: the daemon acknowledges an input message to its broker only once the
+    recorder has it in its file (docs/daemon.md, "At-least-once delivery"), without waiting
+    for the recorder: ``durable_mark()`` marks everything written so far, ``is_durable(mark)``
+    says whether all of it is in the file, and ``request_flush()`` asks for a flush soon.
     """
 
     @property
+    @abstractmethod
     def error(self) -> RecordError | None:
         """The failure the recorder is in (None while recording works)."""
 
     @property
+    @abstractmethod
     def path(self) -> Path | None:
         """The file being written (None while failed or after close)."""
 
     @property
+    @abstractmethod
     def stats(self) -> RecorderStats:
         """Counters since the recorder was created (a snapshot)."""
 
+    @abstractmethod
     def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
         """Add a topic with its JSON Schema (raises RecordError for a conflicting schema)."""
 
+    @abstractmethod
     def flush(self) -> None:
         """Get what was written into the file now."""
 
+    @abstractmethod
     def retry(self) -> bool:
         """In the failure state, try a new file now; whether it records."""
+
+    @abstractmethod
+    def durable_mark(self) -> int:
+        """A mark of everything written so far (for :meth:`is_durable`)."""
+
+    @abstractmethod
+    def is_durable(self, mark: int) -> bool:
+        """Whether everything written before ``durable_mark`` gave ``mark`` is in the file;
+        also true once the recorder has failed (that loss is alarmed and counted, and
+        monitoring goes on)."""
+
+    @abstractmethod
+    def request_flush(self) -> None:
+        """Have what was written flushed into the file soon (without waiting, where the
+        recorder can do that)."""
+
+
+class TestingSink(Sink):
+    """Keeps every message it is given, in order, as ``(topic, log_time_ns, message)``
+    (tests and examples; ``topics`` as for any sink)."""
+
+    __test__ = False  # not a pytest test class
+
+    def __init__(self, topics: Collection[str] | None = None) -> None:
+        self.topics = topics
+        self.items: list[tuple[str, int, dict[str, Any]]] = []
+        self.batches = 0
+        self.closed = False
+
+    def write_batch(self, batch: Batch) -> None:
+        self.batches += 1
+        self.items.extend(zip(repeat(batch.topic), batch.log_times_ns, batch.messages(),
+                              strict=False))
+
+    def of(self, topic: str) -> list[dict[str, Any]]:
+        """The messages of ``topic``, in order."""
+        return [message for item_topic, _, message in self.items if item_topic == topic]
+
+    def close(self) -> None:
+        self.closed = True
 
 
 def call_alarm_hook(hook: AlarmHook | None, alarms: list[dict[str, Any]]) -> None:

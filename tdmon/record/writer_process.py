@@ -1,19 +1,20 @@
 """The flight recorder on a second core: :class:`McapRecorder` in a child process.
 
-:class:`RecorderProcess` is a :class:`~tdmon.record.sink.Recorder` like it whose ``write``
-only appends the message to a batch; batches are pickled and sent over a pipe to a child
-process, which runs an ordinary :class:`McapRecorder`. Encoding, framing, compression and disk
-I/O then happen on the other core, and a slow disk never stalls the event loop. ``write_rows``
-takes a burst's raw input and samples as rows of plain values, made into messages in the
-child (docs/daemon.md, "Bursts"); ``durable_mark``, ``is_durable`` and ``request_flush`` let
-the daemon acknowledge what is in the file without waiting for the child. ``tdmon run`` records
+:class:`RecorderProcess` is a :class:`~tdmon.record.sink.Recorder` like it whose
+``write_batch`` only appends the batch to a parcel; parcels are pickled and sent over a pipe
+to a child process, which runs an ordinary :class:`McapRecorder`. Encoding, framing,
+compression and disk I/O then happen on the other core, and a slow disk never stalls the
+event loop. A batch pickles as its rows (:meth:`~tdmon.record.batch.Batch.rows`: a burst's
+raw input and samples as tuples of plain values), so their messages are made in the child
+(docs/daemon.md, "Bursts"); ``durable_mark``, ``is_durable`` and ``request_flush`` let the
+daemon acknowledge what is in the file without waiting for the child. ``tdmon run`` records
 this way where it may use two cores (``[recorder] process``); figures in docs/benchmarks.md.
 
 Behaviour kept from :class:`McapRecorder`:
 
-* A message is in the file at most ``flush_interval_s`` after ``write``: a batch is sent when
-  it is full or half a flush interval old (a background thread sends it when the pipeline is
-  quiet), and the child flushes as the in-process recorder does.
+* A message is in the file at most ``flush_interval_s`` after ``write_batch``: a parcel is
+  sent when it is full or half a flush interval old (a background thread sends it when the
+  pipeline is quiet), and the child flushes as the in-process recorder does.
 * Nothing raises into the pipeline: a failure in the child is reported through ``on_alarm``
   (``recorder_failed`` / ``recorder_resumed``, on the caller's thread) and counted; if the
   child process itself dies, every message from then on is counted as lost and one
@@ -24,7 +25,7 @@ Behaviour kept from :class:`McapRecorder`:
   writing until the parent closes it. If the parent dies, the child sees the pipe close and
   finishes the file (summary and footer) with everything it received.
 
-Messages must not be changed after ``write``: they are pickled when the batch is sent.
+Messages must not be changed after ``write_batch``: they are pickled when the parcel is sent.
 The pipe is bounded, so a child that falls behind slows ``write`` down rather than letting
 memory grow.
 """
@@ -43,8 +44,7 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from itertools import repeat
+from collections.abc import Mapping
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
@@ -53,27 +53,28 @@ from typing import Any, Final
 import tdmon
 from tdmon.errors import RecordError
 from tdmon.messages import alarm_message
-from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
-from tdmon.record.sink import AlarmHook, FiniteMessage, Message, call_alarm_hook
+from tdmon.record.batch import Batch
+from tdmon.record.mcap_recorder import McapRecorder
+from tdmon.record.sink import AlarmHook, Recorder, RecorderStats, call_alarm_hook
 from tdmon.vocabulary import AlarmKind, Severity
 
 __all__ = ["RecorderProcess"]
 
 log = logging.getLogger(__name__)
 
-#: Messages per batch: large enough that pickling and the pipe cost little per message, small
+#: Messages per parcel: large enough that pickling and the pipe cost little per message, small
 #: enough (~100-250 kB pickled) that sending one is a short pause for the pipeline.
 BATCH_SIZE = 512
 
-#: Bytes in flight to the child [bytes]: ~40 batches of raw input and samples.
+#: Bytes in flight to the child [bytes]: ~40 parcels of raw input and samples.
 PIPE_BUFFER = 4 * 1024 * 1024
 
 _PICKLE = pickle.HIGHEST_PROTOCOL
 
 
 class _Tag:
-    """The first element of every tuple on the pipe between the parent and the child (a batch
-    of messages is a bare list, untagged). Plain strings on the wire: the pipe carries no
+    """The first element of every tuple on the pipe between the parent and the child (a parcel
+    of batches is a bare list, untagged). Plain strings on the wire: the pipe carries no
     class that both ends would have to import alike."""
 
     # parent -> child: a command; the child's reply carries the same tag
@@ -89,10 +90,10 @@ class _Tag:
     ALARM: Final = "alarm"
     STATE: Final = "state"
     CLOSED: Final = "closed"
-    DURABLE: Final = "durable"  # every batch up to this count is flushed into the file
+    DURABLE: Final = "durable"  # every parcel up to this count is flushed into the file
 
 
-class RecorderProcess:
+class RecorderProcess(Recorder):
     """A :class:`McapRecorder` running in a child process (same parameters and interface).
 
     Parameters
@@ -104,7 +105,7 @@ class RecorderProcess:
         As for :class:`McapRecorder`; called on the caller's thread from ``write``, ``flush``,
         ``retry`` and ``close``.
     batch_size
-        Messages sent to the child at once.
+        Messages sent to the child at once (in one parcel).
     start_timeout_s, close_timeout_s
         How long to wait for the child to start (and open its first file) and to finish.
     """
@@ -128,10 +129,10 @@ class RecorderProcess:
         self.close_timeout_s = close_timeout_s
         self._send_every = self.flush_interval_s / 2
         self._lock = threading.RLock()
-        # in order: (topic, log time, message) and (topic, log times, make, rows) entries
-        self._batch: list[tuple[Any, ...]] = []
-        self._batched = 0  # messages in the batch
-        # batches sent, batches the child has flushed into its file (as it last said), and
+        # the parcel: batches to send, in order, and the messages they hold
+        self._parcel: list[Batch] = []
+        self._in_parcel = 0
+        # parcels sent, parcels the child has flushed into its file (as it last said), and
         # the count a flush was last asked at (see durable_mark)
         self._sent = self._durable = self._flush_asked = 0
         self._send_at = time.monotonic() + self._send_every
@@ -162,6 +163,7 @@ class RecorderProcess:
         self._path = None if ready[0] is None else Path(ready[0])
         self.recovered = list(ready[1])
         self._pending_alarms.extend(ready[2])
+        self._send_at = time.monotonic() + self._send_every  # from when the child took over
         _OPEN.add(self)
 
         self._stop = threading.Event()
@@ -188,56 +190,27 @@ class RecorderProcess:
         """Counters of the child's recorder plus what was lost on the way to it."""
         with self._lock:
             if self._final_stats is None and not self._dead:
-                self._send_batch()
+                self._send_parcel()
                 reply = self._request(_Tag.STATS)
                 if reply is not None:
                     self._last_stats = reply
-            base = self._final_stats or self._last_stats
-            snapshot = RecorderStats(**vars(base))
-            snapshot.files = list(base.files)
-            snapshot.per_topic = dict(base.per_topic)
+            snapshot = (self._final_stats or self._last_stats).copy()
             snapshot.lost += self._lost_here
             snapshot.unencodable += self._unencodable_here
             return snapshot
 
-    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
-        """Queue one message for the child; never raises for recording problems."""
-        if type(message) is FiniteMessage:
-            # pickled as a plain dict: a dict subclass takes ~0.85 us more a message in this
-            # process (the model message of every frame), a copy 0.1 us; the child then
-            # searches it for a NaN as before, on its own core
-            message = dict(message)
-        self._add(((topic, log_time_ns, message),), 1)
-
-    def write_many(self, topic: str, log_times_ns: Sequence[int],
-                   messages: Sequence[Message]) -> None:
-        """``write`` for several messages of one topic (see :meth:`McapRecorder.write_many`)."""
-        if len(log_times_ns) != len(messages):
-            raise ValueError(f"{len(log_times_ns)} log times for {len(messages)} messages")
-        self._add(zip(repeat(topic), log_times_ns, messages), len(messages))
-
-    def write_rows(self, topic: str, log_times_ns: Sequence[int],
-                   make: Callable[[Any], Message], rows: Sequence[tuple[Any, ...]]) -> None:
-        """``write_many(topic, log_times_ns, [make(row) for row in rows])``, with the messages
-        made in the child: only the rows (tuples of plain values) are pickled here, and
-        ``make`` by its name (a module-level function, or a ``functools.partial`` of one).
-
-        The pipeline hands a burst's raw input and samples this way (docs/daemon.md,
-        "Bursts"): their dicts are then never built in the daemon's process."""
-        if len(log_times_ns) != len(rows):
-            raise ValueError(f"{len(log_times_ns)} log times for {len(rows)} rows")
-        self._add(((topic, log_times_ns, make, rows),), len(rows))
-
-    def _add(self, entries: Iterable[tuple[Any, ...]], count: int) -> None:
-        """Put ``entries`` (``count`` messages) in the batch; send it when full or due."""
+    def write_batch(self, batch: Batch) -> None:
+        """Queue a batch for the child; never raises for recording problems. The parcel is
+        sent when it holds ``batch_size`` messages or is due."""
+        count = len(batch)
         with self._lock:
             if self._closed or self._dead:
                 self._lost_here += count
                 return
-            self._batch.extend(entries)
-            self._batched += count
-            if self._batched >= self.batch_size or time.monotonic() >= self._send_at:
-                self._send_batch()
+            self._parcel.append(batch)
+            self._in_parcel += count
+            if self._in_parcel >= self.batch_size or time.monotonic() >= self._send_at:
+                self._send_parcel()
         if self._pending_alarms:
             self._fire_alarms()
 
@@ -248,7 +221,7 @@ class RecorderProcess:
         is flushed into the file. For the daemon's acknowledgements (``AckWindow``), which
         must not wait on the child as ``flush`` and ``stats`` do."""
         with self._lock:
-            return self._sent + (1 if self._batch else 0)
+            return self._sent + (1 if self._parcel else 0)
 
     def is_durable(self, mark: int) -> bool:
         """Whether what was written before ``durable_mark`` gave ``mark`` is flushed into the
@@ -262,7 +235,7 @@ class RecorderProcess:
         """Send what is batched and have the child flush its file, without waiting: its answer
         moves :meth:`is_durable` on. One such request at a time."""
         with self._lock:
-            self._send_batch()
+            self._send_parcel()
             if (self._dead or self._closed or self._durable >= self._sent
                     or self._durable < self._flush_asked):  # nothing new, or one on its way
                 return
@@ -275,7 +248,7 @@ class RecorderProcess:
     def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
         """Add a topic with its JSON Schema (see :meth:`McapRecorder.register_topic`)."""
         with self._lock:
-            self._send_batch()
+            self._send_parcel()
             problem = self._request(_Tag.REGISTER_TOPIC, topic, dict(schema))
         self._fire_alarms()
         if problem:
@@ -284,14 +257,14 @@ class RecorderProcess:
     def flush(self) -> None:
         """Send what is queued and have the child flush its file."""
         with self._lock:
-            self._send_batch()
+            self._send_parcel()
             self._request(_Tag.FLUSH)
         self._fire_alarms()
 
     def retry(self) -> bool:
         """In the failure state, have the child try a new file now; whether it records."""
         with self._lock:
-            self._send_batch()
+            self._send_parcel()
             recording = bool(self._request(_Tag.RETRY))
         self._fire_alarms()
         return recording
@@ -309,7 +282,7 @@ class RecorderProcess:
             self._flusher.join()
         finished = False
         with self._lock:
-            self._send_batch()
+            self._send_parcel()
             if not self._dead:
                 try:
                     self._conn.send((_Tag.CLOSE,))
@@ -338,20 +311,20 @@ class RecorderProcess:
 
     # -- internals (call with the lock held) ----------------------------------------------
 
-    def _send_batch(self) -> None:
-        batch = self._batch
+    def _send_parcel(self) -> None:
+        parcel = self._parcel
         self._send_at = time.monotonic() + self._send_every
-        if not batch:
+        if not parcel:
             self._drain()
             return
-        count, self._batch, self._batched = self._batched, [], 0
+        count, self._parcel, self._in_parcel = self._in_parcel, [], 0
         if self._dead:
             self._lost_here += count
             return
         try:
-            payload = pickle.dumps(batch, protocol=_PICKLE)
+            payload = pickle.dumps(parcel, protocol=_PICKLE)
         except Exception:
-            payload, count = self._picklable(batch)
+            payload, count = self._picklable(parcel)
         try:
             self._conn.send_bytes(payload)
             self._sent += 1
@@ -361,20 +334,20 @@ class RecorderProcess:
             return
         self._drain()
 
-    def _picklable(self, batch: list[tuple[Any, ...]]) -> tuple[bytes, int]:
-        """The batch without the entries that are not data at all, pickled, and the number
+    def _picklable(self, parcel: list[Batch]) -> tuple[bytes, int]:
+        """The parcel without the batches that are not data at all, pickled, and the number
         of messages kept; the others counted."""
         kept, count = [], 0
-        for item in batch:
-            size = _size(item)
+        for batch in parcel:
+            size = len(batch)
             try:
-                pickle.dumps(item, protocol=_PICKLE)
+                pickle.dumps(batch, protocol=_PICKLE)
             except Exception as exc:
                 self._unencodable_here += size
                 self._lost_here += size
-                log.error("%d message(s) on %s cannot be recorded: %s", size, item[0], exc)
+                log.error("%d message(s) on %s cannot be recorded: %s", size, batch.topic, exc)
             else:
-                kept.append(item)
+                kept.append(batch)
                 count += size
         return pickle.dumps(kept, protocol=_PICKLE), count
 
@@ -445,8 +418,8 @@ class RecorderProcess:
         if self._dead:
             return
         self._dead = True
-        self._lost_here += self._batched
-        self._batch, self._batched = [], 0
+        self._lost_here += self._in_parcel
+        self._parcel, self._in_parcel = [], 0
         error = RecordError(f"{why}; messages are counted as lost from now on")
         first = self._error is None
         self._error = error
@@ -471,14 +444,14 @@ class RecorderProcess:
         call_alarm_hook(self.on_alarm, alarms)
 
     def _flush_loop(self) -> None:
-        # a quiet pipeline: what waits in the batch still reaches the file in time
+        # a quiet pipeline: what waits in the parcel still reaches the file in time
         tick = min(self._send_every / 2, 0.25)
         while not self._stop.wait(tick):
             with self._lock:
                 if self._closed:
                     return
-                if self._batch and time.monotonic() >= self._send_at:
-                    self._send_batch()
+                if self._parcel and time.monotonic() >= self._send_at:
+                    self._send_parcel()
 
 
 def _reap(process: subprocess.Popen[bytes], timeout: float) -> None:
@@ -490,11 +463,6 @@ def _reap(process: subprocess.Popen[bytes], timeout: float) -> None:
         process.terminate()
         with contextlib.suppress(subprocess.TimeoutExpired):
             process.wait(timeout=5.0)
-
-
-def _size(entry: tuple[Any, ...]) -> int:
-    """Messages in one entry of a batch: one, or a ``write_rows`` entry's rows."""
-    return 1 if len(entry) == 3 else len(entry[3])
 
 
 #: recorders not closed yet: closed at interpreter exit (the child then finishes its file)
@@ -582,11 +550,11 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
             state = now
             conn.send((_Tag.STATE, *now))
 
-    # What is flushed into the file, for the parent's acknowledgements: ``marked`` batches had
+    # What is flushed into the file, for the parent's acknowledgements: ``marked`` parcels had
     # been written when the recorder had made ``flushes`` flushes; a flush counted later came
     # after them (the recorder writes everything it holds before it flushes), so they are in
     # the file: DURABLE says so.
-    batches = marked = 0
+    parcels = marked = 0
     flushes = recorder.stats.flushes
     idle_s = min(float(options.get("flush_interval_s", 1.0)) / 4, 0.25)
 
@@ -601,24 +569,25 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
         while True:
             try:
                 if not conn.poll(idle_s):
-                    durable(batches)  # a quiet parent: the recorder's own flush covers all
+                    durable(parcels)  # a quiet parent: the recorder's own flush covers all
                     continue
                 data = conn.recv_bytes()
             except (EOFError, OSError):
                 break  # the parent is gone: finish the file with what arrived
             item = pickle.loads(data)
-            if type(item) is list:
-                _write_entries(recorder, item)
-                batches += 1
+            if type(item) is list:  # a parcel of batches
+                for batch in item:
+                    recorder.write_batch(batch)
+                parcels += 1
                 report()
-                durable(batches)
+                durable(parcels)
             elif item[0] == _Tag.CLOSE:
                 break
             elif item[0] == _Tag.FLUSH_SOON:
                 recorder.flush()
                 report()
-                conn.send((_Tag.DURABLE, batches))
-                marked, flushes = batches, recorder.stats.flushes
+                conn.send((_Tag.DURABLE, parcels))
+                marked, flushes = parcels, recorder.stats.flushes
             else:
                 reply = _command(recorder, item)
                 report()  # before the reply: the parent sees the command's effects with it
@@ -629,28 +598,6 @@ def _serve(conn: Connection, folder: Any, options: dict[str, Any], log_level: in
             report()
             conn.send((_Tag.CLOSED, recorder.stats))
         conn.close()
-
-
-def _write_entries(recorder: McapRecorder, entries: list[tuple[Any, ...]]) -> None:
-    """One batch from the parent into the recorder, in order."""
-    write = recorder.write
-    for entry in entries:
-        if len(entry) == 3:
-            write(*entry)
-            continue
-        topic, log_times_ns, make, rows = entry
-        try:
-            messages = list(map(make, rows))
-        except Exception:  # not from the pipeline's rows: each alone, the bad ones left out
-            messages, kept = [], []
-            for log_time_ns, row in zip(log_times_ns, rows, strict=True):
-                try:
-                    messages.append(make(row))
-                    kept.append(log_time_ns)
-                except Exception as exc:
-                    recorder.count_unencodable(f"a row on {topic} makes no message: {exc}")
-            log_times_ns = kept
-        recorder.write_many(topic, log_times_ns, messages)
 
 
 def _command(recorder: McapRecorder, item: tuple[Any, ...]) -> Any:

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tdmon.record.sink import MessageSink
 from tdmon.replay.driver import SummarySink
 from tdmon.vocabulary import EstimateKind
 
@@ -90,7 +91,7 @@ class RecordingOutcome:
         return self.name or Path(self.recording).stem
 
 
-class FleetCollector:
+class FleetCollector(MessageSink):
     """A sink keeping what the fleet summary needs from one replay."""
 
     topics = frozenset({"/tdmon/state", "/tdmon/estimate", "/tdmon/alarm", "/tdmon/well"})

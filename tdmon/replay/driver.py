@@ -39,10 +39,11 @@ from tdmon.config.daemon import (
     SourcesConfig,
 )
 from tdmon.daemon.build import build_daemon
-from tdmon.daemon.pipeline import Pipeline, Sink
+from tdmon.daemon.pipeline import Pipeline
 from tdmon.daemon.runner import stop_on_signals
 from tdmon.errors import IngestError, RecordError
-from tdmon.record.sink import Recorder
+from tdmon.record.batch import Batch
+from tdmon.record.sink import MessageSink, Recorder, Sink
 from tdmon.vocabulary import EstimateKind
 
 __all__ = ["FULL_SPEED_GC_YOUNG", "ReplayResult", "SummarySink", "check_replay_file",
@@ -118,7 +119,7 @@ class ReplayResult:
         }
 
 
-class SummarySink:
+class SummarySink(MessageSink):
     """Counts results for the summary: estimates and alarms per kind, rig-state time shares.
 
     Non-finite numbers are not looked for here: the recorder finds them anyway while encoding
@@ -150,9 +151,6 @@ class SummarySink:
         elif topic == "/tdmon/alarm":
             self.alarms[str(message.get("kind"))] += 1
 
-    def close(self) -> None:
-        """Nothing to release."""
-
     def shares(self) -> dict[str, float]:
         total = sum(self.state_time.values())
         if total <= 0:
@@ -160,8 +158,9 @@ class SummarySink:
         return {state: round(seconds / total, 4) for state, seconds in self.state_time.items()}
 
 
-class _ProgressSink:
-    """Advances a progress callback every ``every`` input messages (cheap per message)."""
+class _ProgressSink(Sink):
+    """Advances a progress callback every ``every`` input messages (counts batches: no
+    message is made for it)."""
 
     topics = frozenset({"/tdmon/raw"})
 
@@ -170,10 +169,11 @@ class _ProgressSink:
         self.every = every
         self.count = 0
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        self.count += 1
-        if self.count % self.every == 0:
-            self.advance(self.every)
+    def write_batch(self, batch: Batch) -> None:
+        before, self.count = self.count, self.count + len(batch)
+        passed = self.count // self.every - before // self.every
+        if passed:
+            self.advance(passed * self.every)
 
     def close(self) -> None:
         rest = self.count % self.every
@@ -315,7 +315,7 @@ async def replay(
             pipeline.emit("alarm", message)
 
     summary = SummarySink()
-    sinks: list[Any] = []
+    sinks: list[Sink] = []
     recorder_type = RecorderProcess if separate_writer else McapRecorder
     recorder: Recorder = recorder_type(path=out_path, overwrite=True, on_alarm=on_alarm,
                                        flush_interval_s=5.0)

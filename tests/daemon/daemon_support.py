@@ -18,12 +18,13 @@ from tdmon.config.daemon import DaemonConfig, parse_daemon_config
 from tdmon.daemon.build import Built, build_daemon
 from tdmon.daemon.steps.monitor import GridLoadModel, LoadModel
 from tdmon.daemon.supervisor import Backoff
+from tdmon.record.sink import MessageSink
 
 FAST_BACKOFF = Backoff(initial=0.1, maximum=0.5)
 WELL_FILE = Path(__file__).resolve().parents[2] / "config" / "wells" / "aadnoy-example-7-1.toml"
 
 
-class CollectSink:
+class CollectSink(MessageSink):
     """Keeps every message written, by topic (a stand-in for the recorder)."""
 
     def __init__(self) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from daemon_support import CollectSink, linear_model, make_config
+from daemon_support import WELL_FILE, CollectSink, linear_model, make_config
 
 from tdmon.config.daemon import (
     DaemonConfig,
@@ -14,9 +14,11 @@ from tdmon.config.daemon import (
     PublishConfig,
     SourcesConfig,
     ZenohConfig,
+    parse_daemon_config,
 )
 from tdmon.daemon.build import build_daemon
 from tdmon.daemon.daemon import SourceSpec
+from tdmon.daemon.fleet import FleetPipeline, build_fleet
 from tdmon.daemon.pipeline import Stats
 from tdmon.daemon.sinks import PUBLISHERS, SINKS, usable_cores
 from tdmon.daemon.sources import SOURCES
@@ -134,19 +136,63 @@ async def test_a_failed_build_finishes_the_recording(tmp_path: Path) -> None:
     assert is_finished(recording)
 
 
-async def test_a_new_source_is_one_row(tmp_path: Path) -> None:
+def test_a_new_source_is_one_row(tmp_path: Path) -> None:
     config = make_config({"sources": MCAP}, tmp_path)
 
-    async def tagged(wiring: Wiring, section: McapSourceConfig) -> None:
+    def tagged(wiring: Wiring, section: McapSourceConfig) -> None:
         path = wiring.config.resolve(section.path)
         wiring.sources.append(SourceSpec(f"tagged {path.name}", lambda: McapSource(path)))
 
-    async def never(wiring: Wiring, section: ZenohConfig) -> None:
+    def never(wiring: Wiring, section: ZenohConfig) -> None:
         raise AssertionError("built a section that is not configured")
 
     table: Table = {"tagged": Entry(lambda c: c.sources.mcap, tagged),
              "absent": Entry(lambda c: c.sources.zenoh, never)}
     wiring = Wiring(config, Stats())
-    await wire(table, wiring)
+    wire(table, wiring)
     assert [spec.name for spec in wiring.sources] == ["tagged replay.mcap"]
     assert wiring.sinks == [] and wiring.connected == []
+
+
+async def test_a_fleet_wires_each_rig_s_sinks_from_the_same_tables(
+        tmp_path: Path, free_tcp_port: Any) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    config = parse_daemon_config({
+        "prefix": "rig", "well": str(WELL_FILE),
+        "channels": {"hookload": {"unit": "kN"}, "bit_depth": {"unit": "m"}},
+        "sources": {**MQTT, "zenoh": {"listen": [endpoint]}},
+        "publish": {"mqtt": True, "zenoh": True, "names": ["model", "status"]},
+        "queues": {"publish": 2},
+        "recorder": {"enabled": True, "output": "recordings", "process": "child"},
+        "rigs": [{"prefix": "rig/A"}, {"prefix": "rig/B"}]}, tmp_path / "fleet.toml")
+    probe = CollectSink()
+    async with build_fleet(config, extra_sinks=[probe]) as built:
+        fleet = built.pipeline
+        assert isinstance(fleet, FleetPipeline)
+        [connection] = built.daemon.publishers  # one MQTT publisher for every rig
+        assert isinstance(connection, MqttPublisher)
+        sessions = set()
+        for prefix, name in (("rig/A", "rig_A"), ("rig/B", "rig_B")):
+            recorder, caller, zenoh_out, mqtt_out = fleet.rigs[prefix].pipeline.sinks
+            # the [recorder] row: in this process ("child" is a single rig's), the rig's folder
+            assert type(recorder) is McapRecorder
+            assert recorder.folder == tmp_path / "recordings" / name
+            assert recorder.prefix == name
+            assert caller is probe
+            assert isinstance(zenoh_out, ZenohPublisher) and zenoh_out.prefix == prefix
+            sessions.add(id(zenoh_out.session))
+            assert mqtt_out.topics == {"/tdmon/model", "/tdmon/status"}
+            # each rig's results through the one connection, on the rig's own prefix
+            for i in range(2):
+                mqtt_out.write("/tdmon/model", 0, {"t": float(i)})
+            assert connection.pending == 2
+            assert [topic for topic, _ in connection._queue] == [f"{prefix}/tdmon/model"] * 2
+            connection._queue.clear()
+        assert len(sessions) == 1  # publish.zenoh = true: the source's session for all rigs
+        assert fleet.recorders == [rig.pipeline.sinks[0] for rig in fleet.rigs.values()]
+        # a result the full queue drops is counted in the fleet's own status
+        for i in range(3):
+            fleet.rigs["rig/A"].pipeline.emit("model", {"t": float(i)})
+        assert connection.dropped == 1 and fleet.stats.dropped == 1
+        fleet.close_sinks()
+    assert all(is_finished(path) for path in (tmp_path / "recordings").glob("*/*.mcap"))

@@ -8,6 +8,7 @@ import dataclasses
 import json
 import math
 import pickle
+import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -29,15 +30,9 @@ from tdmon.errors import IngestError
 from tdmon.ingest import mcap_source
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.mcap_source import McapSource
-from tdmon.ingest.types import (
-    RAW_ROW,
-    RawMessage,
-    Sample,
-    raw_message,
-    sample_message,
-    samples_json,
-)
+from tdmon.ingest.types import RawMessage, raw_message
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for, open_session
+from tdmon.record.batch import Batch, Items
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import read_messages
 
@@ -84,18 +79,16 @@ async def test_the_inbox_wakes_a_waiting_consumer() -> None:
 # -- the pipeline ---------------------------------------------------------------------------------
 
 
-class ManySink(CollectSink):
-    """A sink taking bursts: remembers each write_many call."""
+class BatchSink(CollectSink):
+    """Remembers each batch it is given: its topic and size."""
 
     def __init__(self) -> None:
         super().__init__()
         self.calls: list[tuple[str, int]] = []
 
-    def write_many(self, topic: str, log_times_ns: list[int],
-                   messages: list[dict[str, Any]]) -> None:
-        self.calls.append((topic, len(messages)))
-        for log_time_ns, message in zip(log_times_ns, messages, strict=True):
-            self.write(topic, log_time_ns, message)
+    def write_batch(self, batch: Batch) -> None:
+        self.calls.append((batch.topic, len(batch)))
+        super().write_batch(batch)
 
 
 def _pipeline(sinks: list[Sink]) -> Pipeline:
@@ -118,7 +111,7 @@ def _rig_messages() -> list[RawMessage]:
     return messages
 
 
-def _one_by_one_and_in_bursts(bursts: list[list[RawMessage]], sinks: list[Sink]
+def _one_by_one_and_in_bursts(bursts: list[list[RawMessage]], sinks: list[CollectSink]
                               ) -> tuple[Pipeline, Pipeline, CollectSink]:
     """The messages through one pipeline one by one (recorded by the sink returned) and
     through another burst by burst into ``sinks``; both flushed. Each sink got what the
@@ -128,7 +121,7 @@ def _one_by_one_and_in_bursts(bursts: list[list[RawMessage]], sinks: list[Sink]
     for burst in bursts:
         for message in burst:
             single.process(message)
-    batched = _pipeline(sinks)
+    batched = _pipeline(list(sinks))
     for burst in bursts:
         batched.process_burst(burst)
     for pipeline in (single, batched):
@@ -136,19 +129,19 @@ def _one_by_one_and_in_bursts(bursts: list[list[RawMessage]], sinks: list[Sink]
     for topic in ("raw", "sample", "rejected", "state", "model"):
         assert alone[topic], topic
         for sink in sinks:
-            assert sink[topic] == alone[topic], (sink, topic)  # type: ignore[index]
+            assert sink[topic] == alone[topic], (sink, topic)
     return single, batched, alone
 
 
 def test_a_burst_records_and_computes_what_one_by_one_does() -> None:
     messages = _rig_messages()
     bursts = [messages[k:k + 7] for k in range(0, len(messages), 7)]
-    single, batched, _ = _one_by_one_and_in_bursts(bursts, [ManySink(), together := ManySink()])
+    single, batched, _ = _one_by_one_and_in_bursts(bursts, [BatchSink(), together := BatchSink()])
     for name in ("messages_in", "samples_in", "rejected", "frames", "duplicates"):
         assert getattr(batched.stats, name) == getattr(single.stats, name), name
     assert batched.stats.samples_in == 62 and batched.stats.rejected == 3
     assert batched.stats.duplicates == 2
-    # one call per burst and topic: a burst's raw input before anything else of it, its
+    # one batch per burst and topic: a burst's raw input before anything else of it, its
     # samples after everything else
     raw_calls = [n for topic, n in together.calls if topic == "/tdmon/raw"]
     assert raw_calls == [len(burst) for burst in bursts]
@@ -163,48 +156,52 @@ def test_a_burst_records_and_computes_what_one_by_one_does() -> None:
         assert set(segment[first_sample:]) == {"/tdmon/sample"}
 
 
-class RowsSink(CollectSink):
-    """A sink taking a burst as rows, as the recorder in a child process does: it makes the
-    messages itself, with ``make`` sent by name as to another process."""
+class RowsSink(BatchSink):
+    """A sink taking a batch as the recorder in a child process does: pickled (as its rows),
+    the messages made from the rows on the other side."""
 
     def __init__(self) -> None:
         super().__init__()
-        self.row_calls: list[tuple[str, int]] = []
+        self.rows: dict[str, int] = {}
 
-    def write_rows(self, topic: str, log_times_ns: list[int],
-                   make: Callable[[Any], dict[str, Any]], rows: list[tuple[Any, ...]]) -> None:
-        assert all(type(row) is tuple for row in rows)
-        make = pickle.loads(pickle.dumps(make))
-        self.row_calls.append((topic, len(rows)))
-        for log_time_ns, row in zip(log_times_ns, rows, strict=True):
-            self.write(topic, log_time_ns, make(row))
+    def write_batch(self, batch: Batch) -> None:
+        if batch.topic in ("/tdmon/raw", "/tdmon/sample"):
+            assert all(type(row) is tuple for row in batch.rows())
+            self.rows[batch.topic] = self.rows.get(batch.topic, 0) + len(batch)
+        copy = pickle.loads(pickle.dumps(batch, protocol=pickle.HIGHEST_PROTOCOL))
+        assert list(copy.items) == list(batch.rows())  # only the rows went over
+        super().write_batch(copy)
 
 
-def test_a_sink_taking_rows_gets_the_messages_the_others_get() -> None:
+def test_a_batch_pickled_as_rows_makes_the_messages_the_others_get() -> None:
     messages = _rig_messages()
     # a payload longer than the recorded limit: its raw message is cut (bounded_payload)
     messages.insert(9, RawMessage("mqtt", "rig/hookload", b'{"t": 4.5, "value": 1}' + b" " * 5000,
                                   104.5))
     rows = RowsSink()
     _one_by_one_and_in_bursts([messages[k:k + 7] for k in range(0, len(messages), 7)],
-                              [rows, ManySink()])
+                              [rows, BatchSink()])
     assert any(m.get("payload_truncated") for m in rows["raw"])
-    assert {topic for topic, _ in rows.row_calls} == {"/tdmon/raw", "/tdmon/sample"}
-    assert sum(n for topic, n in rows.row_calls if topic == "/tdmon/raw") == len(messages)
+    assert rows.rows == {"/tdmon/raw": len(messages), "/tdmon/sample": 62}
 
 
-class EncodedSink(ManySink):
-    """A sink taking messages already JSON, as the in-process recorder does."""
+class EncodedSink(BatchSink):
+    """A sink taking messages as JSON bytes, as the in-process recorder does; counts the raw
+    input handed over as its recording held it."""
 
     def __init__(self) -> None:
         super().__init__()
-        self.encoded_calls: list[tuple[str, int]] = []
+        self.as_recorded = 0
 
-    def write_encoded_many(self, topic: str, log_times_ns: list[int],
-                           datas: list[bytes]) -> None:
-        self.encoded_calls.append((topic, len(datas)))
-        for log_time_ns, data in zip(log_times_ns, datas, strict=True):
-            self.write(topic, log_time_ns, json.loads(data))
+    def write_batch(self, batch: Batch) -> None:
+        self.calls.append((batch.topic, len(batch)))
+        encoded = batch.encoded()
+        if batch.topic == "/tdmon/raw" and all(
+                data is raw.recorded for data, raw in zip(encoded.datas, batch.items,
+                                                          strict=True)):
+            self.as_recorded += len(batch)
+        for log_time_ns, data in zip(encoded.log_times_ns, encoded.datas, strict=True):
+            self.write(batch.topic, log_time_ns, json.loads(data))
 
 
 def _as_recorded(messages: list[RawMessage]) -> list[RawMessage]:
@@ -213,13 +210,13 @@ def _as_recorded(messages: list[RawMessage]) -> list[RawMessage]:
             for raw in messages]  # type: ignore[misc]
 
 
-def test_a_replay_s_raw_input_is_recorded_as_its_recording_held_it() -> None:
+def test_a_replay_s_raw_input_is_handed_over_as_its_recording_held_it() -> None:
     messages = _as_recorded(_rig_messages())
     assert all(raw.recorded is not None for raw in messages)
     bursts = [messages[k:k + 7] for k in range(0, len(messages), 7)]
     # one burst with a message that has no bytes (as live input), one with a payload
     # longer than the pipeline keeps whole: both made into messages as usual
-    bursts[1][3] = RawMessage(*RAW_ROW(bursts[1][3]))
+    bursts[1][3] = dataclasses.replace(bursts[1][3], recorded=None)
     payload = b'{"t": 4.5, "value": 1}' + b" " * 5000
     whole = {"source": "mqtt", "topic": "rig/hookload", "receive_time": 104.5,
              "payload": payload.decode(), "payload_encoding": "utf-8"}
@@ -228,67 +225,49 @@ def test_a_replay_s_raw_input_is_recorded_as_its_recording_held_it() -> None:
     encoded = EncodedSink()
     _one_by_one_and_in_bursts(bursts, [encoded, RowsSink()])
     assert any(m.get("payload_truncated") for m in encoded["raw"])
-    assert [call for call in encoded.encoded_calls if call[0] == "/tdmon/raw"] == [
-        ("/tdmon/raw", len(burst)) for i, burst in enumerate(bursts) if i not in (1, 2)]
-    assert [n for topic, n in encoded.calls if topic == "/tdmon/raw"] == [7, 8]
-    # the samples as JSON bytes too (live input as well): every burst's that has one
-    assert sum(n for topic, n in encoded.encoded_calls if topic == "/tdmon/sample") == len(
-        encoded["sample"])
-    assert not [n for topic, n in encoded.calls if topic == "/tdmon/sample"]
-
-
-@pytest.mark.parametrize("sample", [
-    Sample("hookload", 1.7e9, 1.2e6, "mqtt", "rig/F4/hookload", "N", 1.7e9 + 0.2),
-    Sample("torque", 1714521600.125, -0.0, "zenoh", 'rig/"F4"/tq\\ü🙂', "N*m", 0.0, 7),
-    Sample("bit_depth", 0.0, 1e16, "mcap", "rig/bit", "m", 1.0),
-    Sample("flow_in", 7e9, 5e-324, "wits0", "rig/flow", "m**3/s", 1.0),
-    Sample("spp", 1.5, 123456789.98765432, "mqtt", "", "Pa", 1.0),
-])
-def test_samples_json_writes_the_bytes_orjson_writes_of_the_messages(sample: Sample) -> None:
-    other = dataclasses.replace(sample, t=sample.t + 1.0, value=-sample.value)
-    assert samples_json([sample, other, sample]) == [
-        orjson.dumps(sample_message(s)) for s in (sample, other, sample)]
-
-
-def test_samples_json_leaves_a_non_finite_number_to_the_recorder() -> None:
-    good = Sample("hookload", 1.7e9, 1.2e6, "mqtt", "rig/F4/hookload", "N", 1.7e9)
-    for bad in (dataclasses.replace(good, value=math.nan), dataclasses.replace(good, t=math.inf)):
-        assert samples_json([good, bad]) is None
+    assert encoded.as_recorded == sum(len(burst) for i, burst in enumerate(bursts)
+                                      if i not in (1, 2))
 
 
 def test_a_sink_failing_a_burst_is_counted_and_the_others_get_it() -> None:
-    class Broken(ManySink):
-        def write_many(self, topic: str, log_times_ns: list[int],
-                       messages: list[dict[str, Any]]) -> None:
-            raise RuntimeError("bug in a sink")
+    class Broken(BatchSink):
+        def write_batch(self, batch: Batch) -> None:
+            if len(batch) > 1:
+                raise RuntimeError("bug in a sink")
+            super().write_batch(batch)
 
     good = CollectSink()
-    pipeline = _pipeline([Broken(), good])
+    broken = Broken()
+    pipeline = _pipeline([broken, good])
     messages = _rig_messages()
     pipeline.process_burst(messages)
     assert len(good["raw"]) == len(messages) and len(good["sample"]) == 62
     assert pipeline.stats.sink_errors == 2  # the raw and the sample burst
+    assert broken["state"] == good["state"] and not broken["raw"]
 
 
 # -- the recorder ---------------------------------------------------------------------------
 
 
-def test_write_many_records_what_write_does(tmp_path: Path) -> None:
-    messages = [{"channel": "hookload", "t": 1.0 + i, "value": 1e6 + i, "unit": "N",
-                 "source": "mqtt", "topic": "rig/hookload"} for i in range(700)]
+def _samples(count: int) -> list[dict[str, Any]]:
+    return [{"channel": "hookload", "t": 1.0 + i, "value": 1e6 + i, "unit": "N",
+             "source": "mqtt", "topic": "rig/hookload"} for i in range(count)]
+
+
+def test_batches_record_what_one_message_at_a_time_does(tmp_path: Path) -> None:
+    messages = _samples(700)
     times = [1_700_000_000_000_000_000 + i * 10**9 for i in range(700)]
     with McapRecorder(tmp_path / "one", recover=False) as one:
         for log_time_ns, message in zip(times, messages, strict=True):
             one.write("/tdmon/sample", log_time_ns, message)
     with McapRecorder(tmp_path / "many", recover=False) as many:
-        many.write_many("/tdmon/sample", times[:300], messages[:300])
+        many.write_batch(Batch("/tdmon/sample", times[:300], messages[:300]))
         many.write("/tdmon/alarm", times[300], {"t": 1.0, "kind": "k", "severity": "info",
                                                 "message": "m", "value": math.nan})
-        # a short list goes through the queue, a long one straight to the file: same order
-        many.write_many("/tdmon/sample", times[300:310], messages[300:310])
-        many.write_many("/tdmon/sample", times[310:], messages[310:])
-        with pytest.raises(ValueError, match="2 log times for 1 messages"):
-            many.write_many("/tdmon/sample", times[:2], messages[:1])
+        many.write_batch(Batch("/tdmon/sample", times[300:310], messages[300:310]))
+        many.write_batch(Batch("/tdmon/sample", times[310:], messages[310:]))
+    with pytest.raises(ValueError, match="2 log times for 1 items"):
+        Batch("/tdmon/sample", times[:2], messages[:1])
     [path_one] = one.stats.files
     [path_many] = many.stats.files
     back_one = list(read_messages(path_one))
@@ -300,29 +279,31 @@ def test_write_many_records_what_write_does(tmp_path: Path) -> None:
     assert many.stats.nonfinite_replaced == 1 and many.stats.lost == 0
 
 
-def test_write_encoded_many_records_the_bytes_given(tmp_path: Path) -> None:
+def test_bytes_the_items_hold_are_recorded_as_they_are(tmp_path: Path) -> None:
     messages = [{"source": "mqtt", "topic": "rig/hookload", "receive_time": 1.0 + i,
                  "payload": f'{{"t":{i}}}', "payload_encoding": "utf-8"} for i in range(300)]
-    datas = [orjson.dumps(message) for message in messages]
+    # the bytes as another writer made them (the json module's spacing), the same values
+    datas = [json.dumps(message).encode() for message in messages]
+    held = Items(message=messages.__getitem__, encoded=lambda items: [datas[i] for i in items])
     times = [1_700_000_000_000_000_000 + i * 10**9 for i in range(300)]
-    with McapRecorder(tmp_path, recover=False) as recorder:
-        recorder.write_many("/tdmon/raw", times[:5], messages[:5])
-        recorder.write_encoded_many("/tdmon/raw", times[5:20], datas[5:20])  # queued
-        recorder.write_encoded_many("/tdmon/raw", times[20:], datas[20:])  # straight on
-        with pytest.raises(ValueError, match="2 log times for 1 messages"):
-            recorder.write_encoded_many("/tdmon/raw", times[:2], datas[:1])
+    with McapRecorder(tmp_path, recover=False, compression="none") as recorder:
+        recorder.write_batch(Batch("/tdmon/raw", times[:5], messages[:5]))  # encoded here
+        recorder.write_batch(Batch("/tdmon/raw", times[5:], range(5, 300), held))
     [path] = recorder.stats.files
     back = list(read_messages(path))
     assert [(m.log_time_ns, m.message) for m in back] == list(zip(times, messages, strict=True))
     assert recorder.stats.per_topic == {"/tdmon/raw": 300} and recorder.stats.lost == 0
     assert recorder.stats.nonfinite_replaced == 0
+    content = path.read_bytes()
+    assert len(re.findall(rb'"receive_time": \d', content)) == 295  # as handed over
+    assert len(re.findall(rb'"receive_time":\d', content)) == 5  # orjson's
 
 
-def test_a_message_that_is_not_json_leaves_its_list_s_others_recorded(tmp_path: Path) -> None:
+def test_a_message_that_is_not_json_leaves_its_batch_s_others_recorded(tmp_path: Path) -> None:
     messages: list[dict[str, Any]] = [{"t": float(i), "value": float(i)} for i in range(40)]
     messages[13] = {"t": 13.0, "value": {1, 2}}  # a set: neither orjson nor json writes it
     with McapRecorder(tmp_path, recover=False) as recorder:
-        recorder.write_many("/tdmon/sample", list(range(40)), messages)
+        recorder.write_batch(Batch("/tdmon/sample", list(range(40)), messages))
     assert recorder.stats.unencodable == 1 and recorder.stats.lost == 1
     assert recorder.stats.per_topic == {"/tdmon/sample": 39}
     [path] = recorder.stats.files
@@ -414,7 +395,7 @@ def test_the_batch_search_for_nan_finds_every_one(tmp_path: Path) -> None:
             message["extra"] = None
         messages.append(message)
     with McapRecorder(tmp_path, recover=False) as recorder:
-        recorder.write_many("/tdmon/alarm", list(range(300)), messages)
+        recorder.write_batch(Batch("/tdmon/alarm", list(range(300)), messages))
     assert recorder.stats.nonfinite_replaced == len(nan_at)
     [path] = recorder.stats.files
     back = [m.message for m in read_messages(path)]

@@ -59,7 +59,7 @@ in_slips_hookload = "800 kN"
     return path
 
 
-def _wait_for(path: Path, text: str, timeout: float = 20) -> None:
+def _wait_for(path: Path, text: str, timeout: float = 90) -> None:
     deadline = time.monotonic() + timeout
     while text not in path.read_text():
         assert time.monotonic() < deadline, f"'{text}' never appeared: {path.read_text()}"

@@ -5,101 +5,60 @@ taking ``seq``."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
-from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tdmon.daemon.daemon import AckWindow, Daemon, SourceSpec, recorders_of
+from tdmon.daemon.daemon import AckWindow, Daemon, SourceSpec
 from tdmon.daemon.loss import LossDetector
 from tdmon.daemon.pipeline import Stats
+from tdmon.errors import RecordError
 from tdmon.ingest.decode import ChannelSpec, Decoder, parse_payload_seq
 from tdmon.ingest.types import RawMessage, Sample
+from tdmon.record.batch import Batch
+from tdmon.record.sink import Recorder, RecorderStats
 
 
-@dataclass
-class _Counts:
-    flushes: int = 0
-
-
-class FakeRecorder:
-    """Holds written messages in memory until flush() puts them 'in the file'."""
+class FakeRecorder(Recorder):
+    """Holds written messages in memory until flush() puts them 'in the file'; a flush asked
+    for is done at once, as by the recorder in the daemon's process."""
 
     def __init__(self) -> None:
-        self.buffer: list[str] = []
-        self.file: list[str] = []
-        self._stats = _Counts()
+        self.buffer: list[Any] = []
+        self.file: list[Any] = []
+        self.written = self.durable = self.flushes = 0
+        self.failed = False
 
     @property
-    def stats(self) -> _Counts:
-        return _Counts(self._stats.flushes)
+    def error(self) -> RecordError | None:
+        return RecordError("failed") if self.failed else None
 
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        self.buffer.append(message["payload"])
+    @property
+    def path(self) -> Path | None:
+        return None
+
+    @property
+    def stats(self) -> RecorderStats:
+        return RecorderStats(written=self.written, flushes=self.flushes)
+
+    def register_topic(self, topic: str, schema: Mapping[str, Any]) -> None:
+        pass
+
+    def retry(self) -> bool:
+        return not self.failed
+
+    def write_batch(self, batch: Batch) -> None:
+        self.buffer += [message["payload"] for message in batch.messages()]
+        self.written += len(batch)
 
     def flush(self) -> None:
         self.file += self.buffer
         self.buffer.clear()
-        self._stats.flushes += 1
-
-    def close(self) -> None:
-        self.flush()
-
-
-def test_acks_wait_for_the_recorders_flush() -> None:
-    recorder = FakeRecorder()
-    window = AckWindow(recorders_of([recorder, object()]), batch=5, idle_s=0.05, idle_min=3,
-                       max_age_s=5.0)
-    assert window.recorders == [recorder]
-    acked: list[int] = []
-    window.add([lambda i=i: acked.append(i) for i in range(2)], now=0.0)
-    window.release(now=0.01, idle=0.01)
-    assert acked == [] and len(window) == 2  # not flushed yet
-    window.add([lambda: acked.append(99)], now=0.02)  # written after that look
-    recorder.flush()  # the recorder's own schedule
-    window.release(now=0.03, idle=0.0)
-    assert acked == []  # looks at the recorder at most every check_s
-    window.release(now=0.1, idle=0.0)
-    assert acked == [0, 1] and len(window) == 1 and window.forced_flushes == 0
-    window.release(now=0.2, idle=0.0)
-    assert acked == [0, 1]  # 99 was written before the flush but seen waiting only after it
-    recorder.flush()
-    window.release(now=0.3, idle=0.0)
-    assert acked == [0, 1, 99]
-    acked.remove(99)
-    # idle with too few waiting: nothing; with idle_min waiting: flush and go
-    window.add([lambda: acked.append(2), lambda: acked.append(3)], now=1.0)
-    window.release(now=1.1, idle=1.0)
-    assert acked == [0, 1]
-    window.add([lambda: acked.append(4)], now=1.1)
-    window.release(now=1.2, idle=0.06)
-    assert acked == [0, 1, 2, 3, 4] and window.forced_flushes == 1
-    # a full batch goes at once; an old one goes even when the recorder never flushes
-    window.add([lambda i=i: acked.append(i) for i in range(5, 10)], now=2.0)
-    window.release(now=2.0, idle=0.0)
-    assert acked[-5:] == [5, 6, 7, 8, 9]
-    window.add([lambda: acked.append(10)], now=3.0)
-    window.release(now=7.9, idle=0.0)
-    assert acked[-1] == 9
-    window.release(now=8.0, idle=0.0)
-    assert acked[-1] == 10
-
-
-class FarRecorder(FakeRecorder):
-    """A recorder in another process: marks of what was written, flushes asked for and done
-    later (``settle``), never waited for."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.written = self.durable = 0
-        self.asked: list[int] = []
-        self.failed = False
-
-    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
-        super().write(topic, log_time_ns, message)
-        self.written += 1
+        self.flushes += 1
+        self.durable = self.written
 
     def durable_mark(self) -> int:
         return self.written
@@ -108,23 +67,79 @@ class FarRecorder(FakeRecorder):
         return self.durable >= mark or self.failed
 
     def request_flush(self) -> None:
+        self.flush()
+
+    def close(self) -> None:
+        self.flush()
+
+
+class FarRecorder(FakeRecorder):
+    """A recorder in another process: flushes asked for and done later (``settle``), never
+    waited for."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.asked: list[int] = []
+
+    def request_flush(self) -> None:
         self.asked.append(self.written)
 
     def settle(self) -> None:  # the other process flushed what it had been sent
         self.flush()
-        self.durable = self.written
+
+
+def _arrivals(recorder: FakeRecorder, window: AckWindow, acked: list[int]
+              ) -> Callable[[int, float], None]:
+    def arrive(i: int, now: float) -> None:
+        recorder.write("/tdmon/raw", 0, {"payload": i})
+        window.add([lambda: acked.append(i)], now=now)
+    return arrive
+
+
+def test_acks_wait_for_the_recorders_flush() -> None:
+    recorder = FakeRecorder()
+    window = AckWindow([recorder], batch=5, idle_s=0.05, idle_min=3, max_age_s=5.0)
+    acked: list[int] = []
+    arrive = _arrivals(recorder, window, acked)
+    arrive(0, 0.0)
+    arrive(1, 0.0)
+    window.release(now=0.01, idle=0.01)
+    assert acked == [] and len(window) == 2  # marked, not flushed yet
+    arrive(99, 0.02)  # written after that look
+    recorder.flush()  # the recorder's own schedule
+    window.release(now=0.03, idle=0.0)
+    assert acked == [0, 1]  # 99 was in the flush, but is marked only at the next look
+    window.release(now=0.04, idle=0.0)
+    assert acked == [0, 1]  # looks at most every check_s
+    window.release(now=0.1, idle=0.0)
+    assert acked == [0, 1, 99] and len(window) == 0 and window.forced_flushes == 0
+    acked.remove(99)
+    # idle with too few waiting: nothing; with idle_min waiting: a flush, and they go
+    arrive(2, 1.0)
+    arrive(3, 1.0)
+    window.release(now=1.1, idle=1.0)
+    assert acked == [0, 1]
+    arrive(4, 1.1)
+    window.release(now=1.2, idle=0.06)
+    assert acked == [0, 1, 2, 3, 4] and window.forced_flushes == 1
+    # a full batch goes at once; an old one goes once it has waited max_age_s
+    for i in range(5, 10):
+        arrive(i, 2.0)
+    window.release(now=2.0, idle=0.0)
+    assert acked[-5:] == [5, 6, 7, 8, 9]
+    arrive(10, 3.0)
+    window.release(now=7.9, idle=0.0)
+    assert acked[-1] == 9
+    window.release(now=8.0, idle=0.0)
+    assert acked[-1] == 10 and recorder.file == [0, 1, 99, *range(2, 11)]
 
 
 def test_acks_wait_for_a_recorder_in_another_process_without_waiting_on_it() -> None:
     recorder = FarRecorder()
-    window = AckWindow(recorders_of([recorder]), batch=5, idle_s=0.05, idle_min=3,
-                       max_age_s=5.0, check_s=0.05)
+    window = AckWindow([recorder], batch=5, idle_s=0.05, idle_min=3, max_age_s=5.0,
+                       check_s=0.05)
     acked: list[int] = []
-
-    def arrive(i: int, now: float) -> None:
-        recorder.write("/tdmon/raw", 0, {"payload": i})
-        window.add([lambda: acked.append(i)], now=now)
-
+    arrive = _arrivals(recorder, window, acked)
     arrive(0, 0.0)
     arrive(1, 0.0)
     window.release(now=0.01, idle=0.0)  # a mark of the two; nothing asked, nothing acked
@@ -157,6 +172,24 @@ def test_acks_wait_for_a_recorder_in_another_process_without_waiting_on_it() -> 
     assert acked == list(range(10)) and recorder.file[-1] == 9
 
 
+def test_a_recorder_added_later_is_waited_for() -> None:
+    # a fleet's rigs appear while the daemon runs: the window reads the growing list
+    first, later = FarRecorder(), FarRecorder()
+    recorders: list[Recorder] = [first]
+    window = AckWindow(recorders, check_s=0.05)
+    acked: list[int] = []
+    _arrivals(first, window, acked)(0, 0.0)
+    recorders.append(later)
+    _arrivals(later, window, acked)(1, 0.0)
+    window.release(now=0.1, idle=0.0)
+    first.settle()
+    window.release(now=0.2, idle=0.0)
+    assert acked == []  # the later recorder has not flushed its message yet
+    later.settle()
+    window.release(now=0.3, idle=0.0)
+    assert acked == [0, 1]
+
+
 def test_without_a_recorder_acks_go_after_processing() -> None:
     acked: list[int] = []
     window = AckWindow([])
@@ -167,6 +200,7 @@ def test_without_a_recorder_acks_go_after_processing() -> None:
 class FakePipeline:
     def __init__(self, recorder: FakeRecorder) -> None:
         self.sinks = [recorder]
+        self.recorders = [recorder]
         self.stats = Stats()
         self.processed: list[bytes] = []
         self.recorder = recorder

@@ -78,9 +78,14 @@ def test_topics_route_to_their_rig_and_results_are_not_input(tmp_path: Path) -> 
                             "fleet": {"max_rigs": 2}}, tmp_path)
     made: list[str] = []
 
+    class Named(str):
+        """A stand-in for a rig's pipeline: its prefix, without recorders."""
+
+        recorders: tuple[Any, ...] = ()
+
     def make(prefix: str, rig: Any) -> Any:
         made.append(prefix)
-        return type("Rig", (), {"pipeline": prefix})()
+        return type("Rig", (), {"pipeline": Named(prefix)})()
 
     fleet = FleetPipeline(config, make)
     assert fleet._route("rig/north/A/hookload") == "rig/north/A"  # listed, two levels

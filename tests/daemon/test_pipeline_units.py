@@ -409,7 +409,7 @@ def test_step_messages_reach_the_sinks_that_want_them_and_the_frame_results(
     assert [sorted(frame.results) for frame in frames] == [["model", "state"]] * 3
     assert frames[2].results["state"] is kept.messages["/tdmon/state"][2]
     assert pipeline.stats.sink_errors == 7 and pipeline.stats.step_errors == 0
-    assert caplog.text.count("failed writing /tdmon/") == 7
+    assert caplog.text.count("failed writing 1 message(s) on /tdmon/") == 7
 
 
 class TestStaleAfterAGap:

@@ -1,5 +1,4 @@
-"""RawMessage and Sample: the dataclass behaviour their hand-written ``__init__`` keeps (its
-signature: tests/test_hand_written_inits.py)."""
+"""RawMessage and Sample: built, frozen, compared, copied and pickled as dataclasses."""
 
 from __future__ import annotations
 

@@ -198,7 +198,7 @@ def test_unfinished_file_is_refused_by_the_reader(tmp_path: Path) -> None:
 
 
 def test_non_finite_walk_of_long_lists_and_enums() -> None:
-    from tdmon.record.mcap_recorder import _has_nonfinite
+    from tdmon.record.batch import has_nonfinite as _has_nonfinite
     from tdmon.vocabulary import EstimateKind
 
     profile = [0.1 * i for i in range(141)]

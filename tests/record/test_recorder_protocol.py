@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from tdmon.record.mcap_recorder import McapRecorder, RecorderStats
+from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import is_finished, read_messages
-from tdmon.record.sink import Recorder
+from tdmon.record.sink import Recorder, RecorderStats
 from tdmon.record.writer_process import RecorderProcess
 
 TOPIC = "/truth/hookload"

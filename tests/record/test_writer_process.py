@@ -18,8 +18,9 @@ import jsonschema
 import pytest
 
 from tdmon.errors import RecordError
-from tdmon.ingest.types import RAW_ROW, RawMessage, raw_row_message
+from tdmon.ingest.types import RawMessage, raw_items, raw_row_message
 from tdmon.record import schemas
+from tdmon.record.batch import Batch, Items
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import RecordedMessage, is_finished, read_messages
 from tdmon.record.writer_process import RecorderProcess
@@ -64,29 +65,30 @@ def test_same_file_as_the_recorder_in_this_process(
     assert process.path is None  # closed
 
 
-def test_rows_made_into_messages_in_the_child(tmp_path: Path) -> None:
-    """``write_rows`` (the pipeline's bursts of raw input and samples): the child makes each
-    message of its row; the file is the one ``write_many`` of the made messages gives. A row
-    the maker refuses is counted as unencodable and lost, the others are kept; a maker that
-    cannot be sent at all loses its rows, counted, and not the rest of the batch."""
+def test_batches_are_made_into_messages_in_the_child(tmp_path: Path) -> None:
+    """A batch goes to the child as its rows (the pipeline's bursts of raw input and samples:
+    tuples of plain values) and the child makes each message of its row; the file is the one
+    the recorder in this process writes of the same batches. A row that makes no message is
+    counted as unencodable and lost, the others are kept; a batch that cannot be sent at all
+    loses its messages, counted, and not the rest of the parcel."""
     raws = [RawMessage("mqtt", f"rig/K1/{channel}", f'{{"t": {i}, "value": {i}}}'.encode(),
                        1.7e9 + i) for i in range(600) for channel in ("hookload", "torque")]
     times = [int(raw.receive_time * 1e9) for raw in raws]
+    items = raw_items(max_bytes=64)
     make = partial(raw_row_message, max_bytes=64)
     inline, separate = tmp_path / "inline.mcap", tmp_path / "separate.mcap"
     with McapRecorder(path=inline) as recorder:
-        recorder.write_many("/tdmon/raw", times, [make(RAW_ROW(raw)) for raw in raws])
+        recorder.write_batch(Batch("/tdmon/raw", times, raws, items))
     with RecorderProcess(path=separate, batch_size=500) as process:
         for k in range(0, len(raws), 256):  # bursts, as the pipeline hands them over
-            process.write_rows("/tdmon/raw", times[k:k + 256], make,
-                               [RAW_ROW(raw) for raw in raws[k:k + 256]])
+            process.write_batch(Batch("/tdmon/raw", times[k:k + 256], raws[k:k + 256], items))
         end = times[-1]  # what follows comes after, in the file's time order too
-        process.write_rows("/tdmon/raw", [end + 1, end + 2], make,
-                           [("mqtt", "rig/x", b"{}", 1.0), (1,)])
-        process.write_rows("/tdmon/raw", [end + 3], lambda row: {"x": 1}, [("a",)])
+        process.write_batch(Batch("/tdmon/raw", [end + 1, end + 2],
+                                  [("mqtt", "rig/x", b"{}", 1.0), (1,)],
+                                  Items(message=make, row=tuple, from_row=make)))
+        process.write_batch(Batch("/tdmon/raw", [end + 3], [("a",)],
+                                  Items(row=tuple, from_row=lambda row: {"x": 1})))
         process.write("/tdmon/raw", end + 4, {"after": "the unsendable maker"})
-        with pytest.raises(ValueError, match="2 log times for 1 rows"):
-            process.write_rows("/tdmon/raw", [1, 2], make, [("a",)])
     want = [m.message for m in read_messages(inline)]
     got = [m.message for m in read_messages(separate)]
     assert got[:len(want)] == want and len(want) == len(raws)
