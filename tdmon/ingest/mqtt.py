@@ -14,7 +14,8 @@ import socket
 import ssl
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
+from itertools import islice
 from pathlib import Path
 from types import TracebackType
 from typing import Any, cast
@@ -30,6 +31,11 @@ from tdmon.ingest.result_json import encode_result
 from tdmon.ingest.types import RawMessage
 
 log = logging.getLogger(__name__)
+
+#: Messages the source hands to the daemon at once, at most (:meth:`MqttSource.batches`).
+BATCH = 256
+#: Results handed to paho at once, at most (:meth:`MqttPublisher.pump`).
+PUBLISH_BATCH = 64
 
 
 def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext | None:
@@ -63,9 +69,17 @@ def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext 
     return context
 
 
-def make_client(config: MqttConfig, client_id: str, base: Path | None = None
+def make_client(config: MqttConfig, client_id: str, base: Path | None = None,
+                nodelay: bool = True,
+                queue_type: type[asyncio.Queue[aiomqtt.Message]] | None = None
                 ) -> aiomqtt.Client:
-    """An aiomqtt client for ``config`` (must be called inside the running loop)."""
+    """An aiomqtt client for ``config`` (must be called inside the running loop).
+
+    ``nodelay``: small messages go out at once (TCP_NODELAY), for results and the rig's
+    messages; without it (the source, whose only messages are acknowledgements) the kernel
+    sends a burst of acknowledgements together, where one write each costs a system call and
+    a wake-up of the broker per message.
+    """
     return aiomqtt.Client(
         config.host,
         config.port,
@@ -78,7 +92,8 @@ def make_client(config: MqttConfig, client_id: str, base: Path | None = None
         protocol=aiomqtt.ProtocolVersion.V311,
         timeout=10.0,
         # small messages: without NODELAY, Nagle and delayed ACKs add ~40 ms now and then
-        socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
+        socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)] if nodelay else [],
+        queue_type=queue_type,
     )
 
 
@@ -115,6 +130,20 @@ def _translate(config: MqttConfig, what: str, exc: BaseException) -> IngestError
 def connect_error(config: MqttConfig, exc: BaseException) -> IngestError:
     """The one-line error for a failed connection (naming bad credentials as such)."""
     return _translate(config, "cannot connect", exc)
+
+
+def _queue_class(made: list[asyncio.Queue[aiomqtt.Message]]
+                 ) -> type[asyncio.Queue[aiomqtt.Message]]:
+    """A queue class for aiomqtt's ``queue_type`` whose instance, once aiomqtt has made it,
+    is in ``made``: the source takes what waits there without aiomqtt's message iterator,
+    which makes a task per message (:meth:`MqttSource.batches`)."""
+
+    class Inbox(asyncio.Queue[aiomqtt.Message]):
+        def __init__(self, maxsize: int = 0) -> None:
+            super().__init__(maxsize)
+            made.append(self)
+
+    return Inbox
 
 
 class ManualAcks:
@@ -211,11 +240,15 @@ class MqttSource:
         self.recent = recent if recent is not None else RecentDeliveries()
         self._client: aiomqtt.Client | None = None
         self._messages: aiomqtt.MessagesIterator | None = None
+        self._inbox: asyncio.Queue[aiomqtt.Message] | None = None
         self._acks: ManualAcks | None = None
         self._resumed = False
 
     async def __aenter__(self) -> MqttSource:
-        client = make_client(self.config, self.config.client_id, self.base)
+        made: list[asyncio.Queue[aiomqtt.Message]] = []
+        client = make_client(self.config, self.config.client_id, self.base, nodelay=False,
+                             queue_type=_queue_class(made))
+        (inbox,) = made  # made by the client's constructor
         acks = ManualAcks(client)  # before connecting: see ManualAcks
         try:
             await client.__aenter__()
@@ -229,6 +262,7 @@ class MqttSource:
             raise _translate(self.config, "cannot subscribe", exc) from exc
         self._client = client
         self._messages = client.messages
+        self._inbox = inbox
         self._acks = acks
         # the broker resends only on a session resumed within this run: nothing handed out
         # before, nothing to recognise
@@ -245,29 +279,72 @@ class MqttSource:
             await _quiet_exit(self._client)
             self._client = None
             self._messages = None
+            self._inbox = None
 
     def __aiter__(self) -> MqttSource:
         return self
 
     async def __anext__(self) -> RawMessage:
-        assert self._messages is not None and self._acks is not None, "not entered"
         while True:
-            try:
-                message = await anext(self._messages)
-            except aiomqtt.MqttError as exc:
-                raise _translate(self.config, "connection lost", exc) from exc
-            topic = message.topic.value
-            ack = (None if message.qos == 0
-                   else functools.partial(self._acks.ack, message.mid, message.qos))
-            if topic.startswith(self.ignore_prefixes):
-                if ack is not None:
-                    ack()  # our own results coming back on the shared prefix: nothing to keep
-                continue
-            payload = cast(bytes, message.payload)  # paho's bytes, as received
-            duplicate = self._resumed and (topic, payload) in self.recent
-            if not duplicate:
-                self.recent.add(topic, payload)
-            return RawMessage("mqtt", topic, payload, time.time(), ack, False, duplicate)
+            raw = self._raw(await self._next())
+            if raw is not None:
+                return raw
+
+    async def batches(self) -> AsyncIterator[list[RawMessage]]:
+        """What has arrived, up to ``BATCH`` messages at a time (the daemon queues a list as
+        one entry and processes what is queued as one burst: docs/daemon.md, "Bursts").
+
+        aiomqtt reads one packet per event-loop turn: after the first message the source
+        gives the loop a turn per message while more arrive, so a backlog comes in lists of
+        up to ``BATCH``, and a message at a rig's rate on its own at once. What waits is
+        handed over before a lost connection is reported.
+        """
+        assert self._inbox is not None, "not entered"
+        inbox = self._inbox
+        while True:
+            batch: list[RawMessage] = []
+            first = self._raw(await self._next())
+            if first is not None:
+                batch.append(first)
+            while len(batch) < BATCH:
+                while not inbox.empty() and len(batch) < BATCH:
+                    raw = self._raw(inbox.get_nowait())
+                    if raw is not None:
+                        batch.append(raw)
+                if len(batch) >= BATCH:
+                    break
+                await asyncio.sleep(0)  # a turn, in which aiomqtt reads a packet if one came
+                if inbox.empty():
+                    break
+            if batch:
+                yield batch
+
+    async def _next(self) -> aiomqtt.Message:
+        """The next message: one waiting in the queue, else the next to arrive (raises
+        :class:`IngestError` when the connection is lost before one does)."""
+        assert self._inbox is not None and self._messages is not None, "not entered"
+        if not self._inbox.empty():
+            return self._inbox.get_nowait()
+        try:
+            return await anext(self._messages)
+        except aiomqtt.MqttError as exc:
+            raise _translate(self.config, "connection lost", exc) from exc
+
+    def _raw(self, message: aiomqtt.Message) -> RawMessage | None:
+        """The RawMessage of one message (None: one of our own results, acknowledged)."""
+        assert self._acks is not None, "not entered"
+        topic = message.topic.value
+        ack = (None if message.qos == 0
+               else functools.partial(self._acks.ack, message.mid, message.qos))
+        if topic.startswith(self.ignore_prefixes):
+            if ack is not None:
+                ack()  # our own results coming back on the shared prefix: nothing to keep
+            return None
+        payload = cast(bytes, message.payload)  # paho's bytes, as received
+        duplicate = self._resumed and (topic, payload) in self.recent
+        if not duplicate:
+            self.recent.add(topic, payload)
+        return RawMessage("mqtt", topic, payload, time.time(), ack, False, duplicate)
 
 
 async def _quiet_exit(client: aiomqtt.Client) -> None:
@@ -352,20 +429,31 @@ class MqttPublisher:
 
     async def pump(self, client: aiomqtt.Client) -> None:
         """Publish queued messages in order until cancelled; a message is removed only once
-        sent (QoS 1/2: acknowledged by the broker; QoS 0: written to the socket)."""
+        sent (QoS 1/2: acknowledged by the broker; QoS 0: written to the socket).
+
+        Up to ``PUBLISH_BATCH`` are published at once: each ``publish`` hands its message to
+        paho before it waits, in the order the calls start, and the event loop writes them
+        together (one at a time, a result waits for its own write or acknowledgement first:
+        an event-loop turn or more per message, more than the daemon spends on a sample).
+        """
+        client.pending_calls_threshold = max(client.pending_calls_threshold, PUBLISH_BATCH)
+        queue = self._queue
         while True:
-            if not self._queue:
+            if not queue:
                 self._idle.set()
                 self._wake.clear()
                 await self._wake.wait()
                 continue
-            topic, payload = self._queue[0]
-            try:
-                await client.publish(topic, payload, qos=self.qos)
-            except aiomqtt.MqttError as exc:
-                raise _translate(self.config, "publish failed", exc) from exc
-            self._queue.popleft()
-            self.published += 1
+            batch = list(islice(queue, PUBLISH_BATCH))
+            outcomes = await asyncio.gather(
+                *(client.publish(topic, payload, qos=self.qos) for topic, payload in batch),
+                return_exceptions=True)
+            for outcome in outcomes:
+                if isinstance(outcome, BaseException):
+                    # the rest go again on the next connection, in order
+                    raise _translate(self.config, "publish failed", outcome) from outcome
+                queue.popleft()
+                self.published += 1
 
     async def drain(self, timeout: float) -> bool:
         """Wait until everything queued is published (True) or ``timeout`` passes (False)."""

@@ -158,3 +158,28 @@ async def test_results_are_all_delivered_in_order(mosquitto: Any, qos: int) -> N
     finally:
         dashboard.loop_stop()
         dashboard.disconnect()
+
+
+async def test_a_backlog_is_handed_over_in_lists_in_order(mosquitto: Any) -> None:
+    """Messages queued for the session while the source was away come in lists of more than
+    one (the daemon processes a list as one burst), every one once, in order."""
+    config = MqttConfig(port=mosquitto.port, client_id="tdmon-backlog", clean_session=False)
+    async with MqttSource(config, ["rig/L0/#"], base=None):
+        pass  # the broker keeps a session for this client id from now on
+    messages = [(f"rig/L0/{('hookload', 'torque')[i % 2]}", b'{"t": %d, "value": 1}' % i)
+                for i in range(2000)]
+    await asyncio.to_thread(publish, mosquitto.port, messages)
+    async with MqttSource(config, ["rig/L0/#"], base=None) as source:
+        received: list[tuple[str, bytes]] = []
+        sizes = []
+        batches = source.batches()
+        while len(received) < len(messages):
+            batch = await asyncio.wait_for(anext(batches), 10)
+            sizes.append(len(batch))
+            for raw in batch:
+                assert raw.ack is not None
+                raw.ack()
+                received.append((raw.topic, raw.payload))
+        assert received == messages
+        assert max(sizes) > 1 and len(sizes) < len(messages)
+        await asyncio.sleep(0.3)
