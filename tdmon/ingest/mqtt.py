@@ -70,16 +70,10 @@ def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext 
 
 
 def make_client(config: MqttConfig, client_id: str, base: Path | None = None,
-                nodelay: bool = True,
                 queue_type: type[asyncio.Queue[aiomqtt.Message]] | None = None
                 ) -> aiomqtt.Client:
-    """An aiomqtt client for ``config`` (must be called inside the running loop).
-
-    ``nodelay``: small messages go out at once (TCP_NODELAY), for results and the rig's
-    messages; without it (the source, whose only messages are acknowledgements) the kernel
-    sends a burst of acknowledgements together, where one write each costs a system call and
-    a wake-up of the broker per message.
-    """
+    """An aiomqtt client for ``config`` (must be called inside the running loop); incoming
+    messages wait in a ``queue_type`` (default asyncio.Queue)."""
     return aiomqtt.Client(
         config.host,
         config.port,
@@ -92,7 +86,7 @@ def make_client(config: MqttConfig, client_id: str, base: Path | None = None,
         protocol=aiomqtt.ProtocolVersion.V311,
         timeout=10.0,
         # small messages: without NODELAY, Nagle and delayed ACKs add ~40 ms now and then
-        socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)] if nodelay else [],
+        socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         queue_type=queue_type,
     )
 
@@ -246,7 +240,7 @@ class MqttSource:
 
     async def __aenter__(self) -> MqttSource:
         made: list[asyncio.Queue[aiomqtt.Message]] = []
-        client = make_client(self.config, self.config.client_id, self.base, nodelay=False,
+        client = make_client(self.config, self.config.client_id, self.base,
                              queue_type=_queue_class(made))
         (inbox,) = made  # made by the client's constructor
         acks = ManualAcks(client)  # before connecting: see ManualAcks
