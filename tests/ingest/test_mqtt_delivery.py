@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import paho.mqtt.client as mqtt
@@ -182,4 +183,39 @@ async def test_a_backlog_is_handed_over_in_lists_in_order(mosquitto: Any) -> Non
                 received.append((raw.topic, raw.payload))
         assert received == messages
         assert max(sizes) > 1 and len(sizes) < len(messages)
+        await asyncio.sleep(0.3)
+
+
+async def test_a_resumed_session_s_backlog_does_not_hold_the_subscription_up(
+        shipped_mosquitto: Callable[..., Any]) -> None:
+    """On a session resumed with messages in flight, mosquitto (the shipped configuration)
+    sends its whole queue before it answers the subscription: the source is entered once the
+    first message has come (not after the whole backlog has been read, which with a large one
+    took longer than aiomqtt's timeout), and the backlog then arrives whole and in order."""
+    broker = shipped_mosquitto()
+    config = MqttConfig(port=broker.port, client_id="tdmon-resume", clean_session=False)
+    messages = [("rig/R0/hookload", b'{"t": %d, "value": 1}' % i) for i in range(20_000)]
+    async with MqttSource(config, ["rig/R0/#"], base=None):
+        pass  # the broker keeps a session for this client id from now on
+    await asyncio.to_thread(publish, broker.port, messages)
+    acknowledged = set()
+    async with MqttSource(config, ["rig/R0/#"], base=None) as source:
+        for i, raw in enumerate(await take(source, 500)):
+            if i % 2 and raw.ack is not None:  # half acknowledged; the run ends here
+                raw.ack()
+                acknowledged.add(raw.payload)
+        await asyncio.sleep(0.3)
+    expected = [message for message in messages if message[1] not in acknowledged]
+    async with MqttSource(config, ["rig/R0/#"], base=None) as source:
+        assert source._client is not None
+        waiting = len(source._client.messages)
+        received = []
+        batches = source.batches()
+        while len(received) < len(expected):
+            for raw in await asyncio.wait_for(anext(batches), 20):
+                assert raw.ack is not None
+                raw.ack()
+                received.append((raw.topic, raw.payload))
+        assert received == expected
+        assert waiting < len(expected) // 10  # entered long before all of it had been read
         await asyncio.sleep(0.3)
