@@ -1,11 +1,11 @@
 """Start-up benchmark: commands in fresh processes, an idle daemon's memory, the first command
-after set-up, and the model's fixed cost per call (issue 15).
+after set-up, and the model's fixed cost per call (issues 15 and 27).
 
-Every command runs in a new interpreter, alternately with this tree on its kernels compiled
-ahead of time (``this``, after ``tdmon model warmup``), this tree on numba's JIT
-(``this_jit``: ``TDMON_KERNELS=jit``, kernels in numba's cache) and, given ``--baseline``,
-another copy of tdmon (e.g. ``git archive main | tar -x -C /tmp/main``), so that all see the
-same load; the best of ``--repeat`` runs is kept. Project virtualenv, no peers:
+Every command runs in a new interpreter, alternately with this tree (``this``: ``tdmon model
+loads`` runs the model's loops as plain Python), this tree with ``TDMON_KERNELS=numba``
+(``this_numba``: the same command on numba's kernels, loaded from its cache) and, given
+``--baseline``, another copy of tdmon (e.g. ``git archive main | tar -x -C /tmp/main``), so that
+all see the same load; the best of ``--repeat`` runs is kept. Project virtualenv, no peers:
 
     .venv/bin/python benchmarks/bench_startup.py [--baseline /tmp/main] [--repeat 5] \
         [--skip-cold] [--json out.json]
@@ -13,19 +13,19 @@ same load; the best of ``--repeat`` runs is kept. Project virtualenv, no peers:
 Parts (docs/benchmarks.md, "Start-up"):
 
 - ``tdmon --help`` and ``tdmon model loads --well config/wells/aadnoy-example-7-1.toml``: wall
-  time of the whole process, kernels already in numba's cache;
+  time of the whole process, after ``tdmon model warmup``;
 - ``tdmon run`` idle: a Zenoh peer on a free loopback port with nothing publishing, recorder
   on, Rerun off; resident memory (VmRSS) once it listens and has settled;
 - first command after set-up: the package copied to a new folder (a fresh clone: no numba
-  cache) with an empty user cache folder (``XDG_CACHE_HOME``: no ahead-of-time build, no pint
-  store), ``tdmon model warmup`` timed as the set-up step, then the first ``model loads`` and
-  the first ``tdmon replay`` of ``replays/trip-out-tight-spot.mcap``, against the same
+  cache) with its own numba cache folder and an empty user cache folder (``XDG_CACHE_HOME``: no
+  pint store), ``tdmon model warmup`` timed as the set-up step, then the first ``model loads``
+  and the first ``tdmon replay`` of ``replays/trip-out-tight-spot.mcap``, against the same
   commands in another fresh copy without the warm-up (``--skip-cold`` leaves these out);
-- in this process, with the ahead-of-time kernels and then with numba's JIT:
-  ``WellModel.evaluate`` on 201 and 6000 elements, the fixed cost per call (the 201-element
-  time less 201 times the per-element slope, and directly: the bit in the first element, one
-  piece marched), and 8 friction cases marched together (``evaluate_cases``) against one
-  ``evaluate`` per case.
+- in this process, on numba's kernels: ``WellModel.evaluate`` on 201 and 6000 elements, the
+  fixed cost per call (the 201-element time less 201 times the per-element slope, and
+  directly: the bit in the first element, one piece marched), and 8 friction cases marched
+  together (``evaluate_cases``) against one ``evaluate`` per case; and one ``evaluate`` on 201
+  elements as plain Python.
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ def _fresh_copy(tree: Path, folder: Path) -> Path:
 
 def _first_commands(tree: Path, folder: Path) -> dict[str, float]:
     """A fresh copy with the set-up's warm-up, and another without, first commands timed."""
-    cache = folder / "cache"  # its own numba cache (should the copy be read-only) and user cache
+    cache = folder / "cache"  # its own numba cache folder and user cache folder
 
     def fresh(name: str) -> dict[str, str]:
         return {"NUMBA_CACHE_DIR": str(cache / name / "numba"),
@@ -167,18 +167,19 @@ def _per_call(function: Any, number: int, repeat: int = 7) -> float:
     return min(timeit.repeat(function, number=number, repeat=repeat)) / number
 
 
-def _fixed_cost(kernels_mode: str) -> dict[str, Any]:
-    """The model's timings on the kernels ``TDMON_KERNELS=kernels_mode`` loads."""
+def _fixed_cost() -> dict[str, Any]:
+    """The model's timings on numba's kernels, and one call on the plain Python ones."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_torque_drag import TOTAL_DEPTH, tdmon_well
 
-    from tdmon.model import kernels
     from tdmon.model.torque_drag import WellModel
 
-    os.environ[kernels.ENVIRONMENT] = kernels_mode
-    kernels.forget()
-    figures: dict[str, Any] = {"kernels": kernels.load().kind}
-    models = {30.0: WellModel(tdmon_well(30.0)), 1.0: WellModel(tdmon_well(1.0))}
+    figures: dict[str, Any] = {}
+    plain = WellModel(tdmon_well(30.0), engine="python")
+    figures["evaluate_python_201_us"] = _per_call(
+        lambda: plain.evaluate("pick_up", TOTAL_DEPTH, 0.25), 20, repeat=5) * 1e6
+    models = {30.0: WellModel(tdmon_well(30.0), engine="numba"),
+              1.0: WellModel(tdmon_well(1.0), engine="numba")}
     calls: dict[str, tuple[Any, int]] = {}
     for model in models.values():
         n = model.n_elements
@@ -228,11 +229,6 @@ def _fixed_cost(kernels_mode: str) -> dict[str, Any]:
     return figures
 
 
-def _model_both() -> dict[str, dict[str, Any]]:
-    """`_fixed_cost` on the ahead-of-time kernels, then on numba's JIT, in this process."""
-    return {"aot": _fixed_cost("aot"), "jit": _fixed_cost("jit")}
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--baseline", type=Path, help="another tdmon tree to run side by side")
@@ -246,21 +242,21 @@ def main() -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     if args.model_only:
-        print(json.dumps({"model": _model_both()}, indent=2))
+        print(json.dumps({"model": _fixed_cost()}, indent=2))
         return 0
     variants: dict[str, Variant] = {"this": (ROOT, {}),
-                                    "this_jit": (ROOT, {"TDMON_KERNELS": "jit"})}
+                                    "this_numba": (ROOT, {"TDMON_KERNELS": "numba"})}
     if args.baseline is not None:
         variants["baseline"] = (args.baseline.resolve(), {})
     result: dict[str, Any] = {"commands": _best_commands(variants, args.repeat)}
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
-        result["idle_run_rss_MB"] = {
+        result["idle_run_rss_MB"] = {  # the daemon runs numba's kernels either way
             name: min(_idle_rss(tree, folder, args.settle, **extra) for _ in range(2))
-            for name, (tree, extra) in variants.items()}
+            for name, (tree, extra) in variants.items() if name != "this_numba"}
         if not args.skip_cold:
             result["first_commands"] = _first_commands(ROOT, folder / "fresh")
-    result["model"] = _model_both()
+    result["model"] = _fixed_cost()
     print(json.dumps(result, indent=2))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2))

@@ -12,8 +12,8 @@ cd "$(dirname "$0")/.."
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e .
-# compile the model kernels ahead of time now (about 15-30 s; numba's cache without a C
-# compiler), not in the first command
+# compile the model kernels into numba's on-disk cache now (a minute or so), not in the
+# first command
 .venv/bin/tdmon model warmup
 
 TDMON=.venv/bin/tdmon

@@ -14,8 +14,8 @@ fi
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[test]"
-# compile the model kernels ahead of time now (about 15-30 s; numba's cache without a C
-# compiler), not in the first test
+# compile the model kernels into numba's on-disk cache now (a minute or so), not in the
+# first test
 .venv/bin/tdmon model warmup
 
 .venv/bin/ruff check tdmon tests benchmarks

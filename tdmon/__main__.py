@@ -1,5 +1,5 @@
-import sys
+"""``python -m tdmon``: importing tdmon.cli first arms SIGINT (see its docstring)."""
 
-from tdmon.cli import main
+import tdmon.cli
 
-sys.exit(main())
+raise SystemExit(tdmon.cli.main())

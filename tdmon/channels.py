@@ -33,7 +33,7 @@ CHANNEL_UNITS: Final[Mapping[str, tuple[str, str]]] = MappingProxyType({
     "mud_temp_out": ("degC", "degC"),
     "mud_density": ("kg/m**3", "kg/m^3"),
 })
-"""Canonical channels and their internal (SI) unit: (pint expression, display string). The
+"""Canonical channels and their internal (SI) unit: (unit text, display string). The
 temperatures are kept in degrees Celsius, the unit of the friction laws' temperature."""
 
 CHANNELS: Final[tuple[str, ...]] = tuple(CHANNEL_UNITS)

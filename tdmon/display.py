@@ -59,30 +59,30 @@ QUANTITIES: Final[Mapping[str, str]] = MappingProxyType({
     "flow": "m**3/s",
     "rotation": "rad/s",
 })
-"""Each kind of quantity and its internal unit (a pint expression, as in tdmon.channels)."""
+"""Each kind of quantity and its internal unit (as in tdmon.channels)."""
 
-# (pint expression, label shown, key used in column and entity names) per system and quantity
-_TABLES: Final[Mapping[str, Mapping[str, tuple[str, str, str]]]] = {
+# (label shown, key used in column and entity names) per system and quantity; the label is
+# also the unit converted to, so that every unit tdmon prints is one it reads
+_TABLES: Final[Mapping[str, Mapping[str, tuple[str, str]]]] = {
     "si": {
-        "force": ("kN", "kN", "kN"),
-        "torque": ("kN*m", "kN m", "kNm"),
-        "depth": ("m", "m", "m"),
-        "density": ("kg/m**3", "kg/m3", "kgm3"),
-        "temperature": ("degC", "degC", "C"),
-        "pressure": ("bar", "bar", "bar"),
-        "flow": ("L/min", "L/min", "Lpm"),
-        "rotation": ("revolution/minute", "rpm", "rpm"),
+        "force": ("kN", "kN"),
+        "torque": ("kN m", "kNm"),
+        "depth": ("m", "m"),
+        "density": ("kg/m3", "kgm3"),
+        "temperature": ("degC", "C"),
+        "pressure": ("bar", "bar"),
+        "flow": ("L/min", "Lpm"),
+        "rotation": ("rpm", "rpm"),
     },
     "field": {
-        "force": ("klbf", "klbf", "klbf"),
-        "torque": ("kft*lbf", "kft lbf", "kftlbf"),
-        "depth": ("ft", "ft", "ft"),
-        "density": ("ppg", "ppg", "ppg"),
-        "temperature": ("degF", "degF", "F"),
-        "pressure": ("psi", "psi", "psi"),
-        # pint knows no "gpm"; the US gallon is its default gallon
-        "flow": ("gallon/minute", "gpm", "gpm"),
-        "rotation": ("revolution/minute", "rpm", "rpm"),
+        "force": ("klbf", "klbf"),
+        "torque": ("kft lbf", "kftlbf"),
+        "depth": ("ft", "ft"),
+        "density": ("ppg", "ppg"),
+        "temperature": ("degF", "F"),
+        "pressure": ("psi", "psi"),
+        "flow": ("gpm", "gpm"),  # US gallons per minute
+        "rotation": ("rpm", "rpm"),
     },
 }
 
@@ -169,7 +169,7 @@ class UnitSystem:
         return self.units["rotation"](value)
 
     def quantity_of(self, internal_unit: str) -> Quantity | None:
-        """The kind of quantity whose internal unit is ``internal_unit`` (a pint expression
+        """The kind of quantity whose internal unit is ``internal_unit`` (a unit text
         of tdmon.channels, e.g. ``"N*m"``), or None."""
         for quantity, unit in QUANTITIES.items():
             if unit == internal_unit:
@@ -196,9 +196,9 @@ def unit_system(name: str) -> UnitSystem:
     if name not in _TABLES:
         raise ValueError(f"'{name}' is not a unit system (one of {', '.join(SYSTEMS)})")
     units = {}
-    for quantity, (expression, label, key) in _TABLES[name].items():
-        scale, offset = conversion(QUANTITIES[quantity], expression)
-        # pint's chain of factors leaves 1.7999999999999972 degF/degC; 14 digits are exact
+    for quantity, (label, key) in _TABLES[name].items():
+        scale, offset = conversion(QUANTITIES[quantity], label)
+        # 1/(5/9) is 1.7999999999999998 degF/degC in floating point; 14 digits are exact
         units[quantity] = DisplayUnit(label, key, _round(scale), _round(offset))
     return UnitSystem(cast(SystemName, name), MappingProxyType(units))
 

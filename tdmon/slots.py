@@ -2,10 +2,10 @@
 
 The ``__init__`` a frozen dataclass gets sets each field through ``object.__setattr__`` (its
 own ``__setattr__`` refuses), about 0.1 us a field; the slot's descriptor sets it in half
-that: 0.44 instead of 0.82 us for a RawMessage, 0.8 instead of 1.5 us for a DetectorState
-(docs/benchmarks.md). The classes made on every input message (``RawMessage``, ``Sample``) or
-frame (a rig sample, a detection, the detector's and the sensors' states, the monitor's loads,
-the estimator's states) write their ``__init__`` by hand with these setters and nothing else;
+that: 0.44 instead of 0.82 us for a RawMessage (docs/benchmarks.md). The classes made on every
+input message (``RawMessage``, ``Sample``) and the monitor's loads write their ``__init__`` by
+hand with these setters and nothing else (the calibration's per-frame states are plain frozen
+dataclasses: their share of a replay is too small to be worth a hand-written ``__init__``);
 ``tests/test_hand_written_inits.py`` checks that each takes its fields, in order, with their
 defaults, the classes' own tests that the instances stay frozen.
 """

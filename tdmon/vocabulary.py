@@ -19,6 +19,7 @@ from types import MappingProxyType
 from typing import Final
 
 __all__ = [
+    "ALARM_WORDS",
     "CALIBRATING_STATES",
     "CURVE_FOR_STATE",
     "MOVING_STATES",
@@ -161,3 +162,33 @@ class AlarmKind(StrEnum):
     CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)
     MODEL_COVERAGE = "model_coverage"  # string shorter than the bit depth, or a new well file
     WEIGHT_MISMATCH = "weight_mismatch"  # joint friction/weight estimate (calib/mismatch.py)
+
+
+ALARM_WORDS: Final[Mapping[AlarmKind, str]] = MappingProxyType({
+    AlarmKind.BAND: "hook load outside the modelled band (a trend, not a spike)",
+    AlarmKind.FRICTION_JUMP: "friction factor jumped above its recent level",
+    AlarmKind.LIMIT_TENSILE: "string tension near or over the tensile limit",
+    AlarmKind.LIMIT_SINUSOIDAL_BUCKLING: "compression near or over sinusoidal buckling",
+    AlarmKind.LIMIT_HELICAL_BUCKLING: "compression near or over helical buckling",
+    AlarmKind.LIMIT_MAKEUP_TORQUE: "torque near or over the connections' make-up torque",
+    AlarmKind.SENSOR_STALE: "a sensor stopped sending",
+    AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE: "hook load reading not physically plausible",
+    AlarmKind.SENSOR_BIT_BELOW_HOLE: "bit depth reading below the hole's total depth",
+    AlarmKind.SENSOR_HOOKLOAD_FROZEN: "hook load reading frozen (unchanged while moving)",
+    AlarmKind.SENSOR_TORQUE_FROZEN: "torque reading frozen while rotating",
+    AlarmKind.WINDOW_REJECTED: "a measurement window could not give a friction factor",
+    AlarmKind.BLOCK_WEIGHT: "block weight estimate disagrees with the configured one",
+    AlarmKind.WEIGHT_CHECK: "string weight in slips-off hangs disagrees with the well file",
+    AlarmKind.RECORDER_FAILED: "the flight recorder failed to write",
+    AlarmKind.RECORDER_RESUMED: "the flight recorder writes again",
+    AlarmKind.RECORDING_RECOVERED: "an unfinished recording was recovered at start-up",
+    AlarmKind.DATA_LOSS: "input messages were lost",
+    AlarmKind.CLOCK_JUMP: "the rig clock jumped; timing re-anchored",
+    AlarmKind.MODEL_COVERAGE: "the well file's string does not reach the bit, or the well file "
+                              "changed (a new run, a reload)",
+    AlarmKind.WEIGHT_MISMATCH: "friction and weight estimated together find the string lighter "
+                               "or heavier than the well file says",
+})
+"""What each alarm kind means, in a drilling engineer's words (the report's and the summary's
+``meaning``). Every kind has its words: ``tests/test_vocabulary.py`` fails on a kind without."""
+

@@ -38,6 +38,7 @@ from tdmon.messages import alarm_message, estimate_message, status_message
 from tdmon.model.torque_drag import Operation as ModelOperation
 from tdmon.model.torque_drag import WellModel
 from tdmon.record import schemas
+from tdmon.record.digest import alarm_rows
 from tdmon.vocabulary import (
     AlarmKind,
     ConnectionState,
@@ -83,6 +84,24 @@ def test_alarm_schema_rejects_a_kind_outside_the_vocabulary() -> None:
     jsonschema.validate(good, schema)
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate({**good, "kind": "overpull"}, schema)
+
+
+def test_every_alarm_kind_has_plain_words() -> None:
+    """The report's and the summary's words for an alarm come from the vocabulary: a kind added
+    to AlarmKind without its words in ALARM_WORDS fails here."""
+    missing = [kind.value for kind in AlarmKind if not vocabulary.ALARM_WORDS.get(kind, "").strip()]
+    assert not missing, f"alarm kinds without words in tdmon.vocabulary.ALARM_WORDS: {missing}"
+    assert set(vocabulary.ALARM_WORDS) == set(AlarmKind)  # and none for a kind that is gone
+    assert len(set(vocabulary.ALARM_WORDS.values())) == len(AlarmKind)  # each its own words
+    # the report's rows say them, one per kind raised
+    raised = [alarm_message(float(k), kind, Severity.WARNING, "x")
+              for k, kind in enumerate(AlarmKind)]
+    meanings = {row["kind"]: row["meaning"] for row in alarm_rows(raised)}
+    assert meanings == {kind.value: vocabulary.ALARM_WORDS[kind] for kind in AlarmKind}
+    assert meanings["weight_mismatch"].startswith("friction and weight estimated together")
+    # a kind from a newer daemon's recording is still named, in its own words
+    [row] = alarm_rows([{"t": 1.0, "kind": "sheave_slip", "severity": "info", "message": "x"}])
+    assert row["meaning"] == "sheave slip"
 
 
 # -- the kinds the code can raise -------------------------------------------------------------
@@ -249,7 +268,7 @@ def test_model_reexports_the_vocabulary_operation() -> None:
 
 
 def test_state_maps_match_the_daemon_tables_they_replace() -> None:
-    # daemon/monitor.py's CURVE_FOR_STATE before the vocabulary
+    # daemon/steps/monitor.py's CURVE_FOR_STATE before the vocabulary
     assert dict(vocabulary.CURVE_FOR_STATE) == {
         "pick_up": "pick_up", "back_reaming": "pick_up", "slack_off": "slack_off",
         "reaming": "slack_off", "rotating_off_bottom": "rotating", "drilling": "rotating",

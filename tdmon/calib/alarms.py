@@ -26,7 +26,7 @@ import itertools
 import math
 from dataclasses import dataclass
 from statistics import median
-from typing import Any, Final
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +34,6 @@ from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads
 from tdmon.model.well import HoleGrid, Well
-from tdmon.slots import slot_setters
 from tdmon.vocabulary import AlarmKind, Operation, Severity
 
 __all__ = [
@@ -361,7 +360,7 @@ _NONE: frozenset[str] = frozenset()
 _NO_CONDITIONS: frozenset[AlarmKind] = frozenset()
 
 
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class SensorState:
     """Channels reported stale, those named by a gap's alarm and not heard from since, the last
     values and their run lengths, and the sensor alarm kinds whose condition holds (an alarm is
@@ -373,24 +372,6 @@ class SensorState:
     runs: tuple[tuple[str, int], ...] = ()
     active: frozenset[AlarmKind] = _NO_CONDITIONS
     below_since: float | None = None
-
-    def __init__(self, stale: frozenset[str] = _NONE, announced: frozenset[str] = _NONE,
-                 last: tuple[tuple[str, float], ...] = (), runs: tuple[tuple[str, int], ...] = (),
-                 active: frozenset[AlarmKind] = _NO_CONDITIONS, below_since: float | None = None
-                 ) -> None:
-        # once per frame: the slots set through their descriptors, not object.__setattr__
-        # (see tdmon.slots; 0.73 -> 0.41 us)
-        set_stale, set_announced, set_last, set_runs, set_active, set_below_since = (
-            _SENSOR_SETTERS)
-        set_stale(self, stale)
-        set_announced(self, announced)
-        set_last(self, last)
-        set_runs(self, runs)
-        set_active(self, active)
-        set_below_since(self, below_since)
-
-
-_SENSOR_SETTERS: Final = slot_setters(SensorState)
 
 
 def stale_gap_alarm(gap: tuple[tuple[str, float], ...], resumed: float | None = None) -> Alarm:

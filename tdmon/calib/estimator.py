@@ -52,7 +52,6 @@ from tdmon.calib.estimator_state import (
     count,
     put,
 )
-from tdmon.calib.frozen import evolve
 from tdmon.calib.joint import initial_joint, joint_fields, update_joint
 from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
@@ -62,6 +61,7 @@ from tdmon.calib.scatter import Scatter, add_window, scatter_std
 from tdmon.calib.weightcheck import block_weight_alarm, weight_check
 from tdmon.calib.windows import Window, add_sample, close
 from tdmon.errors import FitError, ModelError
+from tdmon.messages import estimate_message
 from tdmon.model.friction import FrictionModel
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Fluid
@@ -249,14 +249,14 @@ class FrictionEstimator:
         if window.rejected is None and window.state in _MOTION:
             motion = _MOTION[window.state]
             if motion != windows.last_motion:
-                windows = evolve(windows, last_motion=motion)
+                windows = replace(windows, last_motion=motion)
         return EstimatorState(state.samples, windows), tuple(outputs)
 
     def _update(self, w: WindowState, block: BlockWeightWindow, window: Window
                 ) -> tuple[WindowState, list[Output]]:
         out: list[Output] = []
         if window.rejected is not None:
-            w = evolve(w, rejected=count(w.rejected, window.rejected.split(":")[0]))
+            w = replace(w, rejected=count(w.rejected, window.rejected.split(":")[0]))
             if not window.rejected.startswith("too_few"):
                 out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                         f"{window.state} window rejected: {window.rejected}")))
@@ -270,7 +270,7 @@ class FrictionEstimator:
         except FitError as exc:
             out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                     f"{window.state} window rejected: {exc}")))
-            return evolve(w, rejected=count(w.rejected, "not_bracketed")), out
+            return replace(w, rejected=count(w.rejected, "not_bracketed")), out
         out.append(Output("estimate", self._window_message(window, estimate, block,
                                                            self._scatter_of(w, window))))
         if window.state in REAMING_AXIAL_OPERATION:
@@ -297,7 +297,7 @@ class FrictionEstimator:
         state = window.state
         if estimate.section in ("cased", "all") and window.bit_depth <= self.shoe:
             cased = add_cased(w.cased.get(state, CasedFriction()), estimate.mu, estimate.mu_std)
-            w = evolve(w, cased=put(w.cased, state, cased))
+            w = replace(w, cased=put(w.cased, state, cased))
             return self._revise(w, block, state, out)
         if (estimate.section == "all"
                 and window.bit_depth > self.shoe + self.settings.min_open_length
@@ -305,7 +305,7 @@ class FrictionEstimator:
             # tripping out from below the shoe: open-hole friction needs the cased value,
             # known only once the bit is inside casing; these windows are solved again then
             waiting = wait_for_cased(w.pending.get(state, ()), window)
-            return evolve(w, pending=put(w.pending, state, waiting))
+            return replace(w, pending=put(w.pending, state, waiting))
         return w
 
     def _revise(self, w: WindowState, block: BlockWeightWindow, state: str,
@@ -316,12 +316,12 @@ class FrictionEstimator:
         mu_cased = None if cased is None else cased.mu
         if not pending or cased is None or mu_cased is None or not cased.known:
             return w  # nothing waits, or the cased friction rests on too few windows
-        w = evolve(w, pending=put(w.pending, state, ()))
+        w = replace(w, pending=put(w.pending, state, ()))
         for window in pending:
             try:
                 estimate = self._solve(window, mu_cased)
             except FitError:
-                w = evolve(w, rejected=count(w.rejected, "not_bracketed"))
+                w = replace(w, rejected=count(w.rejected, "not_bracketed"))
                 continue
             message = self._window_message(window, estimate, block, self._scatter_of(w, window))
             out.append(Output("estimate", {**message, "revised": True, "mu_cased": mu_cased}))
@@ -368,7 +368,7 @@ class FrictionEstimator:
             return w
         scatter = add_window(w.scatter.get(kind, Scatter()), estimate.mu, estimate.mu_std,
                              self.settings.joint.scatter_windows)
-        return evolve(w, scatter=put(w.scatter, kind, scatter))
+        return replace(w, scatter=put(w.scatter, kind, scatter))
 
     def _joint(self, w: WindowState, block: BlockWeightWindow, window: Window,
                out: list[Output]) -> WindowState:
@@ -391,12 +391,11 @@ class FrictionEstimator:
         except ModelError:
             difference = math.nan
         operation = OPERATION_FOR_STATE.get(window.state, window.state)
-        out.append(Output("estimate", {
-            "t": window.t_end, "kind": EstimateKind.JOINT, "operation": str(operation),
-            "mu": fields.pop("mu"), "mu_std": fields.pop("mu_std"),
-            "bit_depth_m": window.bit_depth, **fields,
-            "weight_difference_N": difference if math.isfinite(difference) else None,
-            "scatter": taus, "mu_single": self._single_frictions(w)}))
+        out.append(Output("estimate", estimate_message(
+            window.t_end, EstimateKind.JOINT, operation, fields.pop("mu"), fields.pop("mu_std"),
+            bit_depth_m=window.bit_depth, **fields,
+            weight_difference_N=difference if math.isfinite(difference) else None,
+            scatter=taus, mu_single=self._single_frictions(w))))
         mismatch, alarm = mismatch_alarm(
             w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
             float(joint.mean[1]), float(fields["weight_factor_std"]), float(joint.mean[0]),
@@ -404,7 +403,7 @@ class FrictionEstimator:
             windows=s.mismatch_windows)
         if alarm is not None:
             out.append(_alarm(alarm))
-        return evolve(w, joint=joint, mismatch=mismatch)
+        return replace(w, joint=joint, mismatch=mismatch)
 
     # -- alarms ---------------------------------------------------------------------------
 
@@ -417,7 +416,7 @@ class FrictionEstimator:
         if alarm is not None:
             out.append(_alarm(alarm))
         history = (*history, estimate.mu)[-self.settings.jump.history:]
-        return evolve(w, history=put(w.history, window.state, history))
+        return replace(w, history=put(w.history, window.state, history))
 
     def _limits(self, w: WindowState, window: Window, estimate: FrictionEstimate,
                 out: list[Output]) -> WindowState:
@@ -433,7 +432,7 @@ class FrictionEstimator:
         except (ModelError, ValueError):
             return w  # the model does not reach this depth: no check, the memory stays
         out.extend(_alarm(a) for a in alarms if a.kind not in w.active_limits)
-        return evolve(w, active_limits=frozenset(a.kind for a in alarms))
+        return replace(w, active_limits=frozenset(a.kind for a in alarms))
 
     def _friction_of(self, w: WindowState, estimate: FrictionEstimate) -> NDArray[np.float64]:
         kind = self.model.grid.element_kind
@@ -458,8 +457,8 @@ class FrictionEstimator:
         check, weight_off, alarm = checked
         if alarm is not None:
             out.append(_alarm(alarm))
-        return evolve(w, weight_off=weight_off,
-                      weight_checks=(*w.weight_checks, check)[-_WEIGHT_CHECKS_KEPT:])
+        return replace(w, weight_off=weight_off,
+                       weight_checks=(*w.weight_checks, check)[-_WEIGHT_CHECKS_KEPT:])
 
     # -- filters --------------------------------------------------------------------------
 
@@ -467,15 +466,15 @@ class FrictionEstimator:
         profile = copy.copy(w.profile)
         if not profile.add_window(window):
             # a gated window changes only the profile's count of gated windows
-            return w if profile.gated == w.profile.gated else evolve(w, profile=profile)
+            return w if profile.gated == w.profile.gated else replace(w, profile=profile)
         out.append(Output("estimate", _profile_message(profile, window)))
         alarm, anomalous = profile_anomaly(
             window.t_end, profile.grid.edges, profile.state.mu, profile.state.covariance,
             self.settings.prior_std, self.settings.jump, known=w.anomalous_bins)
         if alarm is not None:
             out.append(_alarm(alarm))
-        return evolve(w, profile=profile, profile_updates=w.profile_updates + 1,
-                      anomalous_bins=anomalous)
+        return replace(w, profile=profile, profile_updates=w.profile_updates + 1,
+                       anomalous_bins=anomalous)
 
     def _feed_mu_t(self, w: WindowState, window: Window, estimate: FrictionEstimate,
                    out: list[Output]) -> WindowState:
@@ -488,7 +487,7 @@ class FrictionEstimator:
         if math.isfinite(float(fields["mu"])):  # type: ignore[arg-type]
             out.append(Output("estimate", {"t": window.t_end, "kind": EstimateKind.MU_T,
                                            "operation": estimate.operation, **fields}))
-        return evolve(w, mu_t=mu_t)
+        return replace(w, mu_t=mu_t)
 
 
 def _profile_message(profile: FrictionProfile, window: Window) -> dict[str, Any]:

@@ -21,7 +21,6 @@ from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.scatter import Scatter
 from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings
-from tdmon.slots import slot_setters
 
 __all__ = [
     "CalibrationSettings",
@@ -87,7 +86,7 @@ _NO_WINDOW: Final = WindowAccumulator()
 _NO_BLOCK_WEIGHT: Final = BlockWeightWindow()
 
 
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class SampleState:
     """What samples change: the window being built and the in-slips block weight.
 
@@ -101,18 +100,6 @@ class SampleState:
     accumulator: WindowAccumulator = _NO_WINDOW
     block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT
     block_alarmed: bool = False
-
-    def __init__(self, accumulator: WindowAccumulator = _NO_WINDOW,
-                 block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT,
-                 block_alarmed: bool = False) -> None:
-        # once per frame: see tdmon.slots
-        set_accumulator, set_block_weight, set_block_alarmed = _SAMPLE_STATE_SETTERS
-        set_accumulator(self, accumulator)
-        set_block_weight(self, block_weight)
-        set_block_alarmed(self, block_alarmed)
-
-
-_SAMPLE_STATE_SETTERS: Final = slot_setters(SampleState)
 
 
 @dataclass(frozen=True)
@@ -161,21 +148,12 @@ class WindowState:
         return None if cased is None else cased.mu
 
 
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class EstimatorState:
     """The whole state: what samples change and what windows change."""
 
     samples: SampleState
     windows: WindowState
-
-    def __init__(self, samples: SampleState, windows: WindowState) -> None:
-        # once per frame: see tdmon.slots
-        set_samples, set_windows = _ESTIMATOR_STATE_SETTERS
-        set_samples(self, samples)
-        set_windows(self, windows)
-
-
-_ESTIMATOR_STATE_SETTERS: Final = slot_setters(EstimatorState)
 
 
 def put(mapping: Mapping[str, Any], key: str, value: Any) -> Mapping[str, Any]:

@@ -40,15 +40,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tdmon.calib.frozen import evolve
 from tdmon.calib.kalman import KalmanState, Linearisation, iterated_update, predict
+from tdmon.calib.parameters import (
+    JOINT_PARAMETERS,
+    WEIGHT_FACTOR,
+    EstimatedParameters,
+    join_words,
+)
 from tdmon.calib.windows import Window
 from tdmon.errors import ModelError
 from tdmon.model.torque_drag import WellModel
@@ -73,11 +78,9 @@ class JointSettings:
 
     Attributes
     ----------
-    prior_mu, prior_mu_std : prior friction factor [-]
-    weight_factor, weight_factor_std : prior weight factor [-] (1: the model is right)
-    mu_drift_per_hour, mu_drift_per_100m : random-walk drift of the friction between windows,
-        per hour and per 100 m of bit travel [-]
-    weight_drift_per_hour, weight_drift_per_100m : the same for the weight factor [-]
+    parameters : what is estimated, with each parameter's prior, drift and bounds
+        (:data:`tdmon.calib.parameters.JOINT_PARAMETERS`: the friction factor and the weight
+        factor, whose prior is 1 +/- 0.05: the model is right)
     scatter_prior : between-window friction scatter until it is estimated [-]
     scatter_windows : recent windows per operation the scatter is estimated from [-]
     weight_model_std : model error of the string weight per window, relative [-]
@@ -87,8 +90,8 @@ class JointSettings:
         motion's drag, which no number of such hangs averages out)
     iterations : linearisations per measurement [-]
     gate : a measurement further than this many predicted standard deviations is left out [-]
-    identified_ratio : the weight factor counts as identified when its posterior variance is
-        below this fraction of the prior's [-]
+    identified_ratio : a parameter counts as identified when its posterior variance is below
+        this fraction of its prior's [-]
     horizon, horizon_depth : windows this recent [s] and this near [m] are listed as the set
         the estimate rests on
     spread_mu : model error of a weight error that is not spread evenly along the string (an
@@ -98,14 +101,7 @@ class JointSettings:
     mismatch_windows : consecutive estimates beyond it that raise the alarm [-]
     """
 
-    prior_mu: float = 0.25
-    prior_mu_std: float = 0.1
-    weight_factor: float = 1.0
-    weight_factor_std: float = 0.05
-    mu_drift_per_hour: float = 0.02
-    mu_drift_per_100m: float = 0.01
-    weight_drift_per_hour: float = 0.002
-    weight_drift_per_100m: float = 0.001
+    parameters: EstimatedParameters = JOINT_PARAMETERS
     scatter_prior: float = 0.02
     scatter_windows: int = 30
     weight_model_std: float = 0.002
@@ -119,13 +115,27 @@ class JointSettings:
     mismatch_tolerance: float = 0.01
     mismatch_windows: int = 3
 
+    def __post_init__(self) -> None:
+        self.parameters.index(WEIGHT_FACTOR.name)  # the measurement model needs it
+
+    def with_prior(self, name: str, prior: float, prior_std: float) -> JointSettings:
+        """These settings with parameter ``name``'s prior replaced (ValueError: unknown)."""
+        return replace(self, parameters=self.parameters.with_prior(name, prior, prior_std))
+
+    @property
+    def bounds(self) -> tuple[Array, Array]:
+        """Lower and upper bounds of the state vector."""
+        return (np.array([p.bounds[0] for p in self.parameters]),
+                np.array([p.bounds[1] for p in self.parameters]))
+
 
 @dataclass(frozen=True)
 class JointState(KalmanState):
-    """The filter on ``[mu, w]`` and what the identifiability statement needs.
+    """The filter on the parameters (``[mu, w]``) and what the identifiability statement needs.
 
     Attributes
     ----------
+    mean, covariance : of the parameters of the settings, in their order (friction first)
     t, bit_depth : time [s] and bit depth [m] of the last window used (None before)
     recent : ``(t, bit depth, kind, residual)`` of the measurements used within the horizon,
         the residual being measured minus predicted before the update [N or N m]
@@ -139,9 +149,10 @@ class JointState(KalmanState):
 
 
 def initial_joint(settings: JointSettings) -> JointState:
-    """The prior state."""
-    return JointState(np.array([settings.prior_mu, settings.weight_factor]),
-                      np.diag([settings.prior_mu_std**2, settings.weight_factor_std**2]))
+    """The prior state: each parameter's prior, uncorrelated."""
+    parameters = settings.parameters
+    return JointState(np.array([p.prior for p in parameters]),
+                      np.diag([p.prior_std**2 for p in parameters]))
 
 
 class Measurement(NamedTuple):
@@ -192,13 +203,19 @@ class _Linear(Linearisation):
 
 def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float, tau: float,
                settings: JointSettings, method: str) -> Callable[[Array], _Linear]:
-    """``x -> _Linear`` for one measurement (the closure `iterated_update` calls)."""
+    """``x -> _Linear`` for one measurement (the closure `iterated_update` calls).
+
+    The measurement model of each parameter (a new one in ``settings.parameters`` enters
+    here): hook load ``block + w F(mu)``, torque ``w T(mu)``; a parameter the model does not
+    use has a zero derivative and keeps its prior."""
     offset = block if m.quantity == 0 else 0.0
     model_offset = model.well.block_weight if m.quantity == 0 else 0.0
+    n = len(settings.parameters)
+    at_mu, at_w = 0, settings.parameters.index(WEIGHT_FACTOR.name)
 
     def linearise(x: Array) -> _Linear:
-        mu = float(x[0].clip(0.0, 1.0))  # np.clip's own call, without its wrapper
-        w = float(x[1])
+        mu = float(x[at_mu].clip(0.0, 1.0))  # np.clip's own call, without its wrapper
+        w = float(x[at_w])
         value, gradient = model.evaluate_gradient(m.operation, bit_depth, mu,
                                                   quantity_index=m.quantity, method=method)
         f = value - model_offset
@@ -210,7 +227,10 @@ def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float,
             share = (1.0 / math.sqrt(3.0) if m.kind == "static"
                      else settings.released_drag_std)
             variance += (share * w * drag) ** 2
-        return _Linear(offset + w * f, np.array([w * slope, f]), max(variance, 1.0), f)
+        jacobian = np.zeros(n)
+        jacobian[at_mu] = w * slope
+        jacobian[at_w] = f
+        return _Linear(offset + w * f, jacobian, max(variance, 1.0), f)
 
     return linearise
 
@@ -242,12 +262,12 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
     if state.t is not None and state.bit_depth is not None:
         hours = max(window.t_end - state.t, 0.0) / 3600.0
         metres = abs(depth - state.bit_depth) / 100.0
-        q = np.sqrt([settings.mu_drift_per_hour**2 * hours + settings.mu_drift_per_100m**2 * metres,
-                     settings.weight_drift_per_hour**2 * hours
-                     + settings.weight_drift_per_100m**2 * metres])
+        q = np.sqrt([p.drift_per_hour**2 * hours + p.drift_per_100m**2 * metres
+                     for p in settings.parameters])
         state = predict(state, q)
     recent = list(state.recent)
     gated = state.gated
+    bounds = settings.bounds
     for m in offered:
         tau = scatter.get(m.kind, settings.scatter_prior)
         # a hang's hook load is linear in the state (friction enters only its variance): one
@@ -257,7 +277,7 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
             result = iterated_update(state, m.value, _linearise(model, m, depth, block, tau,
                                                                 settings, method),
                                      iterations=iterations, gate=settings.gate,
-                                     bounds=(0.0, 2.0))
+                                     bounds=bounds)
         except ModelError:
             continue
         if result.accepted:
@@ -267,88 +287,124 @@ def update_joint(state: JointState, model: WellModel, window: Window, block: flo
             gated += 1
     recent = [r for r in recent if window.t_end - r[0] <= settings.horizon
               and abs(depth - r[1]) <= settings.horizon_depth]
-    return evolve(state, t=window.t_end, bit_depth=depth, recent=tuple(recent), gated=gated)
+    return replace(state, t=window.t_end, bit_depth=depth, recent=tuple(recent), gated=gated)
 
 
 @dataclass(frozen=True)
 class Identifiability:
-    """Whether friction and weight are separated now.
+    """Whether friction and the parameters beside it are separated now.
 
     Attributes
     ----------
-    identifiable : the weight factor is known from the data, not the prior
+    identifiable : every parameter beside the friction is known from the data, not its prior
     statement : the verdict in words
-    variance_ratio : posterior over prior variance of the weight factor [-]
+    variance_ratios : per parameter beside the friction, its posterior over prior variance [-]
     kinds : measurements per kind within the horizon [-]
     """
 
     identifiable: bool
     statement: str
-    variance_ratio: float
+    variance_ratios: Mapping[str, float]
     kinds: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
 
 
 def identifiability(state: JointState, settings: JointSettings) -> Identifiability:
     """The verdict on the current joint estimate.
 
-    Identified: the weight factor's variance fell below ``identified_ratio`` of its prior
-    (a hang, rotation off bottom, or pick-up with slack-off did it). Otherwise it says what
-    is missing: pick-up (or slack-off) windows alone cannot separate weight from friction, and
-    the friction is then the one at the prior weight.
+    A parameter is identified when its variance fell below ``identified_ratio`` of its prior
+    (for the weight factor: a hang, rotation off bottom, or pick-up with slack-off did it).
+    Otherwise the verdict says what is missing for the first one that is not: pick-up (or
+    slack-off) windows alone cannot separate weight from friction, and the friction is then
+    the one at the prior weight.
     """
+    parameters = settings.parameters
     kinds: dict[str, int] = {}
     for _, _, kind, _ in state.recent:
         kinds[kind] = kinds.get(kind, 0) + 1
-    ratio = float(state.covariance[1, 1]) / settings.weight_factor_std**2
+    ratios = {p.name: float(state.covariance[k, k]) / p.prior_std**2
+              for k, p in enumerate(parameters) if k > 0}
     frozen = MappingProxyType(kinds)
-    if ratio < settings.identified_ratio:
-        return Identifiability(True, "identifiable", ratio, frozen)
+    open_ = [p for p in parameters.others if not ratios[p.name] < settings.identified_ratio]
+    if not open_:
+        return Identifiability(True, "identifiable", MappingProxyType(ratios), frozen)
+    first, friction = open_[0], parameters.friction.noun
     moving = {k for k in kinds if k in ("pick_up", "slack_off")}
     weighing = {k for k in kinds if k not in moving}
     if not kinds:
-        statement = "no window yet: friction and weight factor are the prior"
-    elif len(moving) == 1 and not weighing:
+        statement = ("no window yet: "
+                     + join_words([friction, *(p.label for p in parameters.others)])
+                     + " are the prior")
+    elif len(moving) == 1 and not weighing and first.name == WEIGHT_FACTOR.name:
+        # what pick-up or slack-off alone leaves open for the weight (another parameter says
+        # what separates it when its measurement model is written)
         which = next(iter(moving)).replace("_", "-")
-        statement = (f"{which} only: weight and friction not separable, friction given "
-                     "at the prior weight (rotation off bottom or "
+        what = first.key.replace("_", " ")
+        statement = (f"{which} only: {what} and {friction} not separable, {friction} given "
+                     f"at the prior {what} (rotation off bottom or "
                      f"{'slack-off' if which == 'pick-up' else 'pick-up'} nearby separates them)")
     else:
-        statement = (f"weakly identifiable: the weight factor rests mostly on its prior "
-                     f"(variance {100 * ratio:.0f} % of the prior's)")
-    return Identifiability(False, statement, ratio, frozen)
+        statement = (f"weakly identifiable: the {first.label} rests mostly on its prior "
+                     f"(variance {100 * ratios[first.name]:.0f} % of the prior's)")
+    return Identifiability(False, statement, MappingProxyType(ratios), frozen)
+
+
+def _friction_given(state: JointState, fixed: list[tuple[int, float]]) -> tuple[float, float]:
+    """The friction's mean and standard deviation given parameters ``fixed`` (index, value):
+    the Gaussian posterior conditioned on them, one at a time (``mu + P_mk / P_kk (x_k -
+    m_k)``, variance ``P_mm - P_mk^2 / P_kk``; in turn, the same as all at once)."""
+    mean, p = state.mean, state.covariance
+    for k, value in fixed[:-1]:
+        mean = mean + p[:, k] / p[k, k] * (value - mean[k])
+        p = p - np.outer(p[:, k], p[k, :]) / p[k, k]
+    k, value = fixed[-1]
+    return (float(mean[0] + p[0, k] / p[k, k] * (value - mean[k])),
+            math.sqrt(max(float(p[0, 0] - p[0, k] ** 2 / p[k, k]), 0.0)))
 
 
 def joint_fields(state: JointState, settings: JointSettings) -> dict[str, Any]:
-    """The joint estimate's message fields (``mu``/``mu_std`` and the kind's own).
+    """The joint estimate's message fields (``mu``/``mu_std`` and the kind's own), in the
+    order of :meth:`~tdmon.calib.parameters.EstimatedParameters.message_fields`.
 
-    ``mu`` is the joint friction when the weight factor is identified, else the friction at
-    the prior weight factor (the Gaussian posterior conditioned on ``w = w_prior``:
-    ``mu + P_mw / P_ww (w_prior - w)``, variance ``P_mm - P_mw^2 / P_ww``), which is what the
-    data say about friction when they cannot say anything about the weight. Both are in the
-    message (``mu_joint``, ``mu_at_prior_weight``).
+    ``mu`` is the joint friction when every other parameter is identified, else the friction
+    at the prior of those that are not (the Gaussian posterior conditioned on them, for the
+    weight factor ``mu + P_mw / P_ww (w_prior - w)``, variance ``P_mm - P_mw^2 / P_ww``),
+    which is what the data say about friction when they cannot say anything about the weight.
+    Both are in the message (``mu_joint``, ``mu_at_prior_weight``).
     """
+    parameters = settings.parameters
     p = state.covariance
     std = state.std
-    correlation = float(p[0, 1] / (std[0] * std[1])) if std[0] > 0 and std[1] > 0 else 0.0
+    values: dict[str, Any] = {}
+    for k, parameter in enumerate(parameters):
+        values[parameter.name] = float(state.mean[k])
+        values[parameter.std_field] = float(std[k])
+    for i, j in parameters.pairs():
+        values[parameters.correlation_field(i, j)] = (
+            float(p[i, j] / (std[i] * std[j])) if std[i] > 0 and std[j] > 0 else 0.0)
     # where along the string the weight error sits is unknown: spread evenly (a mud density)
     # the friction is the joint one; all in the vertical top (a fill level) it is mu w
-    departure = abs(float(state.mean[1]) - 1.0)
+    departure = abs(float(state.mean[parameters.index(WEIGHT_FACTOR.name)]) - 1.0)
     mu_joint_std = math.hypot(float(std[0]), settings.spread_mu * float(state.mean[0])
                               * departure)
-    weight_std = float(std[1])
-    at_prior = float(state.mean[0] + p[0, 1] / p[1, 1] * (settings.weight_factor
-                                                          - state.mean[1]))
-    at_prior_std = math.sqrt(max(float(p[0, 0] - p[0, 1] ** 2 / p[1, 1]), 0.0))
+    values[parameters.joint_field] = float(state.mean[0])
+    values[f"{parameters.joint_field}_std"] = mu_joint_std
+    for k, parameter in enumerate(parameters.others, start=1):
+        at_prior, at_prior_std = _friction_given(state, [(k, parameter.prior)])
+        values[parameters.at_prior_field(parameter)] = at_prior
+        values[f"{parameters.at_prior_field(parameter)}_std"] = at_prior_std
     verdict = identifiability(state, settings)
-    mu, mu_std = ((float(state.mean[0]), mu_joint_std) if verdict.identifiable
-                  else (at_prior, at_prior_std))
+    values["identifiable"] = verdict.identifiable
+    values["identifiability"] = verdict.statement
+    for parameter in parameters.others:
+        values[parameter.variance_ratio_field] = verdict.variance_ratios[parameter.name]
+    if verdict.identifiable:
+        mu, mu_std = float(state.mean[0]), mu_joint_std
+    else:
+        mu, mu_std = _friction_given(state, [
+            (k, parameter.prior) for k, parameter in enumerate(parameters.others, start=1)
+            if not verdict.variance_ratios[parameter.name] < settings.identified_ratio])
     return {"mu": mu, "mu_std": mu_std,
-            "weight_factor": float(state.mean[1]), "weight_factor_std": weight_std,
-            "correlation": correlation, "identifiable": verdict.identifiable,
-            "identifiability": verdict.statement,
-            "mu_joint": float(state.mean[0]), "mu_joint_std": mu_joint_std,
-            "mu_at_prior_weight": at_prior, "mu_at_prior_weight_std": at_prior_std,
-            "weight_variance_ratio": verdict.variance_ratio,
+            **{f.name: values[f.name] for f in parameters.message_fields()},
             "windows": dict(verdict.kinds), "residuals": residuals(state), "gated": state.gated}
 
 

@@ -26,13 +26,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Generic, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-
-from tdmon.calib.frozen import evolve
 
 __all__ = [
     "IteratedUpdate",
@@ -96,7 +94,7 @@ def predict(state: S, process_std: ArrayLike) -> S:
     # diagonal would (-0.0 becomes 0.0), then the diagonal takes q^2
     covariance = state.covariance + 0.0
     covariance.flat[::state.mean.size + 1] += q**2
-    return evolve(state, covariance=covariance)
+    return replace(state, covariance=covariance)
 
 
 #: A state of more components than this takes the Joseph form multiplied out, O(n^2) (the
@@ -107,7 +105,7 @@ _EXPANDED_FROM = 16
 
 
 def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
-           noise_variance: float, *, bounds: tuple[float, float] | None = None) -> S:
+           noise_variance: float, *, bounds: tuple[ArrayLike, ArrayLike] | None = None) -> S:
     """Kalman update with one scalar measurement, Joseph form; bad input returns ``state``.
 
     Parameters
@@ -117,7 +115,8 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
     predicted : the measurement model at the prior mean, ``h(x)`` [units of the measurement]
     jacobian : ``H = dh/dx``, shape (n,) [units of the measurement per unit of the state]
     noise_variance : measurement variance ``R`` > 0 [units of the measurement squared]
-    bounds : the posterior mean is clipped to these [units of the state] (None: not clipped)
+    bounds : the posterior mean is clipped to these, one for all components or one per
+        component [units of the state] (None: not clipped)
 
     Returns
     -------
@@ -154,12 +153,12 @@ def update(state: S, measured: float, predicted: float, jacobian: ArrayLike,
         covariance = a @ state.covariance @ a.T + noise_variance * (column * gain)
     symmetric = covariance + covariance.T
     symmetric *= 0.5
-    return evolve(state, mean=mean, covariance=symmetric, updates=state.updates + 1,
-                  innovation=innovation, innovation_variance=s)
+    return replace(state, mean=mean, covariance=symmetric, updates=state.updates + 1,
+                   innovation=innovation, innovation_variance=s)
 
 
 def _mean_step(state: KalmanState, measured: float, predicted: float, h: Array,
-               noise_variance: float, bounds: tuple[float, float] | None
+               noise_variance: float, bounds: tuple[ArrayLike, ArrayLike] | None
                ) -> tuple[Array, Array, float, float, Array] | None:
     """The first half of :func:`update`: (posterior mean, gain, innovation, its variance,
     ``P H^T``), or None where :func:`update` keeps the prior. The covariance, the costly half
@@ -238,7 +237,7 @@ class IteratedUpdate(Generic[S, L]):
 
 def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], *,
                     iterations: int = 1, gate: float | None = None,
-                    bounds: tuple[float, float] | None = None) -> IteratedUpdate[S, L]:
+                    bounds: tuple[ArrayLike, ArrayLike] | None = None) -> IteratedUpdate[S, L]:
     """Iterated extended Kalman update with one nonlinear scalar measurement.
 
     Parameters
@@ -299,7 +298,8 @@ def iterated_update(prior: S, measured: float, linearise: Callable[[Array], L], 
 
 
 def update_batch(state: S, measured: ArrayLike, predicted: ArrayLike, jacobian: ArrayLike,
-                 noise_variance: ArrayLike, *, bounds: tuple[float, float] | None = None) -> S:
+                 noise_variance: ArrayLike, *,
+                 bounds: tuple[ArrayLike, ArrayLike] | None = None) -> S:
     """Update with several linear scalar measurements whose errors are independent.
 
     Parameters

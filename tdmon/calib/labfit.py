@@ -327,7 +327,7 @@ def _start(family: str, t: Array, mu: Array) -> Array:
 
 
 def _nonlinear(family: str, t: Array, mu: Array, max_evaluations: int | None) -> _Estimate:
-    function = FAMILIES[family]
+    function = FAMILIES[family].function
 
     def curve(x: Array, a: float, b: float) -> Array:
         try:

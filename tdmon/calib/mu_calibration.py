@@ -21,18 +21,17 @@ results are keyed like the family's own arguments so ``FrictionModel(family, par
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.calib import kalman
 from tdmon.calib.backcalc import base_friction, window_measurement
-from tdmon.calib.frozen import evolve
 from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
-from tdmon.model.friction import FrictionModel, evaluate_law
+from tdmon.model.friction import FAMILIES, FrictionModel, evaluate_law
 from tdmon.model.torque_drag import WellModel
 
 __all__ = [
@@ -85,14 +84,9 @@ class MuTParametrisation:
         if self.lab is None:
             # tolist: the Python floats float() makes of each element, in one call
             return self.family, dict(zip(self.names, values.tolist(), strict=True))
-        scale = float(values[0])
-        if self.lab.family in ("power", "exponential", "saturation-growth"):
-            coefficients = dict(self.lab.coefficients)
-            coefficients["a"] *= scale
-            return self.lab.family, coefficients
-        if self.lab.family == "constant":
-            return "constant", {"mu": self.lab.coefficients["mu"] * scale}
-        return self.lab.family, {k: v * scale for k, v in self.lab.coefficients.items()}
+        # the coefficients the family declares proportional to mu (tdmon.model.friction)
+        return self.lab.family, FAMILIES[self.lab.family].scale(self.lab.coefficients,
+                                                                 float(values[0]))
 
 
 def family_parametrisation(model: FrictionModel) -> tuple[MuTParametrisation, Array]:
@@ -169,8 +163,8 @@ def _seen(state: MuTState, effective_temperature: float | None) -> MuTState:
     [degC] (unchanged when None or not finite)."""
     if effective_temperature is None or not math.isfinite(effective_temperature):
         return state
-    return evolve(state, temperature_min=min(state.temperature_min, effective_temperature),
-                  temperature_max=max(state.temperature_max, effective_temperature))
+    return replace(state, temperature_min=min(state.temperature_min, effective_temperature),
+                   temperature_max=max(state.temperature_max, effective_temperature))
 
 
 def measurement(model: WellModel, parametrisation: MuTParametrisation, theta: Array,

@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.calib import kalman
 from tdmon.calib.backcalc import window_measurement
-from tdmon.calib.frozen import evolve
 from tdmon.calib.kalman import KalmanState, Linearisation
 from tdmon.calib.windows import Window
 from tdmon.errors import FitError, ModelError
@@ -183,7 +182,7 @@ def predict(state: ProfileState, process_std: float) -> ProfileState:
     drifted = kalman.predict(state, process_std)
     if state.reference_variance.size != state.mean.size:
         return drifted
-    return evolve(drifted, reference_variance=state.reference_variance + process_std**2)
+    return replace(drifted, reference_variance=state.reference_variance + process_std**2)
 
 
 @dataclass(frozen=True)
@@ -373,8 +372,8 @@ class FrictionProfile:
             state = result.state
             if state.windows_seen.size == depends.size:
                 # a new array: copies of this object (the estimator's) share the old one
-                state = evolve(state, windows_seen=state.windows_seen + depends,
-                               deepest=max(state.deepest, window.bit_depth))
+                state = replace(state, windows_seen=state.windows_seen + depends,
+                                deepest=max(state.deepest, window.bit_depth))
             self.state = state
         return result.accepted
 

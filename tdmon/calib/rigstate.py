@@ -20,12 +20,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tdmon.slots import slot_setters
 from tdmon.vocabulary import MOVING_STATES, RigState
 
 __all__ = [
@@ -39,7 +37,6 @@ __all__ = [
     "classify",
     "detect",
     "detect_series",
-    "with_block_weight",
 ]
 
 STATES: tuple[RigState, ...] = tuple(RigState)
@@ -108,22 +105,6 @@ class RigStateThresholds:
     hang_tolerance_fraction: float = 0.04
 
 
-def with_block_weight(thresholds: RigStateThresholds, block_weight: float
-                      ) -> RigStateThresholds:
-    """``dataclasses.replace(thresholds, block_weight=block_weight)`` at a seventh of its cost.
-
-    The calibration hands the rig-state detector the block weight it learns in the slips, a
-    new value with almost every in-slips sample. :class:`RigStateThresholds` has no
-    ``__post_init__`` and every field is an ``__init__`` argument, so a copy of its fields with
-    the new block weight is exactly what ``replace`` builds (a test keeps it so).
-    """
-    copied = object.__new__(RigStateThresholds)
-    fields = copied.__dict__
-    fields.update(thresholds.__dict__)
-    fields["block_weight"] = block_weight
-    return copied
-
-
 HANGING_STATES: frozenset[RigState] = frozenset(
     {RigState.STATIC, RigState.CIRCULATING, RigState.ROTATING_OFF_BOTTOM})
 """States in which the string hangs off bottom without axial motion: their hook load is the
@@ -131,7 +112,7 @@ static hang the weight check and the rotating windows read, so it must have sett
 slips being set pull it down 1410 -> 1344 -> 1035 kN in three 5 s samples on Volve F-4)."""
 
 
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class RigSample:
     """One aligned sample of the rig's channels, SI; None where a channel is missing.
 
@@ -165,30 +146,8 @@ class RigSample:
     block_time: float | None = None
     bit_time: float | None = None
 
-    def __init__(self, t: float, hookload: float | None, bit_depth: float | None,
-                 block_position: float | None = None, rpm: float | None = None,
-                 flow: float | None = None, spp: float | None = None,
-                 hole_depth: float | None = None, torque: float | None = None,
-                 wob: float | None = None, block_time: float | None = None,
-                 bit_time: float | None = None) -> None:
-        # once per frame: see tdmon.slots
-        (set_t, set_hookload, set_bit_depth, set_block_position, set_rpm, set_flow, set_spp,
-         set_hole_depth, set_torque, set_wob, set_block_time, set_bit_time) = _SAMPLE_SETTERS
-        set_t(self, t)
-        set_hookload(self, hookload)
-        set_bit_depth(self, bit_depth)
-        set_block_position(self, block_position)
-        set_rpm(self, rpm)
-        set_flow(self, flow)
-        set_spp(self, spp)
-        set_hole_depth(self, hole_depth)
-        set_torque(self, torque)
-        set_wob(self, wob)
-        set_block_time(self, block_time)
-        set_bit_time(self, bit_time)
 
-
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class DetectorState:
     """What the detector remembers between samples."""
 
@@ -207,52 +166,14 @@ class DetectorState:
     hang_since: float = -math.inf
     hang_run: int = 0
 
-    def __init__(self, t: float = -math.inf, bit_depth: float | None = None,
-                 bit_time: float = -math.inf, block_position: float | None = None,
-                 block_time: float = -math.inf, block_loaded: bool = False,
-                 velocity: float | None = None, hookload: float | None = None,
-                 state: RigState = RigState.UNKNOWN, state_since: float = -math.inf,
-                 run: int = 0, hang_load: float | None = None, hang_since: float = -math.inf,
-                 hang_run: int = 0) -> None:
-        # once per frame: see tdmon.slots
-        (set_t, set_bit_depth, set_bit_time, set_block_position, set_block_time,
-         set_block_loaded, set_velocity, set_hookload, set_state, set_state_since, set_run,
-         set_hang_load, set_hang_since, set_hang_run) = _STATE_SETTERS
-        set_t(self, t)
-        set_bit_depth(self, bit_depth)
-        set_bit_time(self, bit_time)
-        set_block_position(self, block_position)
-        set_block_time(self, block_time)
-        set_block_loaded(self, block_loaded)
-        set_velocity(self, velocity)
-        set_hookload(self, hookload)
-        set_state(self, state)
-        set_state_since(self, state_since)
-        set_run(self, run)
-        set_hang_load(self, hang_load)
-        set_hang_since(self, hang_since)
-        set_hang_run(self, hang_run)
 
-
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class Detection:
     """Result for one sample: ``state``, ``steady``, axial ``velocity`` [m/s] (> 0 deeper)."""
 
     state: RigState
     steady: bool
     velocity: float | None
-
-    def __init__(self, state: RigState, steady: bool, velocity: float | None) -> None:
-        # once per frame: see tdmon.slots
-        set_state, set_steady, set_velocity = _DETECTION_SETTERS
-        set_state(self, state)
-        set_steady(self, steady)
-        set_velocity(self, velocity)
-
-
-_SAMPLE_SETTERS: Final = slot_setters(RigSample)
-_STATE_SETTERS: Final = slot_setters(DetectorState)
-_DETECTION_SETTERS: Final = slot_setters(Detection)
 
 
 def _finite(value: float | None) -> float | None:

@@ -15,12 +15,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from statistics import median
-from typing import Final
 
 import numpy as np
 
 from tdmon.calib.rigstate import Detection, RigSample
-from tdmon.slots import slot_setters
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
 #: states whose windows are estimated from their surface torque (the rotating ones): only they
@@ -100,24 +98,13 @@ class Window:
         return self.rejected is None and bool(self.flags)
 
 
-@dataclass(frozen=True, slots=True, init=False)
+@dataclass(frozen=True, slots=True)
 class WindowAccumulator:
     """Samples of the window being built (tuples: the accumulator is immutable)."""
 
     state: RigState = RigState.UNKNOWN  # of the samples; none yet: unknown is never steady
     samples: tuple[RigSample, ...] = ()
     velocities: tuple[float | None, ...] = ()
-
-    def __init__(self, state: RigState = RigState.UNKNOWN, samples: tuple[RigSample, ...] = (),
-                 velocities: tuple[float | None, ...] = ()) -> None:
-        # once per steady frame: see tdmon.slots
-        set_state, set_samples, set_velocities = _ACCUMULATOR_SETTERS
-        set_state(self, state)
-        set_samples(self, samples)
-        set_velocities(self, velocities)
-
-
-_ACCUMULATOR_SETTERS: Final = slot_setters(WindowAccumulator)
 
 
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:

@@ -4,19 +4,38 @@ Each module in ``_COMMAND_MODULES`` exposes ``register(subparsers)``, which adds
 and sets ``func`` (a callable taking the parsed arguments and returning the exit code).
 User mistakes surface as :class:`tdmon.errors.TdmonError` and are printed as one line on stderr
 with exit code 2; anything else is a bug and keeps its traceback.
+
+SIGINT is handled from this module's first line: a shell without job control starts a
+background job (``tdmon publish ... &`` in a script) with SIGINT ignored, and Python then
+installs no handler of its own, so ``kill -INT`` would be lost until a command re-armed it.
+Until :func:`main` runs, a SIGINT ends the process at once with code 130 (nothing has started
+that needs a clean stop); from then on it is a KeyboardInterrupt like any other.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
+import signal
 import sys
-from collections.abc import Sequence
-from typing import NoReturn
+from types import FrameType
 
-from tdmon import __version__
-from tdmon.blas import limit_blas_threads
-from tdmon.errors import TdmonError
+
+def _interrupted_while_starting(signum: int, frame: FrameType | None) -> None:
+    """SIGINT before :func:`main`: exit 130 quietly, wherever the imports are."""
+    print("tdmon: interrupted", file=sys.stderr)
+    raise SystemExit(130)
+
+
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+import argparse  # noqa: E402 (after SIGINT is armed)
+import importlib  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from typing import NoReturn  # noqa: E402
+
+from tdmon import __version__  # noqa: E402
+from tdmon.blas import limit_blas_threads  # noqa: E402
+from tdmon.errors import TdmonError  # noqa: E402
 
 _COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "fleet", "batch")
 
@@ -48,6 +67,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return _run(argv)
+    except KeyboardInterrupt:  # at any stage: parsing, imports, the command itself
+        print("tdmon: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     func = getattr(args, "func", None)
@@ -62,9 +91,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except TdmonError as exc:
         print(f"tdmon: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("tdmon: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         return 0
 

@@ -25,7 +25,7 @@ def quantity_arg(target: str, example: str, *, positive: bool = False) -> Callab
 
     Parameters
     ----------
-    target : the internal unit the value is returned in (a pint expression, e.g. ``"m"``)
+    target : the internal unit the value is returned in (a unit text, e.g. ``"m"``)
     example : a valid value with a unit, quoted in the error message (e.g. ``"6500 ft"``)
     positive : refuse zero and negative values
 
@@ -39,7 +39,7 @@ def quantity_arg(target: str, example: str, *, positive: bool = False) -> Callab
     shown = target.replace("**", "^").replace("*", " ")
 
     def parse(text: str) -> float:
-        from tdmon.units import parse_quantity
+        from tdmon.units import UnitError, parse_quantity
 
         hint = f"give a number [{shown}] or a number with a unit, e.g. '{example}'"
         try:
@@ -50,7 +50,9 @@ def quantity_arg(target: str, example: str, *, positive: bool = False) -> Callab
             try:
                 value = parse_quantity(text, target)
             except ValueError as exc:
-                raise argparse.ArgumentTypeError(f"{exc}; {hint}") from None
+                # the flag's own example rather than the unit module's list of units
+                reason = exc.reason if isinstance(exc, UnitError) else str(exc)
+                raise argparse.ArgumentTypeError(f"{reason}; {hint}") from None
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"'{text}' is not finite; e.g. '{example}'")
         if positive and not value > 0:

@@ -160,7 +160,7 @@ def _output(args: argparse.Namespace, config: DaemonConfig | None
     return (lambda: pub.zenoh_sender(chosen_zenoh)), f"zenoh {where}"
 
 
-async def _bridge_until_stopped(
+async def _bridge_until_stopped(  # noqa: C901  (complex today; simplify when next touched)
     open_source: Callable[[], AbstractAsyncContextManager[AsyncIterator[RawMessage]]],
     open_sender: Callable[[], AbstractAsyncContextManager[Sender]],
     limit: int | None,

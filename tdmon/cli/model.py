@@ -6,6 +6,7 @@ import argparse
 import csv
 import importlib
 import json
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -86,15 +87,15 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
     warmup = commands.add_parser(
         "warmup",
-        help="compile the model's kernels ahead of time (the set-up scripts run it)",
+        help="compile the model's kernels into numba's cache (the set-up scripts run it)",
         description=(
-            "Compile the torque-and-drag model's kernels ahead of time into an extension "
-            "module in the user's cache folder (about 15 s; needs a C compiler), so that "
-            "commands and the daemon load them without numba; without a compiler, compile "
-            "them into numba's cache instead (about 10 s). scripts/demo.sh and scripts/test.sh "
-            "run it after installing; run it again after changing tdmon/model/_kernels.py or "
-            "upgrading numba or numpy (commands fall back to numba until then). "
-            "TDMON_KERNELS=jit uses numba only."
+            "Compile the torque-and-drag model's kernels with numba and store them in numba's "
+            "on-disk cache (a minute or two; seconds when they are there already), so that no "
+            "later command or daemon compiles them. The cache is the package's "
+            "tdmon/model/__pycache__, or numba's user-wide cache folder when that is not "
+            "writable (NUMBA_CACHE_DIR overrides both): run it as the user that runs tdmon. "
+            "scripts/demo.sh and scripts/test.sh run it after installing; run it again after "
+            "changing tdmon/model/_kernels.py or upgrading numba."
         ),
     )
     warmup.set_defaults(func=_run_warmup)
@@ -107,17 +108,11 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
 
 def _run_warmup(args: argparse.Namespace) -> int:
-    from tdmon.model.warmup import cache_folder, warm_up
+    from tdmon.model.warmup import warm_up
 
     done = warm_up()
-    if done.kernels.kind == "aot":
-        how = (f"compiled ahead of time in {done.build_seconds:.1f} s"
-               if done.build_seconds is not None else "ahead-of-time build already current")
-        print(f"model kernels {how}: {done.kernels.where} (checked in "
-              f"{done.call_seconds:.2f} s; commands load them without numba)")
-    else:
-        print(f"model kernels: {done.note}; numba's JIT compiled them in "
-              f"{done.call_seconds:.1f} s (numba cache: {cache_folder()})")
+    print(f"model kernels: {done.compiled} compiled by numba and stored, {done.loaded} already "
+          f"in its cache, in {done.seconds:.1f} s (numba cache: {done.cache_folder})")
     return 0
 
 
@@ -174,14 +169,18 @@ def _check_bit_depth(path: Path, well: Well, bit_depth: float) -> None:
 
 
 def _run_loads(args: argparse.Namespace) -> int:
+    from tdmon.model.kernels import ENVIRONMENT
     from tdmon.model.torque_drag import torque_drag
 
     well, file_friction = _load(args.well)
     bit_depth = args.bit_depth if args.bit_depth is not None else well.string.length
     _check_bit_depth(args.well, well, bit_depth)
     mu = args.mu if args.mu is not None else file_friction
+    # one march: as plain Python it is done long before numba would have loaded (unless
+    # TDMON_KERNELS chooses; the numbers are the same)
+    engine = None if os.environ.get(ENVIRONMENT) else "python"
     loads = torque_drag(well, bit_depth, mu, method=args.method, wob=args.wob,
-                        bit_torque=args.bit_torque)
+                        bit_torque=args.bit_torque, engine=engine)
     if args.json:
         document = {
             "well": well.name,

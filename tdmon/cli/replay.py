@@ -171,7 +171,7 @@ def _speed(text: str) -> float | None:
     return speed
 
 
-def _replay(args: argparse.Namespace) -> int:
+def _replay(args: argparse.Namespace) -> int:  # noqa: C901  (complex today; simplify when next touched)
     from tdmon.config.daemon import load_daemon_config
     from tdmon.config.expectations import load_expectations
     from tdmon.display import using

@@ -75,7 +75,8 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     pub.add_argument("--columns", help="CSV column map: channel=column:unit,... "
                                        "(default: the Volve F-4 layout)")
     pub.add_argument("--time-column", default="time_utc")
-    pub.add_argument("--speed", default="max", help="real time x N, or 'max' (default)")
+    pub.add_argument("--speed", default=None,
+                     help="real time x N, or 'max' (default; with --opcua: 1, real time)")
     pub.add_argument("--now", action="store_true",
                      help="shift times to the present (live-looking data): the first row is "
                           "now at --speed 1; faster, the last row is now, so that no sample "
@@ -98,6 +99,17 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      help="with --wits0: the WITS unit set of the items (default metric)")
     pub.add_argument("--wits0-decimals", type=int, metavar="N",
                      help="with --wits0: round values to N decimals (default: every digit)")
+    pub.add_argument("--opcua", metavar="URL",
+                     help="serve the session from an OPC UA server instead, as a rig's drilling "
+                          "control system: one variable per channel, written at each time step "
+                          "with its time as source timestamp, at opc.tcp://HOST:PORT "
+                          "(docs/opcua.md, Simulator)")
+    pub.add_argument("--opcua-clients", type=int, default=1, metavar="N",
+                     help="with --opcua: wait for N subscriptions before the first step (0: "
+                          "none)")
+    pub.add_argument("--opcua-linger", type=_seconds, default=5.0, metavar="SECONDS",
+                     help="with --opcua: keep serving this long after the last step, so that "
+                          "subscribers get it at their next publish (default 5)")
     pub.set_defaults(func=_publish)
 
 
@@ -206,7 +218,7 @@ def port_in_use(host: str, port: int) -> str | None:
     return None
 
 
-def _publish(args: argparse.Namespace) -> int:
+def _publish(args: argparse.Namespace) -> int:  # noqa: C901  (complex today; simplify when next touched)
     from itertools import islice
 
     interruptible()
@@ -217,7 +229,12 @@ def _publish(args: argparse.Namespace) -> int:
     config = load_daemon_config(args.config) if args.config else None
     prefix = (args.prefix or (config.prefix if config else "rig/F4")).strip("/")
     speed: float | None
-    if args.speed == "max":
+    if args.opcua and args.speed == "max":
+        raise TdmonError("--opcua needs --speed N (real time x N): OPC UA has no flow control, "
+                         "a subscriber gets what its queue holds between two publishes")
+    if args.speed is None and args.opcua:
+        speed = 1.0
+    elif args.speed in (None, "max"):
         speed = None
     else:
         try:
@@ -242,6 +259,11 @@ def _publish(args: argparse.Namespace) -> int:
         messages = pub.csv_messages(args.source, prefix, columns, args.time_column, shift,
                                     seq=args.seq)
         total = pub.csv_message_count(args.source, columns)
+    if args.wits0 and args.opcua:
+        raise TdmonError("give one of --wits0 and --opcua")
+    if args.opcua:
+        assert speed is not None  # refused above
+        return serve_opcua(args, messages, speed, _progress())  # counts steps, not messages
     if args.wits0:
         from tdmon.cli.bridge import serve_wits0
 
@@ -270,7 +292,7 @@ def _publish(args: argparse.Namespace) -> int:
 
     stopped_by: list[str] = []
 
-    async def main() -> int:
+    async def main() -> int:  # noqa: C901  (complex today; simplify when next touched)
         # Explicit handlers: a job started in the background of a non-interactive shell
         # inherits SIGINT ignored, and asyncio.run only handles SIGINT when it is not.
         loop = asyncio.get_running_loop()
@@ -330,6 +352,47 @@ def _publish(args: argparse.Namespace) -> int:
               f"{prefix}/...", file=sys.stderr)
         return 130 if stopped_by[0] == "SIGINT" else 143
     print(f"tdmon: published {count} messages on {prefix}/...", file=sys.stderr)
+    return 0
+
+
+def serve_opcua(args: argparse.Namespace, messages: Iterable[tuple[float, str, bytes]],
+                speed: float, progress: Any) -> int:
+    """``tdmon publish ... --opcua opc.tcp://HOST:PORT``: each time step of ``messages`` written
+    to the variables of an OPC UA server, paced at real time x ``speed``."""
+    from itertools import islice
+
+    from tdmon.ingest import opcua_server
+    from tdmon.ingest import publish as pub
+    from tdmon.ingest.wits0_server import session_steps
+
+    host, port = opcua_server.parse_opcua_url(args.opcua)
+    if args.opcua_clients < 0:
+        raise TdmonError("--opcua-clients must be 0 or more")
+    # asyncua's server warns at start about the security it was not given: the simulator
+    # serves without security on purpose (docs/opcua.md)
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
+    steps: Iterable[tuple[float, str, bytes]] = (
+        (step.t, "opcua", opcua_server.step_payload(step)) for step in session_steps(messages))
+    if args.limit is not None:
+        steps = islice(steps, args.limit)
+
+    async def main() -> tuple[int, str, int]:
+        try:
+            async with opcua_server.OpcUaRigServer(host, port) as server:
+                # said once listening, so that a script may connect as soon as it reads this
+                print(f"tdmon: serving OPC UA on {server.endpoint}; waiting for "
+                      f"{args.opcua_clients} subscription(s)", file=sys.stderr, flush=True)
+                await server.wait_for_subscribers(args.opcua_clients)
+                count = await pub.publish(steps, opcua_server.OpcUaSender(server), speed,
+                                          progress)
+                await asyncio.sleep(args.opcua_linger)
+                return count, server.endpoint, len(server.subscriptions)
+        finally:
+            progress(None)
+
+    count, where, subscribers = asyncio.run(main())
+    print(f"tdmon: served {count} time steps on {where} to {subscribers} subscription(s)",
+          file=sys.stderr)
     return 0
 
 

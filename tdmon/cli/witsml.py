@@ -1,4 +1,5 @@
-"""``tdmon import witsml``: WITSML 1.4.1.1 time logs to a replay, and a well file drafted from
+"""``tdmon import witsml``: WITSML 1.4.1.1 and 1.3.1.1 time logs to a replay (every curve of the
+log listed with what became of it), and a well file drafted from
 trajectory, tubular and wbGeometry objects (the object kinds are told apart by their root
 element, so the files may be given in any order). Registered by :mod:`tdmon.cli.replay` beside
 the CSV importers."""
@@ -19,13 +20,15 @@ from tdmon.errors import ConfigError, IngestError
 def register_import_witsml(kinds: argparse._SubParsersAction[Any]) -> None:
     """Add ``import witsml`` to the ``import`` command's layouts."""
     parser = kinds.add_parser(
-        "witsml", help="WITSML 1.4.1.1 time logs (and a drafted well file)",
+        "witsml", help="WITSML 1.4.1.1 / 1.3.1.1 time logs (and a drafted well file)",
         description=(
-            "Import WITSML 1.4.1.1 files. Time logs (<logs>; several files or chunks of one "
-            "log are joined in time order, duplicates dropped) go to --out as input messages, "
-            "curves found by classWitsml or mnemonic (docs/witsml.md) and converted from their "
-            "uom to SI, nullValue sending nothing. Trajectory, tubular, wbGeometry, rig and "
-            "fluidsReport files draft a well file (--well-out) listing what WITSML lacks."),
+            "Import WITSML files. Time logs (<logs>, 1.4.1.1 or 1.3.1.1; several files or "
+            "chunks of one log, the same log name whatever their uids, are joined in time "
+            "order, duplicates dropped and counted) go to --out as input messages, curves found "
+            "by classWitsml or mnemonic (docs/witsml.md) and converted from their uom to SI, "
+            "nullValue sending nothing; the summary lists every curve and what became of it. "
+            "Trajectory, tubular, wbGeometry, rig and fluidsReport files (1.4.1.1) draft a "
+            "well file (--well-out) listing what WITSML lacks."),
     )
     parser.add_argument("files", nargs="+", metavar="FILE.xml", help="WITSML object files")
     parser.add_argument("--out", metavar="X.mcap", help="MCAP file for the log(s)")
@@ -141,17 +144,28 @@ def _import_logs(args: argparse.Namespace, logs: list[Path]) -> dict[str, Any]:
                            progress=sys.stderr.isatty())
     if not args.json:
         extra = ""
-        if result.duplicates or result.out_of_order:
-            extra = (f"; dropped {result.duplicates} duplicate and {result.out_of_order} "
-                     "out-of-order rows")
+        if len(logs) > 1 or len(result.log_uids) > 1:
+            extra = (f"; {len(logs)} file(s), {len(result.log_uids)} chunk(s) (uids "
+                     f"{', '.join(result.log_uids)}) joined")
+        if extra or result.duplicates or result.out_of_order:
+            extra += (f"; dropped {result.duplicates} duplicate and {result.out_of_order} "
+                      "out-of-order rows")
         print(f"{result.path}: {result.messages} messages from {result.rows} rows, "
               f"{_utc(result.first_t)} to {_utc(result.last_t)}{extra}")
-        print("  curves: " + ", ".join(f"{channel} <- {curve}"
-                                        for channel, curve in result.curves.items()))
+        print(f"  curves of the log (WITSML {result.version}), {len(result.curve_report)}:")
+        width = max((len(f"{fate.mnemonic} [{fate.unit}]") for fate in result.curve_report),
+                    default=0)
+        for fate in result.curve_report:
+            label = f"{fate.mnemonic} [{fate.unit}]"
+            print(f"    {label:<{width}}  {fate.note}")
     return {"out": str(result.path), "rows": result.rows, "messages": result.messages,
             "per_channel": result.per_channel, "first_t": result.first_t,
             "last_t": result.last_t, "duplicates": result.duplicates,
-            "out_of_order": result.out_of_order, "curves": result.curves}
+            "out_of_order": result.out_of_order, "curves": result.curves,
+            "log_uids": list(result.log_uids), "version": result.version,
+            "curve_report": [{"mnemonic": fate.mnemonic, "unit": fate.unit,
+                              "channel": fate.channel, "note": fate.note}
+                             for fate in result.curve_report]}
 
 
 def _draft(args: argparse.Namespace, files: list[Path]) -> dict[str, Any]:

@@ -14,9 +14,7 @@ from typing import Annotated, Any, Final, TypeVar, Union, get_args, get_origin
 from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError, ValidationInfo
 
 from tdmon.errors import ConfigError
-from tdmon.units import parse_quantity
-
-GRAVITY = 9.80665  # [m/s^2], standard gravity (pound-force per foot is a weight per length)
+from tdmon.units import UnitError, examples, parse_quantity, split_quantity
 
 
 class StrictModel(BaseModel):
@@ -48,7 +46,22 @@ def _is_dimensionless(target: str) -> bool:
 
 def unit_example(target: str) -> str:
     """A unit to suggest in an error message for a quantity in ``target``."""
-    return _EXAMPLE_UNITS.get(target, target)
+    return _EXAMPLE_UNITS.get(target) or next(iter(examples(target)), target)
+
+
+def refused_unit(error: UnitError, value: Any, target: str, key: str | None = None) -> str:
+    """The reason a quantity's unit is refused, with the key written with a unit that works:
+    ``unknown unit 'tonnez'; write e.g. block_weight = "40 kN"``.
+
+    The example keeps the value's number (``"40 tonnez"`` -> ``"40 kN"``) with the unit
+    :func:`unit_example` suggests for the target.
+    """
+    try:
+        number = split_quantity(value)[0] if isinstance(value, str) else None
+    except ValueError:
+        number = None
+    shown = "1" if number is None else f"{number:g}"
+    return f"{error.reason}; write e.g. {key or 'key'} = \"{shown} {unit_example(target)}\""
 
 
 def missing_unit(value: Any, target: str, key: str | None = None) -> str | None:
@@ -84,7 +97,11 @@ def _converter(target: str) -> Callable[[Any, ValidationInfo | None], float]:
             reason = missing_unit(value, target, info.field_name)
             if reason is not None:
                 raise ValueError(reason)
-        number = parse_quantity(value, target)
+        try:
+            number = parse_quantity(value, target)
+        except UnitError as exc:
+            key = info.field_name if info is not None else None
+            raise ValueError(refused_unit(exc, value, target, key)) from None
         if number != number or number in (float("inf"), float("-inf")):
             raise ValueError("must be a finite number")
         return number
@@ -104,17 +121,6 @@ def quantity(target: str) -> BeforeValidator:
     return BeforeValidator(validate)
 
 
-def _weight_per_length(value: Any, info: ValidationInfo) -> float:
-    """A weight per length in N/m; a mass per length such as "29 lb/ft" is multiplied by g."""
-    try:
-        return _converter("N/m")(value, info)
-    except ValueError as as_force:
-        try:
-            return _converter("kg/m")(value, info) * GRAVITY
-        except ValueError:
-            raise as_force from None
-
-
 def _friction_factor(value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise ValueError("expected a friction factor (a number)")
@@ -132,11 +138,13 @@ def check_friction(value: float) -> float:
 
 Length = Annotated[float, quantity("m")]
 Diameter = Annotated[float, quantity("m")]
+#: A force; a mass (``"40 t"``) is its weight under standard gravity (tdmon.units.GRAVITY)
 Force = Annotated[float, quantity("N")]
 Moment = Annotated[float, quantity("N*m")]
 Pressure = Annotated[float, quantity("Pa")]
 Density = Annotated[float, quantity("kg/m^3")]
-WeightPerLength = Annotated[float, BeforeValidator(_weight_per_length)]
+#: A weight per length; a mass per length (``"19.5 lb/ft"``, ``"43 kg/m"``) is multiplied by g
+WeightPerLength = Annotated[float, quantity("N/m")]
 Dimensionless = Annotated[float, quantity("dimensionless")]
 FrictionFactor = Annotated[float, BeforeValidator(_friction_factor)]
 
@@ -333,6 +341,7 @@ __all__ = [
     "missing_unit",
     "quantity",
     "read_toml",
+    "refused_unit",
     "unit_example",
     "validate_model",
     "validation_to_config_error",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import stat
 from datetime import UTC, date, datetime
 from pathlib import Path
@@ -212,17 +213,187 @@ class Wits0Config(_Model):
         return self
 
 
+# A NodeId as text (OPC UA Part 6, 5.3.1.10): "ns=2;s=Rig.HookLoad", "i=2258",
+# "nsu=urn:rig;s=HKLD", "ns=3;g=<guid>", "ns=4;b=<base64>"
+_NODE_ID = re.compile(r"(?:(?:ns=\d+|nsu=[^;]+);)?"
+                      r"(?:i=\d+|s=.+|g=[0-9A-Fa-f-]{36}|b=[A-Za-z0-9+/=]+)")
+# One browse name of a browse path: "2:HookLoad" (namespace index and name) or "Objects" (0)
+_BROWSE_NAME = re.compile(r"(?:\d+:)?[^/:]+")
+
+
+class OpcUaNodeConfig(_Model):
+    """The node feeding one channel: its NodeId (``node``) or its browse path from the
+    Objects folder (``path``), and optionally its unit over the node's EngineeringUnits."""
+
+    node: str | None = None
+    path: str | None = None
+    unit: str | None = Field(default=None, min_length=1)
+
+    @field_validator("node")
+    @classmethod
+    def _node_id(cls, value: str | None) -> str | None:
+        if value is not None and not _NODE_ID.fullmatch(value.strip()):
+            raise ValueError(f"'{value}' is not a NodeId such as 'ns=2;s=Rig.HookLoad', "
+                             "'nsu=urn:rig;s=HKLD' or 'ns=2;i=1001'")
+        return None if value is None else value.strip()
+
+    @field_validator("path")
+    @classmethod
+    def _browse_path(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
+        names = value.strip().strip("/").split("/")
+        if not all(_BROWSE_NAME.fullmatch(name.strip()) for name in names):
+            raise ValueError(f"'{value}' is not a browse path such as '2:Rig/2:HookLoad' "
+                             "(browse names from the Objects folder, each 'index:name')")
+        return "/".join(name.strip() for name in names)
+
+    @model_validator(mode="after")
+    def _node_or_path(self) -> OpcUaNodeConfig:
+        if (self.node is None) == (self.path is None):
+            raise ValueError("give one of node (a NodeId) and path (a browse path)")
+        return self
+
+
+class OpcUaConfig(_Model):
+    """An OPC UA server of the rig's drilling control system (docs/opcua.md): one
+    subscription, a data-change monitored item per configured channel."""
+
+    endpoint: str  # opc.tcp://HOST:PORT[/PATH]
+    # the security policies of OPC UA Part 7 that asyncua implements, without the deprecated
+    # Basic128Rsa15 and Basic256
+    security_policy: Literal["None", "Basic256Sha256", "Aes128_Sha256_RsaOaep",
+                             "Aes256_Sha256_RsaPss"] = "None"
+    security_mode: Literal["None", "Sign", "SignAndEncrypt"] = "None"
+    # the client's application instance certificate and its key (DER or PEM), needed by a
+    # security policy other than None; relative to the daemon file
+    certificate: Path | None = None
+    private_key: Path | None = None
+    # the server's certificate: when given, only a server holding it is accepted; otherwise
+    # the one the server's endpoint shows is taken
+    server_certificate: Path | None = None
+    username: str | None = Field(default=None, min_length=1)
+    password: str | None = None
+    password_env: str | None = None
+    password_file: Path | None = None
+    # how often the server sends what changed (the rig's rate), how often it samples each
+    # node (0: every value the server gets), and how many values it queues per node in between
+    publishing_interval: Seconds = Field(default=1.0, gt=0)
+    sampling_interval: Seconds = Field(default=0.0, ge=0)
+    queue_size: int = Field(default=100, ge=1, le=100_000)
+    # a request unanswered for this long, or a server whose state cannot be read for this long
+    # (checked every timeout / 2), counts as lost: the daemon reconnects
+    timeout: Seconds = Field(default=10.0, gt=0)
+    # channel -> its node: a NodeId as text, or a table with node or path (and unit)
+    nodes: dict[str, OpcUaNodeConfig] = Field(min_length=1)
+
+    @field_validator("endpoint")
+    @classmethod
+    def _endpoint(cls, value: str) -> str:
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(value)
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if parts.scheme != "opc.tcp" or not parts.hostname or port is None:
+            raise ValueError(f"'{value}' is not an OPC UA endpoint such as "
+                             "'opc.tcp://10.0.0.5:4840'")
+        return value
+
+    @field_validator("nodes", mode="before")
+    @classmethod
+    def _short_form(cls, value: Any) -> Any:
+        # hookload = "ns=2;s=HKLD" is short for [sources.opcua.nodes.hookload] node = "..."
+        if isinstance(value, dict):
+            return {channel: {"node": node} if isinstance(node, str) else node
+                    for channel, node in value.items()}
+        return value
+
+    @field_validator("nodes")
+    @classmethod
+    def _channels(cls, value: dict[str, OpcUaNodeConfig]) -> dict[str, OpcUaNodeConfig]:
+        for channel in value:
+            check_channel(channel)
+        return value
+
+    @model_validator(mode="after")
+    def _security(self, info: ValidationInfo) -> OpcUaConfig:
+        if (self.security_policy == "None") != (self.security_mode == "None"):
+            raise CrossFieldError("security_mode", f"policy '{self.security_policy}' with mode "
+                                  f"'{self.security_mode}': give both as None, or a policy "
+                                  "with Sign or SignAndEncrypt")
+        if self.security_policy != "None":
+            for key in ("certificate", "private_key"):
+                if getattr(self, key) is None:
+                    raise CrossFieldError(key, f"security policy '{self.security_policy}' "
+                                          "needs the client's certificate and private_key")
+        self._check_password()
+        self._resolve_files((info.context or {}).get("base_dir"))
+        return self
+
+    def _check_password(self) -> None:
+        """One way to give the password, with a user name; its variable set."""
+        given = [key for key in ("password", "password_env", "password_file")
+                 if getattr(self, key) is not None]
+        if len(given) > 1:
+            raise CrossFieldError(given[1], f"give one of password, password_env and "
+                                  f"password_file, not {' and '.join(given)}")
+        if given and self.username is None:
+            raise CrossFieldError("username", f"{given[0]} needs a username")
+        if self.password_env is not None and self.password_env not in os.environ:
+            raise CrossFieldError("password_env",
+                                  f"environment variable {self.password_env} is not set")
+
+    def _resolve_files(self, base: str | Path | None) -> None:
+        """Certificate, key and password files relative to the daemon file, and there."""
+        if base is None:
+            return
+        for key in ("certificate", "private_key", "server_certificate", "password_file"):
+            path = getattr(self, key)
+            if path is None:
+                continue
+            if not path.is_absolute():
+                path = Path(base) / path
+                object.__setattr__(self, key, path)
+            if not path.is_file():
+                raise CrossFieldError(key, f"no such file: {path}")
+            if key == "password_file":
+                warn_if_readable_by_others(path, "sources.opcua.password_file")
+
+    def resolved_password(self) -> str | None:
+        """The password from ``password``, the ``password_env`` variable or the first line of
+        ``password_file`` (read at each connection); None when none is given.
+
+        Raises
+        ------
+        OSError
+            ``password_file`` cannot be read.
+        """
+        if self.password is not None:
+            return self.password
+        if self.password_env is not None:
+            return os.environ.get(self.password_env)
+        if self.password_file is not None:
+            text = self.password_file.read_text(encoding="utf-8")
+            return text.splitlines()[0] if text else ""
+        return None
+
+
 class SourcesConfig(_Model):
     mqtt: MqttConfig | None = None
     zenoh: ZenohConfig | None = None
     mcap: McapSourceConfig | None = None
     wits0: Wits0Config | None = None
+    opcua: OpcUaConfig | None = None
 
     @model_validator(mode="after")
     def _at_least_one(self) -> SourcesConfig:
-        if self.mqtt is None and self.zenoh is None and self.mcap is None and self.wits0 is None:
+        if (self.mqtt is None and self.zenoh is None and self.mcap is None
+                and self.wits0 is None and self.opcua is None):
             raise ValueError("configure at least one source: [sources.mqtt], [sources.zenoh], "
-                             "[sources.mcap] or [sources.wits0]")
+                             "[sources.mcap], [sources.wits0] or [sources.opcua]")
         return self
 
 
@@ -572,7 +743,7 @@ def load_daemon_config(path: str | os.PathLike[str]) -> DaemonConfig:
     return parse_daemon_config(data, file)
 
 
-def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:
+def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:  # noqa: C901  (complex today; simplify when next touched)
     """Validate already-parsed TOML data (see :func:`load_daemon_config`)."""
     try:
         config = DaemonConfig.model_validate(
@@ -641,7 +812,7 @@ def _check_runs(config: DaemonConfig, file: Path) -> None:
                               f"file not found: {config.resolve(run.well)}")
 
 
-def _check_rigs(config: DaemonConfig, file: Path) -> None:
+def _check_rigs(config: DaemonConfig, file: Path) -> None:  # noqa: C901  (complex today; simplify when next touched)
     """The ``[[rigs]]`` and ``[fleet]`` keys: each rig under ``prefix`` and listed once, its
     well file there, its settings valid once merged with the file's."""
     if not config.is_fleet:
@@ -652,6 +823,9 @@ def _check_rigs(config: DaemonConfig, file: Path) -> None:
     if config.sources.wits0 is not None:
         raise ConfigError(str(file), "sources.wits0", "a WITS0 feed is one rig's: give it a "
                           "daemon file of its own (without [[rigs]] and [fleet])")
+    if config.sources.opcua is not None:
+        raise ConfigError(str(file), "sources.opcua", "an OPC UA server is one rig's: give it "
+                          "a daemon file of its own (without [[rigs]] and [fleet])")
     if config.fleet is not None and config.fleet.wells is not None \
             and not config.resolve(config.fleet.wells).is_dir():
         raise ConfigError(str(file), "fleet.wells",

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, create_model, model_validator
 
+from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameters
 from tdmon.config.common import Length, StrictModel, load_model, quantity
 from tdmon.vocabulary import RigState
 
@@ -70,19 +71,37 @@ class FrictionExpectation(StrictModel):
         return self
 
 
-class JointExpectation(StrictModel):
-    # the joint friction and weight-factor estimates (kind "joint") from `after` [s from the
-    # replay's first message] on: medians in ranges and/or against /truth/friction and
-    # /truth/weight, and the identifiability verdict of the last one
+class _JointExpectation(StrictModel):
+    # the joint estimates (kind "joint") from `after` [s from the replay's first message] on:
+    # medians in ranges and/or against the simulated truth (each estimated parameter's keys,
+    # below), the weight difference, and the identifiability verdict of the last one
     after: Duration = Field(default=0.0, ge=0)
     min_estimates: int = Field(default=1, ge=1)
-    mu: tuple[float, float] | None = None
-    mu_truth_abs: float | None = Field(default=None, gt=0)
-    weight_factor: tuple[float, float] | None = None
-    weight_truth_rel: float | None = Field(default=None, gt=0)
     weight_difference_kN: tuple[float, float] | None = None
     identifiable: bool | None = None
     identifiability: str | None = None  # the last verdict starts with this
+
+
+def _parameter_keys(parameters: EstimatedParameters) -> dict[str, Any]:
+    """Each estimated parameter's keys: ``<name> = [low, high]`` for its median, and where a
+    simulated replay records its truth, ``<key>_truth_abs`` and ``<key>_truth_rel`` (the
+    median absolute or relative difference from it)."""
+    keys: dict[str, Any] = {}
+    for parameter in parameters:
+        keys[parameter.name] = (tuple[float, float] | None, None)
+        if parameter.truth is not None:
+            for kind in ("abs", "rel"):
+                keys[f"{parameter.key}_truth_{kind}"] = (float | None,
+                                                         Field(default=None, gt=0))
+    return keys
+
+
+if TYPE_CHECKING:
+    JointExpectation = _JointExpectation
+else:
+    JointExpectation = create_model(
+        "JointExpectation", __base__=_JointExpectation, __module__=__name__,
+        **_parameter_keys(JOINT_PARAMETERS))
 
 
 class AlarmExpectation(StrictModel):

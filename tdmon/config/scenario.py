@@ -40,6 +40,7 @@ __all__ = [
     "NoiseConfig",
     "PhaseConfig",
     "ScenarioConfig",
+    "SensorTruthConfig",
     "load_scenario",
 ]
 
@@ -159,6 +160,7 @@ class NoiseConfig(StrictModel):
     spike_size: Fraction = Field(default=0.2, ge=0)
     missing_rate: Fraction = Field(default=0.0, ge=0, lt=1)
     clock_jitter: Seconds = Field(default=0.0, ge=0)
+    offset: float = 0.0
 
 
 class NoiseTable(NoiseConfig):
@@ -169,12 +171,15 @@ class NoiseTable(NoiseConfig):
 
     channels: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
-    @field_validator("absolute", mode="before")
+    @field_validator("absolute", "offset", mode="before")
     @classmethod
     def _absolute_per_channel(cls, value: Any, info: ValidationInfo) -> Any:
         if (info.context or {}).get(UNITS_REQUIRED) and value not in (0, 0.0):
-            raise ValueError("the absolute noise is in each channel's unit: give it per "
-                             "channel, e.g. [noise.channels.bit_depth] absolute = \"5 mm\"")
+            what, example = (("absolute noise", '[noise.channels.bit_depth] absolute = "5 mm"')
+                             if info.field_name == "absolute" else
+                             ("zero offset", '[noise.channels.torque] offset = "0.5 kN m"'))
+            raise ValueError(f"the {what} is in each channel's unit: give it per channel, "
+                             f"e.g. {example}")
         return value
 
     @field_validator("channels")
@@ -185,17 +190,19 @@ class NoiseTable(NoiseConfig):
         for name, table in channels.items():
             _known_channels([name])
             table = dict(table)
-            if "absolute" in table:
+            for key in ("absolute", "offset"):
+                if key not in table:
+                    continue
                 target = CHANNEL_UNITS[name][0]
                 # the key at fault is the channel's, not `channels`
-                reason = missing_unit(table["absolute"], target, "absolute") \
+                reason = missing_unit(table[key], target, key) \
                     if (info.context or {}).get(UNITS_REQUIRED) else None
                 try:
                     if reason is not None:
                         raise ValueError(reason)
-                    table["absolute"] = _converter(target)(table["absolute"], None)
+                    table[key] = _converter(target)(table[key], None)
                 except ValueError as exc:
-                    raise CrossFieldError(f"{name}.absolute", str(exc)) from None
+                    raise CrossFieldError(f"{name}.{key}", str(exc)) from None
             NoiseConfig.model_validate(table, context=info.context)
             read[name] = table
         return read
@@ -268,6 +275,27 @@ class ModelErrorConfig(StrictModel):
         return self
 
 
+class SensorTruthConfig(StrictModel):
+    """``[sensor]``: how the rig's hook-load channel reads the load on the hook, the truth
+    the daemon's well file (``[hookload_sensor]``) may describe differently: where the sensor
+    sits, the lines strung, the true sheave efficiency, and a zero offset drifting linearly
+    from ``offset_start`` to ``offset_end`` over the session."""
+
+    location: Literal["deadline", "hook", "top_drive"] = "hook"
+    lines: int = Field(default=10, ge=1, le=24)
+    efficiency: float = Field(default=1.0, ge=0.8, le=1.0)
+    above_sensor: Force = Field(default=0.0, ge=0)
+    offset_start: Force = 0.0
+    offset_end: Force = 0.0
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SensorTruthConfig:
+        if self.location == "deadline" and self.above_sensor != 0.0:
+            raise ValueError("a deadline sensor weighs all the travelling equipment: "
+                             "above_sensor applies to 'hook' and 'top_drive' only")
+        return self
+
+
 class ScenarioConfig(StrictModel):
     """The whole scenario file."""
 
@@ -279,6 +307,7 @@ class ScenarioConfig(StrictModel):
     noise: NoiseTable = NoiseTable()
     fault: list[FaultConfig] = Field(default_factory=list)
     model_error: ModelErrorConfig = ModelErrorConfig()
+    sensor: SensorTruthConfig | None = None
     phase: list[PhaseConfig] = Field(min_length=1)
 
 

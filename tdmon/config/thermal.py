@@ -188,7 +188,7 @@ class FrictionModelConfig(BaseModel):
 
     @model_validator(mode="before")
     @classmethod
-    def _read(cls, raw: Any) -> Any:
+    def _read(cls, raw: Any) -> Any:  # noqa: C901  (complex today; simplify when next touched)
         if isinstance(raw, bool):
             raise ValueError("expected a friction factor, a published fit's name or a table")
         if isinstance(raw, (int, float)):

@@ -35,6 +35,7 @@ from tdmon.config.common import (
 from tdmon.config.thermal import FrictionModelConfig, TemperatureConfig
 from tdmon.errors import ConfigError, ModelError
 from tdmon.model.friction import local_friction
+from tdmon.model.hookload_sensor import HookloadSensor, SensorLocation
 from tdmon.model.string import STEEL_DENSITY, DrillString, StringComponent, weight_per_length
 from tdmon.model.survey import Survey, minimum_curvature
 from tdmon.model.temperature import WellboreTemperature
@@ -168,6 +169,34 @@ class LimitsConfig(StrictModel):
     helical_factor: Dimensionless = Field(default=math.sqrt(2.0), gt=1.0)
 
 
+class HookloadSensorConfig(StrictModel):
+    """``[hookload_sensor]``: how the rig's hook-load channel reads the load on the hook
+    (docs/configuration.md, "The hook-load sensor"; :mod:`tdmon.model.hookload_sensor`).
+
+    ``location``: ``deadline`` (a dead-line anchor load cell times the lines: hoisting reads
+    low and lowering high by the sheave friction), ``hook`` (a load pin at the hook) or
+    ``top_drive`` (a load cell in the top drive). ``lines``: lines strung between crown and
+    block. ``efficiency``: efficiency per turning sheave (API RP 9B's design factor 1.04 gives
+    0.9615); ``above_sensor``: travelling equipment above a pin or load cell, which it does not
+    weigh. Left out: a sensor that reads the load on the hook."""
+
+    location: Literal["deadline", "hook", "top_drive"] = "hook"
+    lines: int = Field(default=10, ge=1, le=24)
+    efficiency: float = Field(default=1.0, ge=0.8, le=1.0)
+    above_sensor: Force = Field(default=0.0, ge=0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> HookloadSensorConfig:
+        if self.location == "deadline" and self.above_sensor != 0.0:
+            raise ValueError("a deadline sensor weighs all the travelling equipment: "
+                             "above_sensor applies to 'hook' and 'top_drive' only")
+        return self
+
+    def to_model(self) -> HookloadSensor:
+        return HookloadSensor(SensorLocation(self.location), self.lines, self.efficiency,
+                              self.above_sensor)
+
+
 class WellConfig(StrictModel):
     """The whole well file."""
 
@@ -179,6 +208,7 @@ class WellConfig(StrictModel):
     fluid: FluidConfig = FluidConfig()
     limits: LimitsConfig = LimitsConfig()
     temperature: TemperatureConfig | None = None
+    hookload_sensor: HookloadSensorConfig = HookloadSensorConfig()
 
     @field_validator("hole")
     @classmethod
@@ -259,6 +289,7 @@ class WellConfig(StrictModel):
                 helical_factor=self.limits.helical_factor,
             ),
             name=self.well.name,
+            hookload_sensor=self.hookload_sensor.to_model(),
         )
 
     def _components(self, source: str, hole_bottom: float) -> tuple[StringComponent, ...]:

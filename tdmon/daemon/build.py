@@ -13,18 +13,18 @@ import contextlib
 import logging
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from tdmon.config.daemon import DaemonConfig
+from tdmon.config.well_file import WellFile, read_well_file
 from tdmon.daemon.aligner import Aligner
 from tdmon.daemon.clock import ClockGuard, ClockSettings
 from tdmon.daemon.daemon import Daemon
-from tdmon.daemon.monitor import LoadModel
 from tdmon.daemon.pipeline import Pipeline, Sink, Stats, Step
 from tdmon.daemon.sinks import PUBLISHERS, SINKS
 from tdmon.daemon.sources import SOURCES
 from tdmon.daemon.steps.compose import calibration_steps_for, default_steps
+from tdmon.daemon.steps.monitor import LoadModel
 from tdmon.daemon.steps.profile import profile_step
 from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
@@ -42,54 +42,6 @@ class Built:
     stats: Stats
     sinks: list[Sink] = field(default_factory=list)
     steps: list[Step] = field(default_factory=list)
-
-
-@dataclass(frozen=True)
-class WellFile:
-    """The daemon's well file, read once: its configuration, the model's ``Well``, the path.
-
-    ``well`` is the file's well with its top string component reaching the bottom of the hole
-    (the model never runs out of string; :mod:`tdmon.daemon.steps.coverage` alarms when the bit
-    goes deeper than the file's own tally, ``tally_length`` [m]); ``digest`` is the SHA-256 of
-    the file's bytes (a reload of an unchanged file changes nothing).
-    """
-
-    config: Any  # tdmon.config.well.WellConfig (imported lazily with pydantic's models)
-    well: Any  # tdmon.model.well.Well
-    path: Path
-    tally_length: float = 0.0
-    digest: str = ""
-
-
-def read_well_path(path: Path) -> WellFile:
-    """Read one well file into a :class:`WellFile` (``ConfigError`` when it is not valid)."""
-    import hashlib
-    from dataclasses import replace
-
-    from tdmon.config.well import load_well as load_well_config
-
-    well_config = load_well_config(path)
-    well = well_config.to_model(path)
-    tally = float(well.string.length)
-    covering = replace(well, string=well.string.reaching(well.hole_bottom))
-    try:
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError:  # read a moment ago; gone now: no digest, every reload applies it
-        digest = ""
-    return WellFile(well_config, covering, path, tally, digest)
-
-
-def read_well_file(config: DaemonConfig) -> WellFile | None:
-    """Read the configured well file (None when there is none)."""
-    if config.well is None:
-        return None
-    return read_well_path(config.resolve(config.well))
-
-
-def load_well(config: DaemonConfig) -> Any:
-    """The model layer's ``Well`` for the configured well file (None when there is none)."""
-    well_file = read_well_file(config)
-    return None if well_file is None else well_file.well
 
 
 def load_model(config: DaemonConfig, well: Any = None) -> LoadModel | None:

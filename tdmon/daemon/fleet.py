@@ -28,18 +28,13 @@ from pathlib import Path
 from typing import Any
 
 from tdmon.config.daemon import DaemonConfig, RigConfig
-from tdmon.daemon.build import (
-    Built,
-    WellFile,
-    assemble_pipeline,
-    read_well_file,
-    rig_steps,
-)
+from tdmon.config.well_file import WellFile, read_well_file
+from tdmon.daemon.build import Built, assemble_pipeline, rig_steps
 from tdmon.daemon.daemon import Daemon
-from tdmon.daemon.monitor import LoadModel
 from tdmon.daemon.pipeline import Pipeline, Sink, Stats
 from tdmon.daemon.sinks import _publish_mqtt, _publish_zenoh
 from tdmon.daemon.sources import SOURCES
+from tdmon.daemon.steps.monitor import LoadModel
 from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
 from tdmon.errors import TdmonError

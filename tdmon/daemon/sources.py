@@ -7,10 +7,16 @@ reopens after a failure). A new transport is its module in ``tdmon.ingest``, a s
 
 from __future__ import annotations
 
-from tdmon.config.daemon import McapSourceConfig, MqttConfig, Wits0Config, ZenohConfig
+from tdmon.config.daemon import (
+    McapSourceConfig,
+    MqttConfig,
+    OpcUaConfig,
+    Wits0Config,
+    ZenohConfig,
+)
 from tdmon.daemon.daemon import SourceSpec
 from tdmon.daemon.wiring import Entry, Table, Wiring
-from tdmon.errors import ConfigError
+from tdmon.errors import ConfigError, IngestError
 from tdmon.ingest.decode import topic_for
 from tdmon.ingest.mcap_source import McapSource
 from tdmon.ingest.mqtt import MqttSource, RecentDeliveries
@@ -79,10 +85,31 @@ async def wits0_source(wiring: Wiring, section: Wits0Config) -> None:
     wiring.sources.append(SourceSpec("wits0", open_wits0))
 
 
+async def opcua_source(wiring: Wiring, section: OpcUaConfig) -> None:
+    """Subscribe to the rig's OPC UA server; each configured node goes in as samples on its
+    channel's topic (docs/opcua.md). Without asyncua the daemon does not start."""
+    from tdmon.ingest.opcua_source import OpcUaSource, import_asyncua
+
+    config = wiring.config
+    try:
+        import_asyncua()
+    except IngestError as exc:
+        raise ConfigError(str(config.source_file), "sources.opcua", str(exc)) from None
+    topics = {spec.channel: topic_for(config.prefix, spec.topic)
+              for spec in config.channel_specs()}
+    max_pending = config.queues.ingest
+
+    def open_opcua() -> OpcUaSource:
+        return OpcUaSource(section, topics, max_pending)
+
+    wiring.sources.append(SourceSpec("opcua", open_opcua))
+
+
 #: ``[sources.<name>]`` -> its builder, in the order the sources are started.
 SOURCES: Table = {
     "zenoh": Entry(lambda config: config.sources.zenoh, zenoh_source),
     "mqtt": Entry(lambda config: config.sources.mqtt, mqtt_source),
     "mcap": Entry(lambda config: config.sources.mcap, mcap_source),
     "wits0": Entry(lambda config: config.sources.wits0, wits0_source),
+    "opcua": Entry(lambda config: config.sources.opcua, opcua_source),
 }

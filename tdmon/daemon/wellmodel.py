@@ -1,6 +1,6 @@
-"""The production :class:`~tdmon.daemon.monitor.LoadModel`: torque and drag for the configured
-well, evaluated once on a bit-depth grid at start-up (one compiled broomstick sweep for the
-design friction factor and the band), then interpolated per frame.
+"""The production :class:`~tdmon.daemon.steps.monitor.LoadModel`: torque and drag for the
+configured well, evaluated once on a bit-depth grid at start-up (one compiled broomstick sweep
+for the design friction factor and the band), then interpolated per frame.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tdmon.config.daemon import DaemonConfig
-from tdmon.daemon.monitor import GridLoadModel
+from tdmon.daemon.steps.monitor import GridLoadModel
 from tdmon.errors import ConfigError, ModelError
 
 log = logging.getLogger(__name__)

@@ -164,8 +164,8 @@ class ManualAcks:
     """
 
     def __init__(self, client: aiomqtt.Client) -> None:
-        # private: the paho client, for the two calls below only (aiomqtt issue 345)
-        self._paho: mqtt.Client = client._client
+        # private: the paho client, for the two calls below only
+        self._paho: mqtt.Client = client._client  # noqa: SLF001  aiomqtt issue 345: no public way
         # call 1 of 2: manual acknowledgement, switched on before connecting, so that nothing
         # a resumed session brings (messages queued while the daemon was away) is
         # acknowledged on receipt (paho >= 2.0; also its constructor's manual_ack=True,

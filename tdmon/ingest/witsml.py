@@ -1,10 +1,14 @@
-"""WITSML 1.4.1.1 time logs, read as a stream: bytes in, typed rows and SI samples out.
+"""WITSML 1.4.1.1 and 1.3.1.1 time logs, read as a stream: bytes in, typed rows and SI samples
+out.
 
-A ``<logs>`` document holds one or more ``<log>`` elements (chunks of one log share its
-``uid``). Each has a header (``indexType``, ``indexCurve``, ``nullValue``, one ``logCurveInfo``
-per curve: ``mnemonic``, ``classWitsml``, ``unit``, per-curve ``nullValue``) and a ``logData``
-block: ``mnemonicList`` and ``unitList`` (comma separated) and one ``<data>`` row per index,
-comma separated cells in the order of ``mnemonicList``.
+A ``<logs>`` document holds one or more ``<log>`` elements (chunks of one log: the same well,
+wellbore and log name; their ``uid`` may differ from run to run). Each has a header
+(``indexType``, ``indexCurve``, ``nullValue``, one ``logCurveInfo`` per curve: ``mnemonic``,
+``classWitsml``, ``unit``, per-curve ``nullValue``) and a ``logData`` block of ``<data>`` rows,
+comma separated cells, one row per index. Where each curve's cells are differs by version:
+1.4.1.1 lists the columns in ``logData``'s ``mnemonicList`` (and ``unitList``); 1.3.1.1 has no
+such lists and gives each ``logCurveInfo`` a ``columnIndex`` (1-based; 0: no values in the
+rows), which the reader turns into the same column list (docs/witsml.md, "WITSML 1.3.1.1").
 
 The reader (:func:`iter_log`) walks the document with ``xml.etree.ElementTree.iterparse`` and
 clears every ``<data>`` row once read, so memory stays flat whatever the file's size. It yields a
@@ -31,16 +35,19 @@ from tdmon.errors import IngestError
 from tdmon.units import conversion
 
 __all__ = [
+    "CURVE_HINTS",
     "CURVE_TABLE",
     "OBJECT_KINDS",
     "RIG_ACTIVITY_MNEMONICS",
     "WITSML_UNITS",
     "CurveChoice",
+    "CurveFate",
     "DataRow",
     "LogBlock",
     "LogCurve",
     "ResolvedCurve",
     "block_samples",
+    "curve_fates",
     "detect_object",
     "iter_log",
     "local_name",
@@ -49,7 +56,8 @@ __all__ = [
     "resolve_curves",
 ]
 
-#: Root element of each WITSML 1.4.1.1 object file -> the object kind it holds.
+#: Root element of each WITSML object file (1.3.1.1 and 1.4.1.1 alike) -> the object kind it
+#: holds.
 OBJECT_KINDS: Final[Mapping[str, str]] = {
     "logs": "log", "trajectorys": "trajectory", "tubulars": "tubular",
     "wbGeometrys": "wbGeometry", "rigs": "rig", "fluidsReports": "fluidsReport",
@@ -66,32 +74,64 @@ class CurveChoice:
 
 
 #: The default curve table: channel -> what finds its curve. The ``classWitsml`` values are
-#: those of WITSML 1.4.1.1's log trace classes as Volve writes them (``tqAv``, ``rpmAv``...);
-#: the mnemonics are the Volve (Baker Hughes) ones first, then common WITS/LAS-style ones.
-#: Maximum or instantaneous curves (``HKLX``, ``tqMx``) are left out on purpose: the model
-#: compares averages. docs/witsml.md has the table with the Volve curves.
+#: those of WITSML's log trace classes as Volve writes them (``tqAv``, ``rpmAv``...). The
+#: mnemonics, in order of preference (docs/witsml.md has the table with the source of each):
+#: Baker Hughes' (the Volve F-4 log in data/volve-f4/witsml; the ``_AVG`` curves and
+#: ``BLOCKCOMP`` of Baker Hughes exports of other Volve wells), the WITS record 1 mnemonics that
+#: rig contractors and mud loggers send (``HKLA``, ``TQA``, ``WOBA``...; docs/wits0.md),
+#: Schlumberger's surface parameters (``HKLD``, ``SWOB``, ``SPPA``, ``BD``, ``TD`` in its LWD/MWD
+#: lists), then common LAS-style names. Maximum or instantaneous curves (``HKLX``, ``tqMx``)
+#: are left out on purpose: the model compares averages.
 CURVE_TABLE: Final[Mapping[str, CurveChoice]] = {
     "hookload": CurveChoice(("hkldAv", "hook load", "hookload"),
-                            ("HKLD", "HKLA", "HKL", "HOOKLOAD", "HKLD_AVG", "HKLDAV")),
+                            ("HKLD", "HKLD_AVG", "HKLA", "HKL", "HOOKLOAD", "HKLDAV",
+                             "HOOK_LOAD", "HL")),
     "torque": CurveChoice(("tqAv", "surface torque", "torque"),
-                          ("TORQUE", "TQA", "STOR", "TQ", "TORQ", "SURF_TORQUE", "TQAV")),
+                          ("TORQUE", "TORQUE_AVG", "TQA", "STOR", "TQ", "TORQ", "SURF_TORQUE",
+                           "TQAV", "TQ_AVG")),
     "bit_depth": CurveChoice(("depthBit", "bit depth"),
-                             ("BITDEP", "BDEP", "DBTM", "BDTI", "BIT_DEPTH", "DBIT")),
+                             ("BITDEP", "DBTM", "BDEP", "BDTI", "BIT_DEPTH", "DBIT", "BD")),
     "hole_depth": CurveChoice(("depthHole", "hole depth"),
-                              ("MDEPTH", "DMEA", "HDTH", "HOLE_DEPTH", "DEPTH")),
+                              ("MDEPTH", "DMEA", "HDTH", "HOLE_DEPTH", "DEPTH", "TD")),
     "block_position": CurveChoice(("blockPos", "block position"),
-                                  ("BPOS", "BLKPOS", "BLOCK_POS", "BLKH", "HKHT")),
+                                  ("BLOCKCOMP", "BPOS", "BLKPOS", "BLOCK_POS", "BLKH", "HKHT",
+                                   "BLOCK_HEIGHT")),
     "rpm": CurveChoice(("rpmAv", "rotary speed"),
-                       ("SURF_RPM", "RPMA", "RPM", "TRPM", "RPMAV")),
-    "flow_in": CurveChoice(("flowInAv", "flow in"), ("FLOWIN", "MFIA", "TFLO", "FLOW_IN")),
-    "spp": CurveChoice(("presPumpAv", "standpipe pressure"), ("PUMP", "SPPA", "SPP", "STP")),
-    "wob": CurveChoice(("wobAv", "weight on bit"), ("WOB", "WOBA", "SWOB")),
+                       ("SURF_RPM", "SURF_RPM_AVG", "RPMA", "RPM", "TRPM", "RPMAV")),
+    "flow_in": CurveChoice(("flowInAv", "flow in"),
+                           ("FLOWIN", "FLOWIN_AVG", "MFIA", "TFLO", "FLOW_IN")),
+    "spp": CurveChoice(("presPumpAv", "standpipe pressure"),
+                       ("PUMP", "PUMP_AVG", "SPPA", "SPP", "STP")),
+    "wob": CurveChoice(("wobAv", "weight on bit"), ("WOB", "WOB_AVG", "WOBA", "SWOB")),
     "mud_density": CurveChoice(("wtMudInAv", "mud density in"), ("MWIN", "MDIA", "MW_IN")),
     "mud_temp_in": CurveChoice(("tempMudInAv", "mud temperature in"),
                                ("MTIA", "TEMPIN", "MT_IN", "MTIN")),
     "mud_temp_out": CurveChoice(("tempMudOutAv", "mud temperature out"),
                                 ("MTOA", "TEMPOUT", "MT_OUT", "MTOUT")),
 }
+
+#: What a curve the table does not take may be, for the import summary's suggestion: channel
+#: -> words of its mnemonic or description (compared as in the table: case, spaces and
+#: underscores ignored), and words that rule the channel out (the other end of the mud loop,
+#: a downhole value).
+CURVE_HINTS: Final[Mapping[str, tuple[tuple[str, ...], tuple[str, ...]]]] = {
+    "hookload": (("hkl", "hook", "hookload"), ("height", "speed", "block")),
+    "torque": (("torq", "tq"), ("bit", "dh", "motor", "makeup", "mu")),
+    "wob": (("wob", "weightonbit"), ("dh", "downhole")),
+    "rpm": (("rpm", "rotaryspeed", "rotspeed"), ("bit", "motor", "turb", "dh", "collar")),
+    "bit_depth": (("bitdep", "bitdepth", "bdep", "dbtm"), ()),
+    "hole_depth": (("holedep", "holedepth", "totaldepth", "dmea", "mdepth"), ("tvd",)),
+    "block_position": (("block", "blk", "bpos", "hookheight"), ("speed", "velocity")),
+    "spp": (("spp", "standpipe", "pumppress", "pumppressure"), ()),
+    "flow_in": (("flowin", "mfi", "flowrate", "flow"), ("out", "mfo")),
+    "mud_density": (("mwin", "mdin", "densityin", "mudweightin", "mudweight", "mw"),
+                    ("out", "ecd")),
+    "mud_temp_in": (("tempin", "mtin", "mti", "temperaturein"), ("out",)),
+    "mud_temp_out": (("tempout", "mtout", "mto", "temperatureout"), ()),
+}
+
+#: Words of a curve's mnemonic or description that make it an extreme, not an average
+_EXTREMES: Final = ("max", "min", "peak", "mx")
 
 #: Curves carrying the Volve contractor's rig activity code (kept as a reference).
 RIG_ACTIVITY_MNEMONICS: Final = frozenset({"rigactivitycode"})
@@ -100,13 +140,13 @@ RIG_ACTIVITY_MNEMONICS: Final = frozenset({"rigactivitycode"})
 #: Rotation rates: WITSML's ``c/s`` (cycles per second), ``rpm`` and ``1/min`` are revolutions,
 #: which pint must be told (its ``c`` is the speed of light, and ``1/min`` would be radians).
 WITSML_UNITS: Final[Mapping[str, str]] = {
-    "c/s": "revolution/second", "rpm": "revolution/minute", "1/min": "revolution/minute",
-    "rev/min": "revolution/minute", "1/s": "revolution/second",
+    "c/s": "rps", "rpm": "rpm", "1/min": "rpm",
+    "rev/min": "rpm", "1/s": "rps",
     "N.m": "N*m", "kN.m": "kN*m", "daN.m": "daN*m", "ft.lbf": "ft*lbf",
     "kft.lbf": "kft*lbf", "lbf.ft": "lbf*ft", "klbf.ft": "klbf*ft",
-    "kkgf": "kkgf", "tonf": "metric_ton_force", "kdaN": "kN*10",
+    "kkgf": "kkgf", "tonf": "tf", "kdaN": "kN*10",
     "m3/s": "m**3/s", "m3/min": "m**3/min", "m3/h": "m**3/h", "L/min": "L/min",
-    "gpm": "gallon/minute", "galUS/min": "gallon/minute", "bbl/min": "oil_barrel/minute",
+    "gpm": "gpm", "galUS/min": "gpm", "bbl/min": "bbl/min",
     "ft3/min": "ft**3/min",
     "kg/m3": "kg/m**3", "g/cm3": "g/cm**3", "kg/L": "kg/L", "lbm/galUS": "lb/gallon",
     "ppg": "ppg", "sg": "sg", "SG": "sg", "lbm/ft3": "lb/ft**3",
@@ -159,13 +199,15 @@ def parse_time(text: str) -> float:
 @dataclass(frozen=True)
 class LogCurve:
     """One ``logCurveInfo``: ``unit`` is the WITSML ``uom`` text, ``null_value`` the curve's own
-    (None: the log's)."""
+    (None: the log's), ``column_index`` its 1-based column in 1.3.1.1's data rows (None: not
+    given, as in 1.4.1.1)."""
 
     mnemonic: str
     class_witsml: str | None
     unit: str
     null_value: str | None
     description: str
+    column_index: int | None = None
 
 
 @dataclass(frozen=True)
@@ -181,7 +223,10 @@ class LogBlock:
     index_curve : ``indexCurve`` mnemonic
     null_value : the log's ``nullValue`` (None: none)
     curves : every ``logCurveInfo``
-    mnemonics, units : ``mnemonicList`` and ``unitList`` of the data block
+    mnemonics, units : ``mnemonicList`` and ``unitList`` of the data block (1.3.1.1: made from
+        the curves' ``columnIndex`` and ``unit``)
+    version : the document's WITSML version (``1.4.1.1``, ``1.3.1.1``)
+    run : ``runNumber`` ("" when not given)
     """
 
     uid: str
@@ -195,6 +240,16 @@ class LogBlock:
     curves: tuple[LogCurve, ...]
     mnemonics: tuple[str, ...]
     units: tuple[str, ...]
+    version: str = "1.4.1.1"
+    run: str = ""
+
+    @property
+    def identity(self) -> tuple[str, str, str]:
+        """What makes chunks one log: the well, the wellbore and the log's name (its uid when
+        it has none), compared without case or surrounding spaces. Runs of one log exported
+        apart carry the same name and different uids."""
+        return (self.well.strip().casefold(), self.wellbore.strip().casefold(),
+                (self.name or self.uid).strip().casefold())
 
     @property
     def index_column(self) -> int:
@@ -217,8 +272,22 @@ class DataRow:
 _HEADER_FIELDS: Final = {
     "name": "name", "nameWell": "well", "nameWellbore": "wellbore",
     "serviceCompany": "service_company", "indexType": "index_type",
-    "indexCurve": "index_curve", "nullValue": "null_value",
+    "indexCurve": "index_curve", "nullValue": "null_value", "runNumber": "run",
 }
+
+#: The namespace of each WITSML version's documents (the root's ``version`` attribute wins)
+_NAMESPACE_VERSIONS: Final = {"http://www.witsml.org/schemas/131": "1.3.1.1",
+                              "http://www.witsml.org/schemas/1series": "1.4.1.1"}
+
+
+def _version(root: ET.Element) -> str:
+    """The WITSML version of a document from its root: the ``version`` attribute, else the
+    namespace; 1.4.1.1 when neither says."""
+    stated = (root.get("version") or "").strip()
+    if stated:
+        return stated
+    namespace = root.tag[1:].partition("}")[0] if root.tag.startswith("{") else ""
+    return _NAMESPACE_VERSIONS.get(namespace, "1.4.1.1")
 
 
 def _child_text(element: ET.Element, name: str) -> str | None:
@@ -230,11 +299,13 @@ def _child_text(element: ET.Element, name: str) -> str | None:
 
 def _curve(element: ET.Element) -> LogCurve:
     texts = {local_name(child.tag): (child.text or "").strip() for child in element}
+    column = texts.get("columnIndex", "")
     return LogCurve(mnemonic=texts.get("mnemonic", ""),
                     class_witsml=texts.get("classWitsml") or None,
                     unit=texts.get("unit", texts.get("uom", "")),
                     null_value=texts.get("nullValue") or None,
-                    description=texts.get("curveDescription", ""))
+                    description=texts.get("curveDescription", ""),
+                    column_index=int(column) if column.isdigit() else None)
 
 
 def detect_object(stream: IO[bytes], source: str) -> str:
@@ -250,7 +321,7 @@ def detect_object(stream: IO[bytes], source: str) -> str:
         for _event, element in ET.iterparse(stream, events=("start",)):
             root = local_name(element.tag)
             if root not in OBJECT_KINDS:
-                raise IngestError(f"{source}: not a WITSML 1.4.1.1 object file (root element "
+                raise IngestError(f"{source}: not a WITSML object file (root element "
                                   f"<{root}>, expected one of "
                                   f"{', '.join(f'<{name}>' for name in OBJECT_KINDS)})")
             return OBJECT_KINDS[root]
@@ -281,6 +352,7 @@ def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:
     curves: list[LogCurve] = []
     lists: dict[str, tuple[str, ...]] = {}
     block: LogBlock | None = None
+    version = "1.4.1.1"
     depth = 0
     rows = 0
     try:
@@ -293,6 +365,7 @@ def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:
                     if name != "logs":
                         raise IngestError(f"{source}: not a WITSML log file (root element "
                                           f"<{name}>, expected <logs>)")
+                    version = _version(element)
                 elif depth == 2 and name == "log":
                     log, curves, lists, block = element, [], {}, None
                     header = {"uid": element.get("uid", "")}
@@ -303,7 +376,7 @@ def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:
             depth -= 1
             if depth == 3 and log_data is not None and name == "data":
                 if block is None:
-                    block = _block(header, curves, lists, source)
+                    block = _block(header, curves, lists, source, version)
                     yield block
                 rows += 1
                 yield _row(element.text or "", block, source, rows)
@@ -328,18 +401,18 @@ def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:
 
 
 def _block(header: Mapping[str, str], curves: list[LogCurve], lists: Mapping[str, tuple[str, ...]],
-           source: str) -> LogBlock:
+           source: str, version: str = "1.4.1.1") -> LogBlock:
     uid = header.get("uid", "")
     label = f"log '{uid or header.get('name', '?')}'"
     index_type = header.get("index_type", "date time")
     if index_type.lower() not in ("date time", "datetime"):
         raise IngestError(f"{source}: {label} is indexed by '{index_type}'; only time logs "
                           "(indexType 'date time') can be imported")
-    if "mnemonicList" not in lists:
-        raise IngestError(f"{source}: {label} has data rows but no <mnemonicList> (the column "
-                          "order; WITSML 1.4.1.1 logData)")
-    mnemonics = lists["mnemonicList"]
-    units = lists.get("unitList", ())
+    if "mnemonicList" in lists:
+        mnemonics = lists["mnemonicList"]
+        units = lists.get("unitList", ())
+    else:
+        mnemonics, units = _columns_from_indexes(curves, source, label)
     if units and len(units) != len(mnemonics):
         raise IngestError(f"{source}: {label}: unitList has {len(units)} entries, mnemonicList "
                           f"{len(mnemonics)}")
@@ -348,7 +421,32 @@ def _block(header: Mapping[str, str], curves: list[LogCurve], lists: Mapping[str
                     service_company=header.get("service_company", ""),
                     index_type=index_type, index_curve=header.get("index_curve", mnemonics[0]),
                     null_value=header.get("null_value") or None, curves=tuple(curves),
-                    mnemonics=mnemonics, units=units)
+                    mnemonics=mnemonics, units=units, version=version,
+                    run=header.get("run", ""))
+
+
+def _columns_from_indexes(curves: list[LogCurve], source: str, label: str
+                          ) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The column list of a data block without ``mnemonicList``: WITSML 1.3.1.1 gives each
+    curve's place in the rows as its ``columnIndex`` (1-based; 0 is a curve with no values in
+    the rows). Columns no curve claims stay unnamed ("")."""
+    unplaced = [curve.mnemonic for curve in curves if curve.column_index is None]
+    placed = [curve for curve in curves if curve.column_index]
+    if unplaced or not placed:
+        missing = f" (none in {', '.join(unplaced)})" if unplaced and placed else ""
+        raise IngestError(f"{source}: {label} has data rows but neither <mnemonicList> (WITSML "
+                          "1.4.1.1 logData) nor a columnIndex in every logCurveInfo (1.3.1.1)"
+                          f"{missing}")
+    width = max(curve.column_index or 0 for curve in placed)
+    mnemonics = [""] * width
+    units = [""] * width
+    for curve in placed:
+        column = (curve.column_index or 0) - 1
+        if mnemonics[column]:
+            raise IngestError(f"{source}: {label}: curves '{mnemonics[column]}' and "
+                              f"'{curve.mnemonic}' both have columnIndex {column + 1}")
+        mnemonics[column], units[column] = curve.mnemonic, curve.unit
+    return tuple(mnemonics), tuple(units)
 
 
 def _row(text: str, block: LogBlock, source: str, number: int) -> DataRow:
@@ -380,6 +478,8 @@ class ResolvedCurve:
     offset: float
     null_texts: frozenset[str]
     null_numbers: frozenset[float]
+    #: how the curve was found: "classWitsml <class>", "mnemonic" or "--curve"
+    found_by: str = "mnemonic"
 
 
 def _nulls(*values: str | None) -> tuple[frozenset[str], frozenset[float]]:
@@ -391,17 +491,18 @@ def _nulls(*values: str | None) -> tuple[frozenset[str], frozenset[float]]:
     return frozenset(texts), frozenset(numbers)
 
 
-def _find(block: LogBlock, choice: CurveChoice) -> LogCurve | None:
+def _find(block: LogBlock, choice: CurveChoice) -> tuple[LogCurve, str] | None:
+    """The curve ``choice`` finds in ``block``, and how (by class or by mnemonic)."""
     listed = {mnemonic.lower() for mnemonic in block.mnemonics}
     curves = [curve for curve in block.curves if curve.mnemonic.lower() in listed]
     for wanted in choice.classes:
         for curve in curves:
             if curve.class_witsml and _normal(curve.class_witsml) == _normal(wanted):
-                return curve
+                return curve, f"classWitsml {curve.class_witsml}"
     for wanted in choice.mnemonics:
         for curve in curves:
             if _normal(curve.mnemonic) == _normal(wanted):
-                return curve
+                return curve, "mnemonic"
     return None
 
 
@@ -439,11 +540,12 @@ def resolve_curves(block: LogBlock, source: str, *,
                 raise IngestError(f"{source}: --curve {channel}={mnemonic}: the log has no "
                                   f"curve '{mnemonic}' (curves: {', '.join(block.mnemonics)})")
             curve = by_mnemonic.get(mnemonic.lower()) or LogCurve(mnemonic, None, "", None, "")
+            found_by = "--curve"
         elif channel in table:
             found = _find(block, table[channel])
             if found is None:
                 continue
-            curve = found
+            curve, found_by = found
         else:
             continue
         column = columns[curve.mnemonic.lower()]
@@ -462,7 +564,7 @@ def resolve_curves(block: LogBlock, source: str, *,
                               f"{curve.mnemonic}:UNIT") from None
         texts, numbers = _nulls(curve.null_value or block.null_value)
         resolved.append(ResolvedCurve(channel, curve.mnemonic, column, uom, scale, offset,
-                                      texts, numbers))
+                                      texts, numbers, found_by))
     missing = [channel for channel in required
                if channel not in {item.channel for item in resolved}]
     if missing:
@@ -481,6 +583,68 @@ def _looked_for(channels: list[str], table: Mapping[str, CurveChoice]) -> str:
             parts.append(f"{channel}: classWitsml {'/'.join(choice.classes)} or mnemonic "
                          f"{'/'.join(choice.mnemonics)}")
     return "; ".join(parts) or "nothing"
+
+
+@dataclass(frozen=True)
+class CurveFate:
+    """What an import made of one curve of a log: ``channel`` it feeds (None: none) and a
+    note for the user (how it was found, or why not and what would take it)."""
+
+    mnemonic: str
+    unit: str
+    channel: str | None
+    note: str
+
+
+def curve_fates(block: LogBlock, curves: tuple[ResolvedCurve, ...]) -> tuple[CurveFate, ...]:
+    """Every curve of ``block`` (its columns, then curves without values in the rows) and
+    what became of it with ``curves`` (:func:`resolve_curves`): taken as a channel, the
+    index, the rig activity code, or not mapped, with the ``--curve`` that would take it
+    when it looks like a channel's (:data:`CURVE_HINTS`)."""
+    info = {curve.mnemonic.lower(): curve for curve in block.curves}
+    taken = {item.mnemonic.lower(): item for item in curves}
+    by_channel = {item.channel: item.mnemonic for item in curves}
+    activity = rig_activity_column(block)
+    names = [m for m in block.mnemonics if m]
+    names += [c.mnemonic for c in block.curves if c.mnemonic.lower() not in
+              {m.lower() for m in names}]
+    fates = []
+    for column, mnemonic in enumerate(names):
+        curve = info.get(mnemonic.lower()) or LogCurve(mnemonic, None, "", None, "")
+        unit = curve.unit or (block.units[column] if column < len(block.units) else "")
+        item = taken.get(mnemonic.lower())
+        if item is not None:
+            fates.append(CurveFate(mnemonic, unit, item.channel,
+                                   f"taken as {item.channel} ({item.found_by})"))
+        elif column == block.index_column and column < len(block.mnemonics):
+            fates.append(CurveFate(mnemonic, unit, None, "the index (time)"))
+        elif column == activity:
+            fates.append(CurveFate(mnemonic, unit, None, "rig activity code "
+                                                         "(/reference/rig_activity)"))
+        elif mnemonic not in block.mnemonics:
+            fates.append(CurveFate(mnemonic, unit, None, "no values in the data rows"))
+        else:
+            fates.append(CurveFate(mnemonic, unit, None, _not_mapped(curve, by_channel)))
+    return tuple(fates)
+
+
+def _not_mapped(curve: LogCurve, by_channel: Mapping[str, str]) -> str:
+    """Why a curve was not taken, with the ``--curve`` that would take it when its mnemonic or
+    description reads like a channel's."""
+    text = f"{_normal(curve.mnemonic)} {_normal(curve.description)} " \
+           f"{_normal(curve.class_witsml or '')}"
+    for channel, (words, vetoes) in CURVE_HINTS.items():
+        if not any(word in text for word in words) or any(veto in text for veto in vetoes):
+            continue
+        if any(word in text for word in _EXTREMES):
+            return (f"not mapped: an extreme of {channel}? (the model compares averages; "
+                    f"--curve {channel}={curve.mnemonic} takes it)")
+        other = by_channel.get(channel)
+        if other is None:
+            return f"not mapped: looks like {channel}; add --curve {channel}={curve.mnemonic}"
+        return (f"not mapped: looks like {channel}, taken from {other}; --curve "
+                f"{channel}={curve.mnemonic} would take this one instead")
+    return "not mapped (no channel of tdmon)"
 
 
 def rig_activity_column(block: LogBlock) -> int | None:

@@ -21,6 +21,7 @@ from typing import IO, Final
 
 from tdmon.errors import IngestError
 from tdmon.ingest.witsml import OBJECT_KINDS, child_text, local_name, pint_unit
+from tdmon.model.string import GRAVITY, weight_per_length
 from tdmon.units import conversion
 
 __all__ = [
@@ -401,6 +402,12 @@ def _q(value: float, unit: str, digits: int = 6) -> str:
     return f'"{value:.{digits}g} {unit}"'
 
 
+def _plain_tube_mass(component: TubularComponent) -> float:
+    """Mass per length of the component as a plain steel tube [kg/m]: eq 41 of the model
+    (:func:`tdmon.model.string.weight_per_length`) divided by g."""
+    return float(weight_per_length(component.od, component.id)) / GRAVITY
+
+
 def _name_for(section: GeometrySection) -> str:
     size = section.outer_diameter or section.inner_diameter
     label = "open hole" if section.is_open else section.kind
@@ -503,20 +510,25 @@ def draft_well(objects: WellObjects, *, tubular: Tubular | None = None,
                                f"weight of {nominal[1]} ({nominal[0]:g} lb/ft): check against "
                                "the pipe tally")
             else:
-                lines.append('# weight = "... kg/m"  # FILL IN: in air, with tool joints')
+                plain = _plain_tube_mass(component)
+                lines.append(f"# weight = {_q(plain, 'kg/m', 4)}  # FILL IN: in air, with tool "
+                             "joints (suggested: the plain tube, eq 41)")
                 missing.append(f"string[{index}].weight: no wtPerLen and no API size match; "
                                "the model uses the plain tube (eq 41), light by the tool joints")
         if component.connection_od is not None:
             lines.append(f"tool_joint_od = {_q(component.connection_od, 'm')}  # connection od")
         else:
-            lines.append('# tool_joint_od = "... in"  # FILL IN: the torque radius')
+            lines.append(f"# tool_joint_od = {_q(component.od / _INCH, 'in', 4)}  # FILL IN: the "
+                         "connection's OD, the torque radius (suggested: the body OD, as "
+                         "without it)")
             missing.append(f"string[{index}].tool_joint_od: no connection od (torque acts at "
                            "the body OD without it)")
         if component.yield_strength is not None:
             lines.append(f"yield_strength = {_q(component.yield_strength / 1e6, 'MPa')}")
         else:
             lines.append('# yield_strength = "552 MPa"  # FILL IN: grade (L-80: 552 MPa)')
-        lines.append('# makeup_torque = "... kN*m"')
+        lines.append("# makeup_torque: the connection's make-up torque, from its data sheet "
+                     "(optional)")
         string_lines += [*lines, ""]
     string_length = sum(component.length for component in tubular.components)
 
@@ -527,8 +539,8 @@ def draft_well(objects: WellObjects, *, tubular: Tubular | None = None,
         fluid_lines = ["[fluid]", f"density = {_q(objects.fluid.density, 'kg/m**3')}  "
                                   f"# fluidsReport {objects.fluid.when}"]
     else:
-        fluid_lines = ["[fluid]", "# FILL IN (the file does not load without it):",
-                       '# density = "1.2 sg"']
+        fluid_lines = ["[fluid]", '# density = "1.2 sg"  # FILL IN: the mud in the hole (the '
+                                  "file does not load without it)"]
         missing.insert(0, "fluid.density: not in the WITSML (no fluidsReport); the file does "
                           "not load until it is given (buoyancy changes the hook load by "
                           "10-20 %)")

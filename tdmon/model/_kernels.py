@@ -1,4 +1,4 @@
-"""Compiled element loops of the torque-and-drag model (numba).
+"""The element loops of the torque-and-drag model: plain Python that numba compiles.
 
 The physics is documented in `tdmon.model.torque_drag` and docs/torque-drag.md; this module only
 holds the loops, written for speed: scalars instead of small arrays, no allocation in the loops.
@@ -8,13 +8,37 @@ element and a run-break flag per node) and the string as cumulative component to
 the bit, with a buoyed weight and a friction radius per component. The march goes from the bit up
 to the top of the hole in *pieces*: a piece is the part of a grid element between the bit, the
 element's nodes and the string's component boundaries, so each piece has one weight, one radius,
-one friction factor and lies on one circular arc. `march_gradient` is the same march for one
-operation followed by its adjoint: the value and its gradient with respect to every element's
-friction factor.
+one friction factor and lies on one circular arc.
 
+There is one element loop, `_march`, and every entry point runs it: one friction array or
+several (*cases*) and one or several operations in one march, with the loads at every node
+(`march_profile`) or only at the top, and with a *tape* for the adjoint (`march_gradient`: the
+value and its gradient with respect to every element's friction factor). The force terms of a
+piece are written once, in `_soft_string_piece` (weight and friction of the soft string) and
+`_aadnoy_run` (Aadnoy's closed forms over a run); the adjoint's backward pass reruns
+`_soft_string_piece` for the values it differentiates.
+
+Where a new force term goes (docs/architecture.md): an extra axial force per element (issue 30's
+pressure-area and viscous drag, computed outside the loops from the mud and the block speed) is
+added where the weight enters, ``axial_weight`` in `_soft_string_piece` and next to the weight
+terms of `_aadnoy_run`'s closed forms, and reaches them as one more argument of `_march`, per
+element (and per operation, for drag that follows the motion). In the soft string it adds
+nothing to the adjoint's derivatives (it depends on neither the force nor the friction) and the
+backward pass gets its values through the rerun piece; in Aadnoy's closed forms
+`_aadnoy_run_adjoint` takes it where it takes the weight's lift. A piece's buoyed weight and
+radius are read once, in `_march` (per component today; a weight that varies with the densities
+inside and outside each element changes that read), and the adjoint takes them from its tape.
+The bit's force and torque (WOB, bit torque) are the march's starting values, ``bit_forces`` and
+``bit_torques``. What a sensor reads of the top force (sheave efficiency, dead-line sensor,
+block acceleration) is not the loops' business: `WellModel` adds the block weight to the top
+force outside them, and a measurement model belongs there too.
+
+This module imports no numba. `tdmon.model.kernels` runs every function here either compiled
+by numba (``njit(cache=True)``) or as it is, plain Python, with the same numbers bit for bit:
+so the code keeps to what both do alike (math functions, float64 and int64 arrays indexed by
+scalars, no fast-math, ``None`` for an absent profile or tape, which numba compiles away).
 The per-well arrays travel packed in two flat buffers (built once per well by `pack_well`); the
-entry points take them and the per-call values. The same functions run under numba's JIT and,
-compiled ahead of time by `tdmon.model.aot`, without numba: `tdmon.model.kernels` picks one.
+entry points take them and the per-call values, positionally or by keyword.
 """
 
 from __future__ import annotations
@@ -23,16 +47,20 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
-# the method and the curve kinds are named where the model (without numba) reads them
-from tdmon.model.kernels import PLANAR_BUILD, SOFT_STRING
+# the methods, as the model passes them
+SOFT_STRING = 0
+AADNOY = 1
+
+# element curve kinds (of the survey interval the element lies on)
+STRAIGHT = 0
+PLANAR_BUILD = 1
+GENERAL_CURVE = 2
 
 _STRAIGHT_DOGLEG = 1e-7
 _MD_TOLERANCE = 1e-9
 
 
-@njit(cache=True)
 def _tangent_at(node_md, tangents, dogleg, j, md):
     """Unit tangent at ``md`` inside element ``j``, on the element's circular arc."""
     length = node_md[j + 1] - node_md[j]
@@ -52,7 +80,6 @@ def _tangent_at(node_md, tangents, dogleg, j, md):
     return x / norm, y / norm, z / norm
 
 
-@njit(cache=True)
 def _angle_between(ax, ay, az, bx, by, bz):
     """Angle between two unit vectors, accurate for small angles."""
     dx = bx - ax
@@ -64,12 +91,10 @@ def _angle_between(ax, ay, az, bx, by, bz):
     return 2.0 * math.asin(half_chord)
 
 
-@njit(cache=True)
 def _inclination(x, y, z):
     return math.atan2(math.sqrt(x * x + y * y), z)
 
 
-@njit(cache=True)
 def piece_geometry(tt, tb, length):
     """Geometry of one piece for the soft-string balance.
 
@@ -108,7 +133,6 @@ def piece_geometry(tt, tb, length):
             ex * ex + ey * ey + ez * ez, dtvd)
 
 
-@njit(cache=True)
 def element_geometry(node_md, tangents):
     """`piece_geometry` of every whole grid element: arrays kk, ke, ee, dtvd."""
     n = node_md.size - 1
@@ -125,10 +149,9 @@ def element_geometry(node_md, tangents):
 
 # --- the per-well arguments, packed ---
 #
-# Two flat buffers rather than twelve arrays or a structref: every array argument is unboxed on
-# each call (about 0.05 us each, in numba's dispatcher and in the ahead-of-time module alike),
-# and a structref cannot cross into the ahead-of-time module (its Python handle is numba's).
-# The entry points unpack the buffers into `_WellArrays`, views the loops read by name.
+# Two flat buffers rather than twelve arrays: numba's dispatcher unboxes every array argument
+# on each call (about 0.05 us each). The entry points unpack the buffers into `_WellArrays`,
+# views the loops read by name.
 
 _WellArrays = namedtuple("_WellArrays", [
     "node_md", "tangents", "dogleg", "curve_kind", "run_break", "element_kk", "element_ke",
@@ -138,7 +161,6 @@ _WellArrays = namedtuple("_WellArrays", [
 _HEADER = 3
 
 
-@njit(cache=True)
 def pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
               component_weight, component_radius):
     """Pack a well's arrays into the two buffers every entry point takes, and add the whole
@@ -175,7 +197,6 @@ def pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
     return real, index
 
 
-@njit(cache=True)
 def _unpack(real, index):
     """The `_WellArrays` views of `pack_well`'s buffers."""
     n_nodes = index[0]
@@ -193,7 +214,6 @@ def _unpack(real, index):
         real[c + n_comp:c + 2 * n_comp], real[c + 2 * n_comp:c + 3 * n_comp])
 
 
-@njit(cache=True)
 def all_finite_non_negative(values):
     """Whether every value of a 1-D array is finite and >= 0 (friction checks: one compiled
     pass instead of two numpy reductions, each of which costs about 1 us on a short array)."""
@@ -203,15 +223,18 @@ def all_finite_non_negative(values):
     return True
 
 
-@njit(cache=True)
+# --- the force terms of a piece (soft string) and of a run (Aadnoy) ---
+
+
 def _normal_force(force, weight, kk, ke, ee):
     squared = force * force * kk + 2.0 * force * weight * ke + weight * weight * ee
     return math.sqrt(squared) if squared > 0.0 else 0.0
 
 
-@njit(cache=True)
 def _soft_string_piece(force, kk, ke, ee, dtvd, weight, axial_mu):
-    """One piece of the 3D soft-string march: returns (force at the top, normal force).
+    """One piece of the 3D soft-string march: returns (force at the top, normal force, and the
+    two intermediate values the adjoint needs: the normal force at the bottom, the predicted
+    force at the top).
 
     The contact force is ``N = |F (t_b - t_t) + W (e_z - (e_z . t_m) t_m)|``, the vector form of
     Johancsik's ``sqrt((F dphi sin a)^2 + (F da + W sin a)^2)`` with ``da = a_top - a_bottom``;
@@ -223,24 +246,37 @@ def _soft_string_piece(force, kk, ke, ee, dtvd, weight, axial_mu):
     predicted = force + axial_weight + axial_mu * n_bottom
     n_top = _normal_force(predicted, weight, kk, ke, ee)
     normal = 0.5 * (n_bottom + n_top)
-    return force + axial_weight + axial_mu * normal, normal
+    return force + axial_weight + axial_mu * normal, normal, n_bottom, predicted
 
 
-@njit(cache=True)
-def _aadnoy_run(force, torque, top_inc, bottom_inc, length, theta, kind, mu, axial_factor,
-                torque_factor, weight, radius):
-    """Closed-form step over one run (arc or straight) as Aadnoy publishes it.
+def _run_geometry(top, bottom):
+    """What Aadnoy's closed forms read of a run's ends (unit tangents ``top``, ``bottom``):
+    (top inclination, bottom inclination, dogleg [rad], and for a straight run the cosine and
+    sine of the mean inclination, else 0.0 and 0.0). The same for every case and operation."""
+    bottom_inc = _inclination(bottom[0], bottom[1], bottom[2])
+    top_inc = _inclination(top[0], top[1], top[2])
+    theta = _angle_between(top[0], top[1], top[2], bottom[0], bottom[1], bottom[2])
+    if theta < _STRAIGHT_DOGLEG:
+        mean_inc = 0.5 * (top_inc + bottom_inc)
+        return top_inc, bottom_inc, theta, math.cos(mean_inc), math.sin(mean_inc)
+    return top_inc, bottom_inc, theta, 0.0, 0.0
+
+
+def _aadnoy_run(force, torque, geometry, length, kind, mu, axial_factor, torque_factor, weight,
+                radius):
+    """Closed-form step over one run (arc or straight) as Aadnoy publishes it; ``geometry`` is
+    `_run_geometry`'s.
 
     Straight: eq 42 and eq 45 of the thesis. Planar build (inclination rising with depth):
     Tables 20-22 of the thesis, generalised from (0, alpha) to (a_top, a_bottom). Any other arc:
     Aadnoy, Fazaelizadeh and Hareland (2010), tension dominated.
     """
+    top_inc, bottom_inc, theta, cos_mean, sin_mean = geometry
     mu_axial = axial_factor * mu
     mu_torque = torque_factor * mu
     if theta < _STRAIGHT_DOGLEG:
-        a = 0.5 * (top_inc + bottom_inc)
-        new_force = force + weight * length * (math.cos(a) + mu_axial * math.sin(a))
-        new_torque = torque + mu_torque * weight * length * radius * math.sin(a)
+        new_force = force + weight * length * (cos_mean + mu_axial * sin_mean)
+        new_torque = torque + mu_torque * weight * length * radius * sin_mean
         return new_force, new_torque
     if kind == PLANAR_BUILD and bottom_inc > top_inc:
         sweep = bottom_inc - top_inc
@@ -269,90 +305,97 @@ def _aadnoy_run(force, torque, top_inc, bottom_inc, length, theta, kind, mu, axi
     return new_force, new_torque
 
 
-@njit(cache=True)
-def _soft_string_step(force, torque, kk, ke, ee, dtvd, weight, radius, mu, axial_factors,
-                      torque_factors):
-    """Advance every operation's force and torque over one piece (in place)."""
-    for o in range(force.size):
-        force[o], normal = _soft_string_piece(force[o], kk, ke, ee, dtvd, weight,
-                                              axial_factors[o] * mu)
-        torque[o] += torque_factors[o] * mu * normal * radius
+# --- the element loop ---
+#
+# What a march writes besides the top loads, when asked (None otherwise):
+# - a profile: per recorded node (bit first) its MD, the index of the component below it, its
+#   unit tangent, and per (case, operation) the axial force and torque there;
+# - a tape, for the adjoint of one case and one operation: per piece its element, the force at
+#   its bottom and (kk, ke, ee, dtvd, weight, radius) for the soft string or its length in
+#   column 0 for Aadnoy; per Aadnoy run its first piece (and, after the last run, one past the
+#   last piece), curve kind, the force at its bottom and (top inclination, bottom inclination,
+#   dogleg, cosine and sine of the mean inclination, length, friction, weight, radius). The
+#   backward pass reads the weight and radius the forward pass used from the tape.
+
+_Profile = namedtuple("_Profile", ["md", "component", "tangent", "force", "torque"])
+_Tape = namedtuple("_Tape", [
+    "piece_element", "piece_force", "piece_values", "run_first", "run_kind", "run_force",
+    "run_values"])
 
 
-@njit(cache=True)
-def _aadnoy_run_nodes(run_force, run_torque, run_md, run_tan, run_mu, kind, weight, radius,
-                      axial_factors, torque_factors, first, k, out_md, out_force, out_torque,
-                      out_tan):
-    """Write a closed run's profile: the run's closed form from its bottom state to every node
-    recorded inside it (the last one is the run's top)."""
-    bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
-    for i in range(first, k):
-        theta = _angle_between(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2],
-                               run_tan[0], run_tan[1], run_tan[2])
-        top_inc = _inclination(out_tan[i, 0], out_tan[i, 1], out_tan[i, 2])
-        for o in range(run_force.size):
-            out_force[o, i], out_torque[o, i] = _aadnoy_run(
-                run_force[o], run_torque[o], top_inc, bottom_inc, run_md - out_md[i], theta,
-                kind, run_mu, axial_factors[o], torque_factors[o], weight, radius)
+def _record(profile, k, md, comp, tangent, forces, torques):
+    profile.md[k] = md
+    profile.component[k] = comp
+    profile.tangent[k, 0] = tangent[0]
+    profile.tangent[k, 1] = tangent[1]
+    profile.tangent[k, 2] = tangent[2]
+    for c in range(forces.shape[0]):
+        for o in range(forces.shape[1]):
+            profile.force[c, o, k] = forces[c, o]
+            profile.torque[c, o, k] = torques[c, o]
 
 
-@njit(cache=True)
-def _record(k, md, comp, tangent, force, torque, out_md, out_force, out_torque, out_comp,
-            out_tan):
-    out_md[k] = md
-    out_comp[k] = comp
-    out_tan[k, 0] = tangent[0]
-    out_tan[k, 1] = tangent[1]
-    out_tan[k, 2] = tangent[2]
-    for o in range(force.size):
-        out_force[o, k] = force[o]
-        out_torque[o, k] = torque[o]
+def _record_run(profile, first, last, run_force, run_torque, run_md, run_tan, run_mu_length,
+                run_length, kind, axial_factors, torque_factors, weight, radius):
+    """The loads at the nodes ``first`` to ``last - 1`` recorded inside a closed Aadnoy run:
+    the run's closed form from its bottom state to each node, with the whole run's friction."""
+    for i in range(first, last):
+        node_tan = (profile.tangent[i, 0], profile.tangent[i, 1], profile.tangent[i, 2])
+        geometry = _run_geometry(node_tan, run_tan)
+        for c in range(run_force.shape[0]):
+            run_mu = run_mu_length[c] / run_length
+            for o in range(run_force.shape[1]):
+                profile.force[c, o, i], profile.torque[c, o, i] = _aadnoy_run(
+                    run_force[c, o], run_torque[c, o], geometry, run_md - profile.md[i], kind,
+                    run_mu, axial_factors[o], torque_factors[o], weight, radius)
 
 
-@njit(cache=True)
-def _march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, torque_factors,
-           out_md, out_force, out_torque, out_comp, out_tan):
-    """March from the bit to the top of the hole for several operations at once.
+def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
+           torque_factors, forces, torques, profile, tape):
+    """March from the bit to the top of the hole for every (case, operation) at once.
 
     An operation is a (bit force, bit torque, axial friction factor, torque friction factor)
-    quadruple; the pieces and their geometry are shared by all. Returns (n recorded, top
-    forces, top torques). Given non-empty ``out_*`` arrays (see `march_profile`) the node MD,
-    component index (of the piece below the node) and tangent, and per operation the axial
-    force and torque, are written into them bit first; Aadnoy runs write their nodes when the
-    run closes. Empty ones record nothing.
+    quadruple, a case a friction array ``mu_cases[c]`` (one value per element). The pieces,
+    their geometry and the Aadnoy runs depend on the bit depth only, so they are found once
+    for all; each (case, operation) then takes the same steps in the same order as it would
+    alone, and gets the same numbers bit for bit. The cases are independent chains of square
+    roots and divisions, which the processor overlaps: that, and the shared geometry, is why
+    several cost little more than one.
+
+    Writes the top force and torque of every (case, operation) into ``forces`` and ``torques``
+    (n_case, n_op), and the ``profile`` and the ``tape`` (see above) unless they are None.
+    Returns the numbers of nodes recorded, pieces marched and Aadnoy runs taped.
+
+    The walk from piece to piece and the steps over the cases are written out here, not in
+    helpers: numba does not inline a helper that takes the well's or the cases' arrays, and
+    the call per piece made the 6000-element march four times slower (tried).
     """
-    # a run-time test, not a flag argument: a literal flag would compile the march twice
-    record = out_md.size > 0
-    # the loop reads local arrays, as it did when they were arguments
     node_md = well.node_md
     tangents = well.tangents
     dogleg = well.dogleg
-    el_kk = well.element_kk
-    el_ke = well.element_ke
-    el_ee = well.element_ee
-    el_dtvd = well.element_dtvd
-    curve_kind = well.curve_kind
-    run_break = well.run_break
     comp_top = well.component_top
-    comp_weight = well.component_weight
-    comp_radius = well.component_radius
     n_comp = comp_top.size
+    n_case, n_op = forces.shape
     j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
     comp = 0
     lower = bit_depth
     tb = _tangent_at(node_md, tangents, dogleg, j, lower)
-    force = bit_forces.copy()
-    torque = bit_torques.copy()
-    k = 0
-    if record:
-        _record(0, lower, 0, tb, force, torque, out_md, out_force, out_torque, out_comp, out_tan)
-        k = 1
-    # Aadnoy runs: the state at the run's bottom and its length-weighted friction
-    run_force = force.copy()
-    run_torque = torque.copy()
+    for c in range(n_case):
+        for o in range(n_op):
+            forces[c, o] = bit_forces[o]
+            torques[c, o] = bit_torques[o]
+    k = 0  # nodes recorded
+    if profile is not None:
+        _record(profile, k, lower, comp, tb, forces, torques)
+        k += 1
+    n = 0  # pieces marched
+    n_runs = 0
+    # Aadnoy runs: the state at the run's bottom and each case's length-weighted friction
+    run_force = forces.copy()
+    run_torque = torques.copy()
+    run_mu_length = np.zeros(n_case)
     run_md = lower
     run_tan = tb
-    run_mu_length = 0.0
     run_first = k
     while True:
         element_top = node_md[j]
@@ -368,197 +411,67 @@ def _march(well, method, mu, bit_depth, bit_forces, bit_torques, axial_factors, 
             upper = element_top
             tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
         length = lower - upper
+        weight = well.component_weight[comp]
+        radius = well.component_radius[comp]
+        if tape is not None:
+            tape.piece_element[n] = j
+            tape.piece_force[n] = forces[0, 0]
         if method == SOFT_STRING:
             if at_component_top or lower < node_md[j + 1]:
                 kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
             else:
-                kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
-            _soft_string_step(force, torque, kk, ke, ee, dtvd, comp_weight[comp],
-                              comp_radius[comp], mu[j], axial_factors, torque_factors)
-            if record:
-                _record(k, upper, comp, tt, force, torque, out_md, out_force, out_torque,
-                        out_comp, out_tan)
-                k += 1
-        else:
-            run_mu_length += mu[j] * length
-            if record:
-                _record(k, upper, comp, tt, force, torque, out_md, out_force, out_torque,
-                        out_comp, out_tan)
-                k += 1
-            component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
-            at_node = not at_component_top
-            if component_ends or (at_node and (run_break[j] or j == 0)):
-                run_mu = run_mu_length / (run_md - upper)
-                weight = comp_weight[comp]
-                radius = comp_radius[comp]
-                if record:
-                    _aadnoy_run_nodes(run_force, run_torque, run_md, run_tan, run_mu,
-                                      curve_kind[j], weight, radius, axial_factors,
-                                      torque_factors, run_first, k, out_md, out_force,
-                                      out_torque, out_tan)
-                    for o in range(force.size):
-                        force[o] = out_force[o, k - 1]
-                        torque[o] = out_torque[o, k - 1]
-                else:
-                    bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
-                    top_inc = _inclination(tt[0], tt[1], tt[2])
-                    theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1],
-                                           run_tan[2])
-                    for o in range(force.size):
-                        force[o], torque[o] = _aadnoy_run(
-                            run_force[o], run_torque[o], top_inc, bottom_inc, run_md - upper,
-                            theta, curve_kind[j], run_mu, axial_factors[o], torque_factors[o],
-                            weight, radius)
-                for o in range(force.size):  # an element loop: slice copies cost more here
-                    run_force[o] = force[o]
-                    run_torque[o] = torque[o]
-                run_md = upper
-                run_tan = tt
-                run_mu_length = 0.0
-                run_first = k
-        lower = upper
-        tb = tt
-        if at_component_top:
-            comp += 1
-        elif j == 0:
-            break
-        else:
-            j -= 1
-    return k, force, torque
-
-
-@njit(cache=True)
-def march(well_real, well_index, method, mu, bit_depth, bit_forces, bit_torques, axial_factors,
-          torque_factors):
-    """Force and torque at the top of the hole for several operations, marched together.
-
-    Parameters
-    ----------
-    well_real, well_index : the well, packed by `pack_well`
-    method : `SOFT_STRING` or `AADNOY`
-    mu : (n_elements,) friction factor per element [-]
-    bit_depth : [m], inside the string and the hole
-    bit_forces, bit_torques : (n_op,) force [N] and torque [N m] at the bit per operation
-    axial_factors, torque_factors : (n_op,) multipliers of mu in the axial and the torque
-        balance per operation [-]
-
-    Returns
-    -------
-    (n_op,) forces [N] and (n_op,) torques [N m] at the top
-    """
-    no_float_2d = np.empty((0, 0))
-    _, force, torque = _march(
-        well=_unpack(well_real, well_index), method=method, mu=mu, bit_depth=bit_depth,
-        bit_forces=bit_forces, bit_torques=bit_torques, axial_factors=axial_factors,
-        torque_factors=torque_factors,
-        out_md=np.empty(0), out_force=no_float_2d, out_torque=no_float_2d,
-        out_comp=np.empty(0, dtype=np.int64), out_tan=np.empty((0, 3)))
-    return force, torque
-
-
-@njit(cache=True)
-def _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
-                 torque_factors, forces, torques):
-    """`_march` without recording for several friction cases at once: writes the top force and
-    torque of every (case, operation) into ``forces`` and ``torques`` (n_case, n_op).
-
-    The pieces, their geometry and the Aadnoy runs depend on the bit depth only, so they are
-    found once for all cases; each (case, operation) then takes exactly `_march`'s steps, in
-    the same order, and gets its numbers bit for bit. The cases are independent chains of
-    square roots and divisions, which the processor overlaps: that, and the shared geometry,
-    is why several cases cost little more than one.
-    """
-    node_md = well.node_md
-    tangents = well.tangents
-    dogleg = well.dogleg
-    el_kk = well.element_kk
-    el_ke = well.element_ke
-    el_ee = well.element_ee
-    el_dtvd = well.element_dtvd
-    curve_kind = well.curve_kind
-    run_break = well.run_break
-    comp_top = well.component_top
-    comp_weight = well.component_weight
-    comp_radius = well.component_radius
-    n_comp = comp_top.size
-    n_case = mu_cases.shape[0]
-    n_op = bit_forces.size
-    j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
-    comp = 0
-    lower = bit_depth
-    tb = _tangent_at(node_md, tangents, dogleg, j, lower)
-    for c in range(n_case):
-        for o in range(n_op):
-            forces[c, o] = bit_forces[o]
-            torques[c, o] = bit_torques[o]
-    # Aadnoy runs: the state at the run's bottom and each case's length-weighted friction
-    run_force = forces.copy()
-    run_torque = torques.copy()
-    run_mu_length = np.zeros(n_case)
-    run_md = lower
-    run_tan = tb
-    while True:
-        element_top = node_md[j]
-        component_top = bit_depth - comp_top[comp]
-        while comp < n_comp - 1 and component_top >= lower - _MD_TOLERANCE:
-            comp += 1
-            component_top = bit_depth - comp_top[comp]
-        at_component_top = comp < n_comp - 1 and component_top > element_top + _MD_TOLERANCE
-        if at_component_top:
-            upper = component_top
-            tt = _tangent_at(node_md, tangents, dogleg, j, upper)
-        else:
-            upper = element_top
-            tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
-        length = lower - upper
-        weight = comp_weight[comp]
-        radius = comp_radius[comp]
-        if method == SOFT_STRING:
-            if at_component_top or lower < node_md[j + 1]:
-                kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
-            else:
-                kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
+                kk = well.element_kk[j]
+                ke = well.element_ke[j]
+                ee = well.element_ee[j]
+                dtvd = well.element_dtvd[j]
+            if tape is not None:
+                tape.piece_values[n, 0] = kk
+                tape.piece_values[n, 1] = ke
+                tape.piece_values[n, 2] = ee
+                tape.piece_values[n, 3] = dtvd
+                tape.piece_values[n, 4] = weight
+                tape.piece_values[n, 5] = radius
             for c in range(n_case):
                 mu = mu_cases[c, j]
                 for o in range(n_op):
-                    forces[c, o], normal = _soft_string_piece(
+                    forces[c, o], normal, _, _ = _soft_string_piece(
                         forces[c, o], kk, ke, ee, dtvd, weight, axial_factors[o] * mu)
                     torques[c, o] += torque_factors[o] * mu * normal * radius
         else:
             for c in range(n_case):
                 run_mu_length[c] += mu_cases[c, j] * length
+            if tape is not None:
+                tape.piece_values[n, 0] = length
             component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
             at_node = not at_component_top
-            if component_ends or (at_node and (run_break[j] or j == 0)):
-                bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
-                top_inc = _inclination(tt[0], tt[1], tt[2])
-                theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1], run_tan[2])
-                # `_aadnoy_run`'s straight run takes the sine and cosine of the run's mean
-                # inclination: geometry only, so computed once for all cases here, then the
-                # same products in the same order (the same numbers)
-                straight = theta < _STRAIGHT_DOGLEG
-                mean_inc = 0.5 * (top_inc + bottom_inc)
-                cos_a = math.cos(mean_inc) if straight else 0.0
-                sin_a = math.sin(mean_inc) if straight else 0.0
+            if component_ends or (at_node and (well.run_break[j] or j == 0)):
+                geometry = _run_geometry(tt, run_tan)
                 run_length = run_md - upper
+                kind = well.curve_kind[j]
+                if profile is not None:
+                    _record_run(profile, run_first, k, run_force, run_torque, run_md, run_tan,
+                                run_mu_length, run_length, kind, axial_factors, torque_factors,
+                                weight, radius)
+                if tape is not None:
+                    _tape_run(tape, n_runs, n, kind, run_force[0, 0], geometry, run_length,
+                              run_mu_length[0] / run_length, weight, radius)
+                    n_runs += 1
                 for c in range(n_case):
                     run_mu = run_mu_length[c] / run_length
                     for o in range(n_op):
-                        if straight:
-                            forces[c, o] = run_force[c, o] + weight * run_length * (
-                                cos_a + axial_factors[o] * run_mu * sin_a)
-                            torques[c, o] = run_torque[c, o] + (
-                                torque_factors[o] * run_mu * weight * run_length * radius * sin_a)
-                        else:
-                            forces[c, o], torques[c, o] = _aadnoy_run(
-                                run_force[c, o], run_torque[c, o], top_inc, bottom_inc,
-                                run_length, theta, curve_kind[j], run_mu, axial_factors[o],
-                                torque_factors[o], weight, radius)
+                        forces[c, o], torques[c, o] = _aadnoy_run(
+                            run_force[c, o], run_torque[c, o], geometry, run_length, kind,
+                            run_mu, axial_factors[o], torque_factors[o], weight, radius)
                         run_force[c, o] = forces[c, o]
                         run_torque[c, o] = torques[c, o]
                     run_mu_length[c] = 0.0
                 run_md = upper
                 run_tan = tt
+                run_first = k + 1
+        if profile is not None:  # inside an Aadnoy run: the run's bottom loads until it closes
+            _record(profile, k, upper, comp, tt, forces, torques)
+            k += 1
+        n += 1
         lower = upper
         tb = tt
         if at_component_top:
@@ -567,59 +480,83 @@ def _march_cases(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axi
             break
         else:
             j -= 1
+    return k, n, n_runs
 
 
-@njit(cache=True)
-def march_cases(well_real, well_index, method, mu_cases, bit_depth, bit_forces, bit_torques,
-                axial_factors, torque_factors):
-    """`march` for several friction cases in one march: arrays (n_case, n_op) of the top
-    forces [N] and torques [N m]; ``mu_cases`` is (n_case, n_elements), C-contiguous [-]."""
-    forces = np.empty((mu_cases.shape[0], bit_forces.size))
-    torques = np.empty((mu_cases.shape[0], bit_forces.size))
-    _march_cases(_unpack(well_real, well_index), method, mu_cases, bit_depth, bit_forces,
-                 bit_torques, axial_factors, torque_factors, forces, torques)
-    return forces, torques
+def _tape_run(tape, r, last_piece, kind, bottom_force, geometry, length, mu, weight, radius):
+    """Keep run ``r`` (its last piece ``last_piece``) on the tape."""
+    tape.run_first[r + 1] = last_piece + 1
+    tape.run_kind[r] = kind
+    tape.run_force[r] = bottom_force
+    top_inc, bottom_inc, theta, cos_mean, sin_mean = geometry
+    tape.run_values[r, 0] = top_inc
+    tape.run_values[r, 1] = bottom_inc
+    tape.run_values[r, 2] = theta
+    tape.run_values[r, 3] = cos_mean
+    tape.run_values[r, 4] = sin_mean
+    tape.run_values[r, 5] = length
+    tape.run_values[r, 6] = mu
+    tape.run_values[r, 7] = weight
+    tape.run_values[r, 8] = radius
 
 
-@njit(cache=True)
+# --- the entry points ---
+
+
 def march_one(well_real, well_index, method, mu, bit_depth, bit_force, bit_torque, axial_factor,
               torque_factor):
-    """`march` of one operation and one friction array, as two floats: (top force [N], top
-    torque [N m]). The operation's terms are scalars (`march_gradient`'s), and nothing is
-    returned as an array, which keeps the call's fixed cost low."""
+    """The march of one operation and one friction array ``mu`` (n_elements,) [-], as two
+    floats: (top force [N], top torque [N m]).
+
+    ``method`` is `SOFT_STRING` or `AADNOY`; ``bit_depth`` [m] lies inside the string and the
+    hole; the operation is its force [N] and torque [N m] at the bit and the multipliers of mu in
+    the axial and the torque balance [-]. Scalars in, scalars out: this keeps the call's fixed
+    cost low (the calibration makes thousands).
+    """
     forces = np.empty((1, 1))
     torques = np.empty((1, 1))
-    _march_cases(_unpack(well_real, well_index), method, mu.reshape((1, mu.size)), bit_depth,
-                 np.full(1, bit_force), np.full(1, bit_torque), np.full(1, axial_factor),
-                 np.full(1, torque_factor), forces, torques)
+    _march(_unpack(well_real, well_index), method, mu.reshape((1, mu.size)), bit_depth,
+           np.full(1, bit_force), np.full(1, bit_torque), np.full(1, axial_factor),
+           np.full(1, torque_factor), forces, torques, None, None)
     return forces[0, 0], torques[0, 0]
 
 
-@njit(cache=True)
+def march_cases(well_real, well_index, method, mu_cases, bit_depth, bit_forces, bit_torques,
+                axial_factors, torque_factors):
+    """The march of several friction cases and operations at once: arrays (n_case, n_op) of
+    the top forces [N] and torques [N m]; ``mu_cases`` is (n_case, n_elements), C-contiguous
+    [-], the operations' terms (n_op,) each, as `march_one`'s."""
+    forces = np.empty((mu_cases.shape[0], bit_forces.size))
+    torques = np.empty((mu_cases.shape[0], bit_forces.size))
+    _march(_unpack(well_real, well_index), method, mu_cases, bit_depth, bit_forces, bit_torques,
+           axial_factors, torque_factors, forces, torques, None, None)
+    return forces, torques
+
+
 def march_profile(well_real, well_index, method, mu, bit_depth, bit_forces, bit_torques,
                   axial_factors, torque_factors, out_md, out_force, out_torque, out_comp,
                   out_tan):
-    """`march` that also writes the loads at every node, bit first; returns the node count.
+    """The march of one friction array that also writes the loads at every node, bit first;
+    returns the node count.
 
     The outputs have room for n_elements + n_components + 2 nodes: ``out_md`` [m],
     ``out_comp`` (index of the component below the node), ``out_tan`` (n, 3) unit tangent,
-    and per operation ``out_force`` [N] and ``out_torque`` [N m], (n_op, n).
+    and per operation ``out_force`` [N] and ``out_torque`` [N m], (n_op, n), C-contiguous.
     """
-    count, _, _ = _march(
-        well=_unpack(well_real, well_index), method=method, mu=mu, bit_depth=bit_depth,
-        bit_forces=bit_forces, bit_torques=bit_torques, axial_factors=axial_factors,
-        torque_factors=torque_factors,
-        out_md=out_md, out_force=out_force, out_torque=out_torque,
-        out_comp=out_comp, out_tan=out_tan)
+    n_op, size = out_force.shape
+    profile = _Profile(out_md, out_comp, out_tan, out_force.reshape((1, n_op, size)),
+                       out_torque.reshape((1, n_op, size)))
+    count, _, _ = _march(_unpack(well_real, well_index), method, mu.reshape((1, mu.size)),
+                         bit_depth, bit_forces, bit_torques, axial_factors, torque_factors,
+                         np.empty((1, n_op)), np.empty((1, n_op)), profile, None)
     return count
 
 
-@njit(cache=True)
 def sweep(well_real, well_index, method, mu_cases, bit_depths, bit_forces, bit_torques,
           axial_factors, torque_factors):
     """Surface force and torque for every (case, depth, operation): arrays (n_case, n_depth, n_op).
 
-    ``mu_cases`` is (n_case, n_element); the other arguments are `march`'s.
+    ``mu_cases`` is (n_case, n_element); the other arguments are `march_cases`'.
     """
     n_case = mu_cases.shape[0]
     n_depth = bit_depths.size
@@ -630,8 +567,8 @@ def sweep(well_real, well_index, method, mu_cases, bit_depths, bit_forces, bit_t
     top_torques = np.empty((n_case, n_op))
     well = _unpack(well_real, well_index)
     for d in range(n_depth):
-        _march_cases(well, method, mu_cases, bit_depths[d], bit_forces, bit_torques,
-                     axial_factors, torque_factors, top_forces, top_torques)
+        _march(well, method, mu_cases, bit_depths[d], bit_forces, bit_torques, axial_factors,
+               torque_factors, top_forces, top_torques, None, None)
         forces[:, d, :] = top_forces
         torques[:, d, :] = top_torques
     return forces, torques
@@ -640,15 +577,14 @@ def sweep(well_real, well_index, method, mu_cases, bit_depths, bit_forces, bit_t
 # --- adjoint: the march's value and its gradient with respect to every element's friction ---
 #
 # One operation, one output ``q = force_seed * F_top + torque_seed * T_top``. The forward pass
-# is the march above (same operations in the same order, so the value is the march's to the
-# bit); it keeps what the backward pass needs, the state at the bottom of each piece (soft
-# string) or run (Aadnoy). The backward pass carries the adjoints ``lam_F = dq/dF`` and
-# ``lam_T = dq/dT`` from the top down to the bit and adds each piece's or run's ``dq/dmu`` to its
-# element. Where the march has a kink (the contact force at N = 0, |F| in Aadnoy's torque) the
-# derivative is that of the branch the forward pass took.
+# is `_march` with a tape (the same steps, so the value is the march's to the bit): the state at
+# the bottom of each piece (soft string) or run (Aadnoy) and their geometry. The backward pass
+# carries the adjoints ``lam_F = dq/dF`` and ``lam_T = dq/dT`` from the top down to the bit and
+# adds each piece's or run's ``dq/dmu`` to its element. Where the march has a kink (the contact
+# force at N = 0, |F| in Aadnoy's torque) the derivative is that of the branch the forward pass
+# took.
 
 
-@njit(cache=True)
 def _normal_force_slope(force, weight, kk, ke, ee):
     """dN/dF of `_normal_force` (0 where the forward pass clips N to 0)."""
     squared = force * force * kk + 2.0 * force * weight * ke + weight * weight * ee
@@ -657,16 +593,13 @@ def _normal_force_slope(force, weight, kk, ke, ee):
     return 0.0
 
 
-@njit(cache=True)
 def _soft_string_piece_adjoint(force, kk, ke, ee, dtvd, weight, radius, mu, axial_factor,
                                torque_factor, lam_force, lam_torque):
     """Backward step over one `_soft_string_piece`: from the adjoints at the piece's top and the
     force at its bottom, returns (adjoint of the bottom force, dq/dmu of the piece)."""
     axial_mu = axial_factor * mu
-    n_bottom = _normal_force(force, weight, kk, ke, ee)
-    predicted = force + weight * dtvd + axial_mu * n_bottom
-    n_top = _normal_force(predicted, weight, kk, ke, ee)
-    normal = 0.5 * (n_bottom + n_top)
+    _, normal, n_bottom, predicted = _soft_string_piece(force, kk, ke, ee, dtvd, weight,
+                                                        axial_mu)
     lam_normal = lam_force * axial_mu + lam_torque * torque_factor * mu * radius
     lam_predicted = 0.5 * lam_normal * _normal_force_slope(predicted, weight, kk, ke, ee)
     lam_n_bottom = 0.5 * lam_normal + lam_predicted * axial_mu
@@ -677,7 +610,6 @@ def _soft_string_piece_adjoint(force, kk, ke, ee, dtvd, weight, radius, mu, axia
     return lam_bottom, d_mu
 
 
-@njit(cache=True)
 def _slack_off_k(a, weight_radius, m):
     """``K(a) = w R ((1 - m^2) sin a - 2 m cos a) / (1 + m^2)`` of the slack-off build formula
     and its derivative in m."""
@@ -687,7 +619,6 @@ def _slack_off_k(a, weight_radius, m):
     return weight_radius * g / q, weight_radius * (dg * q - 2.0 * m * g) / (q * q)
 
 
-@njit(cache=True)
 def _build_slack_off_term(sweep_angle, weight_radius, m, top_inc, bottom_inc):
     """d/dm of ``K(a2) e^(-m s) - K(a1)`` in the slack-off build formula (the part of dF2/dm
     without F1); returns (that, e^(-m s))."""
@@ -697,18 +628,17 @@ def _build_slack_off_term(sweep_angle, weight_radius, m, top_inc, bottom_inc):
     return dk_bottom * decay - sweep_angle * k_bottom * decay - dk_top, decay
 
 
-@njit(cache=True)
-def _aadnoy_run_adjoint(force, top_inc, bottom_inc, length, theta, kind, mu, axial_factor,
-                        torque_factor, weight, radius, lam_force, lam_torque):
+def _aadnoy_run_adjoint(force, geometry, length, kind, mu, axial_factor, torque_factor, weight,
+                        radius, lam_force, lam_torque):
     """Backward step over one `_aadnoy_run` (same branches): from the adjoints at the run's
     top and the force at its bottom, returns (adjoint of the bottom force, dq/d(run friction)).
     The bottom torque's adjoint is the top's (torque adds)."""
+    top_inc, bottom_inc, theta, _, sin_mean = geometry
     mu_axial = axial_factor * mu
     mu_torque = torque_factor * mu
     if theta < _STRAIGHT_DOGLEG:
-        a = 0.5 * (top_inc + bottom_inc)
-        d_mu = (lam_force * axial_factor * weight * length * math.sin(a)
-                + lam_torque * torque_factor * weight * length * radius * math.sin(a))
+        d_mu = (lam_force * axial_factor * weight * length * sin_mean
+                + lam_torque * torque_factor * weight * length * radius * sin_mean)
         return lam_force, d_mu
     if kind == PLANAR_BUILD and bottom_inc > top_inc:
         sweep_angle = bottom_inc - top_inc
@@ -736,144 +666,45 @@ def _aadnoy_run_adjoint(force, top_inc, bottom_inc, length, theta, kind, mu, axi
     return lam_force * growth + lam_torque * mu_torque * radius * sign * theta, d_mu
 
 
-@njit(cache=True)
 def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_torque,
                    axial_factor, torque_factor, force_seed, torque_seed):
-    """`march` of one operation with the gradient of ``force_seed F_top + torque_seed T_top``.
+    """`march_one` with the gradient of ``force_seed F_top + torque_seed T_top``.
 
-    The operation's terms are scalars here (`march` takes arrays of them). Returns (top force,
-    top torque, gradient per element of ``mu``); elements the string does not reach get 0. One
-    forward march and one backward sweep over its pieces (soft string) or runs (Aadnoy). The
-    forward loop is `march`'s, written out again because a helper taking the geometry arrays
-    costs more per piece than the piece's physics; tests compare the values with `march`'s bit
-    for bit.
+    Returns (top force, top torque, gradient per element of ``mu``); elements the string does
+    not reach get 0. One forward march with a tape and one backward sweep over its pieces (soft
+    string) or runs (Aadnoy).
     """
     well = _unpack(well_real, well_index)
-    node_md = well.node_md
-    tangents = well.tangents
-    dogleg = well.dogleg
-    el_kk = well.element_kk
-    el_ke = well.element_ke
-    el_ee = well.element_ee
-    el_dtvd = well.element_dtvd
-    curve_kind = well.curve_kind
-    run_break = well.run_break
-    comp_top = well.component_top
-    comp_weight = well.component_weight
-    comp_radius = well.component_radius
-    n_comp = comp_top.size
-    size = node_md.size + n_comp
-    # per piece: element, component, force at its bottom; soft string: (kk, ke, ee, dtvd),
-    # Aadnoy: its length in column 0
-    piece_element = np.empty(size, dtype=np.int64)
-    piece_comp = np.empty(size, dtype=np.int64)
-    piece_force = np.empty(size)
-    piece_values = np.empty((size, 4))
-    # per Aadnoy run: first piece, curve kind, component, force at its bottom, and
-    # (top inclination, bottom inclination, length, dogleg, friction)
-    run_first = np.empty(size + 1, dtype=np.int64)
-    run_kind = np.empty(size, dtype=np.int64)
-    run_comp = np.empty(size, dtype=np.int64)
-    run_force = np.empty(size)
-    run_values = np.empty((size, 5))
-    j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
-    comp = 0
-    lower = bit_depth
-    tb = _tangent_at(node_md, tangents, dogleg, j, lower)
-    force = bit_force
-    torque = bit_torque
-    run_md = lower
-    run_tan = tb
-    run_mu_length = 0.0
-    n = 0
-    n_runs = 0
-    run_first[0] = 0
-    while True:
-        element_top = node_md[j]
-        component_top = bit_depth - comp_top[comp]
-        while comp < n_comp - 1 and component_top >= lower - _MD_TOLERANCE:
-            comp += 1
-            component_top = bit_depth - comp_top[comp]
-        at_component_top = comp < n_comp - 1 and component_top > element_top + _MD_TOLERANCE
-        if at_component_top:
-            upper = component_top
-            tt = _tangent_at(node_md, tangents, dogleg, j, upper)
-        else:
-            upper = element_top
-            tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
-        length = lower - upper
-        piece_element[n] = j
-        piece_comp[n] = comp
-        piece_force[n] = force
-        if method == SOFT_STRING:
-            if at_component_top or lower < node_md[j + 1]:
-                kk, ke, ee, dtvd = piece_geometry(tt, tb, length)
-            else:
-                kk, ke, ee, dtvd = el_kk[j], el_ke[j], el_ee[j], el_dtvd[j]
-            piece_values[n, 0] = kk
-            piece_values[n, 1] = ke
-            piece_values[n, 2] = ee
-            piece_values[n, 3] = dtvd
-            force, normal = _soft_string_piece(force, kk, ke, ee, dtvd, comp_weight[comp],
-                                               axial_factor * mu[j])
-            torque += torque_factor * mu[j] * normal * comp_radius[comp]
-        else:
-            run_mu_length += mu[j] * length
-            piece_values[n, 0] = length
-            component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
-            at_node = not at_component_top
-            if component_ends or (at_node and (run_break[j] or j == 0)):
-                run_length = run_md - upper
-                run_mu = run_mu_length / run_length
-                bottom_inc = _inclination(run_tan[0], run_tan[1], run_tan[2])
-                top_inc = _inclination(tt[0], tt[1], tt[2])
-                theta = _angle_between(tt[0], tt[1], tt[2], run_tan[0], run_tan[1],
-                                       run_tan[2])
-                run_kind[n_runs] = curve_kind[j]
-                run_comp[n_runs] = comp
-                run_force[n_runs] = force
-                run_values[n_runs, 0] = top_inc
-                run_values[n_runs, 1] = bottom_inc
-                run_values[n_runs, 2] = run_length
-                run_values[n_runs, 3] = theta
-                run_values[n_runs, 4] = run_mu
-                force, torque = _aadnoy_run(force, torque, top_inc, bottom_inc, run_length,
-                                            theta, curve_kind[j], run_mu, axial_factor,
-                                            torque_factor, comp_weight[comp], comp_radius[comp])
-                n_runs += 1
-                run_first[n_runs] = n + 1
-                run_md = upper
-                run_tan = tt
-                run_mu_length = 0.0
-        n += 1
-        lower = upper
-        tb = tt
-        if at_component_top:
-            comp += 1
-        elif j == 0:
-            break
-        else:
-            j -= 1
+    size = well.node_md.size + well.component_top.size  # more than the pieces
+    tape = _Tape(np.empty(size, dtype=np.int64), np.empty(size), np.empty((size, 6)),
+                 np.zeros(size + 1, dtype=np.int64), np.empty(size, dtype=np.int64),
+                 np.empty(size), np.empty((size, 9)))
+    forces = np.empty((1, 1))
+    torques = np.empty((1, 1))
+    _, n_pieces, n_runs = _march(
+        well, method, mu.reshape((1, mu.size)), bit_depth, np.full(1, bit_force),
+        np.full(1, bit_torque), np.full(1, axial_factor), np.full(1, torque_factor), forces,
+        torques, None, tape)
     gradient = np.zeros(mu.size)
     lam_force = force_seed
     if method == SOFT_STRING:
-        for p in range(n - 1, -1, -1):
-            c = piece_comp[p]
-            e = piece_element[p]
+        pieces = tape.piece_values
+        for p in range(n_pieces - 1, -1, -1):
+            e = tape.piece_element[p]
             lam_force, d_mu = _soft_string_piece_adjoint(
-                piece_force[p], piece_values[p, 0], piece_values[p, 1], piece_values[p, 2],
-                piece_values[p, 3], comp_weight[c], comp_radius[c], mu[e], axial_factor,
-                torque_factor, lam_force, torque_seed)
+                tape.piece_force[p], pieces[p, 0], pieces[p, 1], pieces[p, 2], pieces[p, 3],
+                pieces[p, 4], pieces[p, 5], mu[e], axial_factor, torque_factor, lam_force,
+                torque_seed)
             gradient[e] += d_mu
     else:
+        runs = tape.run_values
         for r in range(n_runs - 1, -1, -1):
-            c = run_comp[r]
+            geometry = (runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4])
             lam_force, d_run_mu = _aadnoy_run_adjoint(
-                run_force[r], run_values[r, 0], run_values[r, 1], run_values[r, 2],
-                run_values[r, 3], run_kind[r], run_values[r, 4], axial_factor, torque_factor,
-                comp_weight[c], comp_radius[c], lam_force, torque_seed)
+                tape.run_force[r], geometry, runs[r, 5], tape.run_kind[r], runs[r, 6],
+                axial_factor, torque_factor, runs[r, 7], runs[r, 8], lam_force, torque_seed)
             # the run's friction is the length-weighted mean of its pieces' elements'
-            scale = d_run_mu / run_values[r, 2]
-            for p in range(run_first[r], run_first[r + 1]):
-                gradient[piece_element[p]] += scale * piece_values[p, 0]
-    return force, torque, gradient
+            scale = d_run_mu / runs[r, 5]
+            for p in range(tape.run_first[r], tape.run_first[r + 1]):
+                gradient[tape.piece_element[p]] += scale * tape.piece_values[p, 0]
+    return forces[0, 0], torques[0, 0], gradient

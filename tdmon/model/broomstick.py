@@ -2,7 +2,8 @@
 against bit depth for a family of friction factors.
 
 Measured hook loads drawn against these curves show which friction factor the well behaves
-like. All depths and cases go through one compiled sweep (`sweep` of `tdmon.model._kernels`).
+like. All depths and cases go through one sweep of the element loop (`sweep` of
+`tdmon.model._kernels`).
 """
 
 from __future__ import annotations
@@ -96,8 +97,8 @@ def broomstick_from_model(
     depths = np.array([model.check_bit_depth(d) for d in depths])
     cases = _friction_cases(model, mus)
     terms = np.array([operation_terms(op) for op in BROOMSTICK_OPERATIONS])
-    compiled: Any = model.kernels.module  # positional arguments only (see `WellModel`)
-    forces, torques = compiled.sweep(
+    loops: Any = model.kernels.module  # numba's dispatchers or plain Python (see `WellModel`)
+    forces, torques = loops.sweep(
         *model.kernel_well, kernel_method, cases, depths,
         np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
         np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]))

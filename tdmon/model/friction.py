@@ -23,6 +23,7 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -30,11 +31,13 @@ from numpy.typing import ArrayLike, NDArray
 from tdmon.errors import ModelError
 
 __all__ = [
+    "EVERY_COEFFICIENT",
     "FAMILIES",
     "KAARSTAD_2009",
     "PUBLISHED_FRICTION_MODELS",
     "THESIS_GLYDRIL_FIT",
     "TYPICAL_FRICTION_RANGES",
+    "FrictionFamily",
     "FrictionModel",
     "constant",
     "evaluate_law",
@@ -222,22 +225,71 @@ def polynomial(temperature: ArrayLike, **coefficients: float) -> Array:
     return _finite(values, "polynomial", t)
 
 
-FAMILIES: Mapping[str, Callable[..., Array]] = MappingProxyType({
-    "constant": constant,
-    "linear": linear,
-    "power": power,
-    "exponential": exponential,
-    "saturation-growth": saturation_growth,
-    "polynomial": polynomial,
+#: the ``scaled`` of a family whose every coefficient multiplies mu (its friction is linear
+#: in the coefficients, as a polynomial's, whose names a0, a1, ... vary with the degree)
+EVERY_COEFFICIENT: Final = "every"
+
+
+@dataclass(frozen=True)
+class FrictionFamily:
+    """A mu(T) family: its function and the coefficients that the friction is proportional to.
+
+    Calling it calls the function: ``FAMILIES["linear"](T, a=0.23, b=0.0013)``.
+
+    Parameters
+    ----------
+    function : ``(temperature, **coefficients) -> mu``
+    scaled : the coefficients to multiply by ``s`` so that the law becomes ``s mu(T)`` (the
+        mu(T) calibration's scale mode, :mod:`tdmon.calib.mu_calibration`), e.g. ``("a",)``
+        for ``a T^b``, or :data:`EVERY_COEFFICIENT`. Required: a family that does not say is
+        an error, never every coefficient by default (that would scale the exponent of a
+        power law).
+
+    Raises
+    ------
+    ModelError
+        ``scaled`` is empty or names a coefficient the function does not take.
+    """
+
+    function: Callable[..., Array]
+    scaled: tuple[str, ...] | Literal["every"]
+
+    def __post_init__(self) -> None:
+        if self.scaled == EVERY_COEFFICIENT:
+            return
+        taken = tuple(inspect.signature(self.function).parameters)[1:]
+        if not self.scaled or not set(self.scaled) <= set(taken):
+            raise ModelError(f"friction family {self.function.__name__}: scaled coefficients "
+                             f"{self.scaled!r} must be some of {', '.join(taken)}")
+
+    def __call__(self, temperature: ArrayLike, **coefficients: float) -> Array:
+        return self.function(temperature, **coefficients)
+
+    def scale(self, coefficients: Mapping[str, float], factor: float) -> dict[str, float]:
+        """The coefficients of ``factor`` times the law (the others as they are)."""
+        if self.scaled == EVERY_COEFFICIENT:
+            return {name: value * factor for name, value in coefficients.items()}
+        return {name: value * factor if name in self.scaled else value
+                for name, value in coefficients.items()}
+
+
+FAMILIES: Mapping[str, FrictionFamily] = MappingProxyType({
+    "constant": FrictionFamily(constant, scaled=("mu",)),
+    "linear": FrictionFamily(linear, scaled=EVERY_COEFFICIENT),
+    "power": FrictionFamily(power, scaled=("a",)),
+    "exponential": FrictionFamily(exponential, scaled=("a",)),
+    "saturation-growth": FrictionFamily(saturation_growth, scaled=("a",)),
+    "polynomial": FrictionFamily(polynomial, scaled=EVERY_COEFFICIENT),
 })
-"""mu(T) families by name; each takes ``(temperature, **coefficients)``."""
+"""mu(T) families by name; each takes ``(temperature, **coefficients)`` and says which of its
+coefficients the scale mode multiplies."""
 
 #: The coefficient names of each family but the polynomial's (whose names are a0, a1, ...),
 #: read once from the functions' signatures: a FrictionModel is built for every calibration
 #: step, and ``inspect.signature`` costs more than the rest of its checks together.
 _PARAMETERS: Mapping[str, tuple[str, ...]] = MappingProxyType({
-    name: tuple(inspect.signature(function).parameters)[1:]
-    for name, function in FAMILIES.items() if name != "polynomial"})
+    name: tuple(inspect.signature(family.function).parameters)[1:]
+    for name, family in FAMILIES.items() if name != "polynomial"})
 _PARAMETER_SETS: Mapping[str, frozenset[str]] = MappingProxyType({
     name: frozenset(parameters) for name, parameters in _PARAMETERS.items()})
 
@@ -290,7 +342,7 @@ class FrictionModel:
 
     def __call__(self, temperature_C: ArrayLike) -> Array:
         """Friction factor [-] at mud temperature ``temperature_C`` [degC]."""
-        return FAMILIES[self.family](temperature_C, **self.coefficients)
+        return FAMILIES[self.family].function(temperature_C, **self.coefficients)
 
     def describe(self) -> str:
         """A one-line formula, e.g. ``mu = 0.23 + 0.0013 T``."""
@@ -339,7 +391,7 @@ def evaluate_law(family: str, coefficients: dict[str, float],
     for value in coefficients.values():
         if type(value) is not float or not math.isfinite(value):
             return FrictionModel(family, coefficients)(temperature_C)
-    return FAMILIES[family](temperature_C, **coefficients)
+    return FAMILIES[family].function(temperature_C, **coefficients)
 
 
 def _linear(a: float, b: float) -> FrictionModel:

@@ -1,70 +1,64 @@
-"""Which compiled kernels the model runs: the ahead-of-time module, or numba's JIT.
+"""How the model's element loops run: compiled by numba, or as plain Python.
 
-The element loops live once, in `tdmon.model._kernels` (numba ``@njit``). `tdmon model warmup`
-compiles them ahead of time (`tdmon.model.aot`) into an extension module in the user's cache
-folder (``~/.cache/tdmon/kernels`` on Linux), named by a key of the kernels' source, numba's and
-numpy's versions, the Python ABI and the processor level it targets. `load` returns that module
-when it is there for the current key: then neither numba nor LLVM is imported, which saves about
-120 MB and most of a second per process (docs/benchmarks.md). Otherwise (not built yet, a
-changed source, no C compiler at set-up) it returns `tdmon.model._kernels` itself, compiled by
-numba on the first call and kept in numba's cache, and logs why at INFO. Both run the same
-functions and give the same numbers.
+The loops live once, in `tdmon.model._kernels`, as plain Python that imports no numba. `load`
+hands them out in one of two engines with the same entry points and the same numbers bit for
+bit (`tests/model/test_kernels.py` compares every `WellModel` call):
 
-``TDMON_KERNELS`` chooses: ``auto`` (the default, as above), ``jit`` (numba always) or ``aot``
-(the ahead-of-time module or an error). This module imports neither numba nor the kernels.
+``"numba"`` (the default)
+    every function of `_kernels` compiled by ``numba.njit(cache=True)``. numba keeps the
+    machine code in its on-disk cache, next to the source (``tdmon/model/__pycache__``) or,
+    where that folder is not writable (an installed package), in its user-wide cache folder
+    (``NUMBA_CACHE_DIR`` overrides both); `tdmon model warmup` fills it at set-up so that no
+    later process compiles. A process still pays numba's import and the cache's load, about a
+    second here, on its first call.
+``"python"``
+    the functions as they are: a few hundred times slower per element, but no numba at all.
+    A one-shot evaluation of one well (`tdmon model loads`) is done before numba would have
+    loaded; and it serves where numba is missing or broken.
+
+``TDMON_KERNELS`` (``numba`` or ``python``) sets the default; a `WellModel` built with
+``engine=`` overrides it. This module imports numba only when the numba engine is loaded.
 """
 
 from __future__ import annotations
 
-import hashlib
-import importlib
-import importlib.machinery
-import importlib.util
-import logging
 import os
-import sys
+import types
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
-from types import ModuleType
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
+from tdmon.model import _kernels
+from tdmon.model._kernels import (  # noqa: F401 (the model reads the loops' constants here)
+    AADNOY,
+    GENERAL_CURVE,
+    PLANAR_BUILD,
+    SOFT_STRING,
+    STRAIGHT,
+)
 
-_log = logging.getLogger(__name__)
+Engine = Literal["numba", "python"]
+ENGINES: tuple[str, ...] = ("numba", "python")
 
-SOFT_STRING = 0
-AADNOY = 1
-
-# element curve kinds (of the survey interval the element lies on)
-STRAIGHT = 0
-PLANAR_BUILD = 1
-GENERAL_CURVE = 2
-
-#: The environment variable that chooses the kernels: "auto", "jit" or "aot".
+#: The environment variable that chooses the default engine.
 ENVIRONMENT = "TDMON_KERNELS"
-_MODES = ("auto", "jit", "aot")
 
-#: The functions the model calls, by name, in both kinds of kernels (positional arguments).
+#: The functions the model calls, by name, in both engines.
 ENTRY_POINTS = ("pack_well", "all_finite_non_negative", "march_one", "march_cases",
                 "march_profile", "sweep", "march_gradient")
-
-_HERE = Path(__file__).resolve().parent
-#: The files whose text the ahead-of-time build depends on.
-_SOURCES = (_HERE / "_kernels.py", _HERE / "aot.py", _HERE / "kernels.py")
 
 
 @dataclass(frozen=True)
 class Kernels:
-    """Loaded kernels: ``kind`` "aot" or "jit", the ``module`` holding `ENTRY_POINTS`, and
-    ``where`` they come from (the extension module's path, or numba's JIT)."""
+    """Loaded kernels: the ``engine`` ("numba" or "python") and the ``module`` holding
+    `ENTRY_POINTS` (numba's dispatchers, or `tdmon.model._kernels` itself)."""
 
-    kind: str
+    engine: str
     module: Any
-    where: str
 
 
 class KernelWell(NamedTuple):
@@ -81,8 +75,8 @@ def kernel_well(kernels: Kernels, *, node_md: ArrayLike, tangents: ArrayLike,
                 component_radius: ArrayLike) -> KernelWell:
     """Pack a well's arrays (see `tdmon.model._kernels.pack_well`) with ``kernels``.
 
-    Each array is converted to the dtype and C layout the kernels read (copied only if it is
-    not so already): the ahead-of-time module checks neither.
+    Each array is converted to the dtype and C layout the kernels' one compiled signature
+    reads (copied only if it is not so already), so that no call compiles another.
     """
     vector = np.ascontiguousarray
     real, index = kernels.module.pack_well(
@@ -93,144 +87,54 @@ def kernel_well(kernels: Kernels, *, node_md: ArrayLike, tangents: ArrayLike,
     return KernelWell(real, index)
 
 
-def _numba_version_text() -> bytes:
-    """numba's version file, read without importing numba (importlib.metadata costs 50 ms)."""
-    spec = importlib.util.find_spec("numba")
-    if spec is None or spec.origin is None:
-        return b"no numba"
-    try:
-        return (Path(spec.origin).parent / "_version.py").read_bytes()
-    except OSError:
-        return spec.origin.encode()
+def default_engine() -> str:
+    """``TDMON_KERNELS`` as one of `ENGINES` ("numba" when unset; a ModelError otherwise)."""
+    engine = os.environ.get(ENVIRONMENT, "numba").strip().lower() or "numba"
+    if engine not in ENGINES:
+        raise ModelError(f"environment variable {ENVIRONMENT}={engine!r}: use one of "
+                         f"{', '.join(ENGINES)}")
+    return engine
 
 
-# the x86-64 micro-architecture levels, and the /proc/cpuinfo flags each needs beyond the last
-_X86_LEVELS = (
-    ("x86-64-v2", {"cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3"}),
-    ("x86-64-v3", {"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "movbe", "xsave", "abm"}),
-    ("x86-64-v4", {"avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl"}),
-)
+def load(engine: str | None = None) -> Kernels:
+    """The kernels of ``engine`` (default `default_engine`): "numba" or "python"."""
+    chosen = default_engine() if engine is None else engine
+    if chosen == "python":
+        return Kernels("python", _kernels)
+    if chosen == "numba":
+        return Kernels("numba", _compiled())
+    raise ModelError(f"unknown kernels engine {chosen!r}: use one of {', '.join(ENGINES)}")
 
 
 @lru_cache(maxsize=1)
-def target_cpu() -> str:
-    """The processor the ahead-of-time build targets: the highest x86-64 level this one has
-    (its flags in Linux's /proc/cpuinfo), or "" (the architecture's generic processor).
+def _compiled() -> types.SimpleNamespace:
+    """Every function of `_kernels` compiled by numba, the entry points in a namespace.
 
-    Not the processor's own model: numba's pycc with the model's tuning ran Aadnoy's march
-    a third slower here (AMD znver4), the level as fast as the JIT (docs/benchmarks.md). The
-    level is part of the build's key, so a processor without it finds no build.
+    Each function is rebuilt on a copy of the module's globals in which every function is
+    replaced by its numba dispatcher, so that a compiled loop calls compiled helpers; the code,
+    file and name stay the module's, which is what numba's cache is keyed by. Nothing is
+    compiled here: numba compiles (or loads from its cache) on a dispatcher's first call.
     """
-    if "x86_64" not in importlib.machinery.EXTENSION_SUFFIXES[0]:
-        return ""
     try:
-        with open("/proc/cpuinfo", "rb") as info:
-            head = info.read(32768).decode("ascii", "replace")
-    except OSError:
-        return ""
-    for line in head.splitlines():
-        name, _, value = line.partition(":")
-        if name.strip() == "flags":
-            return x86_level(set(value.split()))
-    return ""
+        import numba
+    except ImportError as error:
+        raise ModelError(f"the model's numba kernels need numba ({error}); "
+                         f"{ENVIRONMENT}=python runs them as plain Python") from error
 
-
-def x86_level(flags: set[str]) -> str:
-    """The highest x86-64 micro-architecture level whose flags (/proc/cpuinfo's names) are all
-    in ``flags``, or "" for the baseline x86-64."""
-    level = ""
-    for name, needed in _X86_LEVELS:
-        if not needed <= flags:
-            break
-        level = name
-    return level
-
-
-@lru_cache(maxsize=1)
-def build_key() -> str:
-    """Hex key of what the ahead-of-time module is built from: the kernels' source, numba's
-    and numpy's versions, the Python ABI and the platform (the extension suffix), and the
-    target processor (`target_cpu`)."""
-    digest = hashlib.sha256()
-    for source in _SOURCES:
-        digest.update(source.read_bytes())
-    digest.update(target_cpu().encode())
-    digest.update(_numba_version_text())
-    digest.update(np.__version__.encode())
-    digest.update(sys.implementation.cache_tag.encode())
-    digest.update(importlib.machinery.EXTENSION_SUFFIXES[0].encode())
-    return digest.hexdigest()[:20]
-
-
-def module_name() -> str:
-    """The ahead-of-time module's name (it includes the key: each build is its own module)."""
-    return f"tdmon_kernels_{build_key()}"
-
-
-def cache_root() -> Path:
-    """The folder that holds every ahead-of-time build (one file per key)."""
-    import platformdirs
-
-    return platformdirs.user_cache_path("tdmon", appauthor=False) / "kernels"
-
-
-def aot_path() -> Path:
-    """Where the ahead-of-time module of the current key is (or would be)."""
-    return cache_root() / f"{module_name()}{importlib.machinery.EXTENSION_SUFFIXES[0]}"
-
-
-def load_aot(path: Path | None = None) -> ModuleType:
-    """Import the ahead-of-time module at ``path`` (default `aot_path`); OSError or
-    ImportError when it is missing or cannot be loaded, AttributeError when it lacks an
-    entry point."""
-    path = aot_path() if path is None else path
-    name = path.name.split(".")[0]
-    if not path.is_file():
-        raise FileNotFoundError(f"no ahead-of-time kernels at {path}")
-    loaded = sys.modules.get(name)  # this build, loaded before (from this or another path)
-    if loaded is not None:
-        return loaded
-    loader = importlib.machinery.ExtensionFileLoader(name, str(path))
-    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
-    if spec is None:
-        raise ImportError(f"cannot load {path}")
-    module = importlib.util.module_from_spec(spec)
-    loader.exec_module(module)
-    for entry in ENTRY_POINTS:
-        getattr(module, entry)
-    sys.modules[name] = module
-    return module
-
-
-def mode() -> str:
-    """``TDMON_KERNELS`` as one of "auto", "jit", "aot" (a ModelError otherwise)."""
-    mode = os.environ.get(ENVIRONMENT, "auto").strip().lower() or "auto"
-    if mode not in _MODES:
-        raise ModelError(f"environment variable {ENVIRONMENT}={mode!r}: use one of "
-                         f"{', '.join(_MODES)}")
-    return mode
-
-
-def load() -> Kernels:
-    """The kernels to run, as ``TDMON_KERNELS`` chooses (see the module's docstring)."""
-    return _load(mode())
-
-
-@lru_cache(maxsize=len(_MODES))
-def _load(mode: str) -> Kernels:
-    if mode != "jit":
-        path = aot_path()
+    namespace = dict(vars(_kernels))
+    plain = {name: value for name, value in namespace.items()
+             if isinstance(value, types.FunctionType) and value.__module__ == _kernels.__name__}
+    for name, function in plain.items():
+        rebound = types.FunctionType(function.__code__, namespace, function.__name__,
+                                     function.__defaults__, function.__closure__)
+        rebound.__qualname__ = function.__qualname__
+        rebound.__module__ = function.__module__
+        rebound.__doc__ = function.__doc__
         try:
-            return Kernels("aot", load_aot(path), str(path))
-        except (OSError, ImportError, AttributeError) as error:
-            if mode == "aot":
-                raise ModelError(f"{ENVIRONMENT}=aot but the ahead-of-time kernels do not "
-                                 f"load ({error}): run 'tdmon model warmup'") from error
-            _log.info("model kernels: numba's JIT (%s; 'tdmon model warmup' builds them "
-                      "ahead of time)", error)
-    return Kernels("jit", importlib.import_module("tdmon.model._kernels"), "numba's JIT")
-
-
-def forget() -> None:
-    """Forget the loaded choice (after a build, or a change of ``TDMON_KERNELS``)."""
-    _load.cache_clear()
+            namespace[name] = numba.njit(cache=True)(rebound)
+        except RuntimeError as error:  # numba found no cache folder it can write
+            raise ModelError(
+                f"numba cannot cache the model's kernels ({error}): set NUMBA_CACHE_DIR to a "
+                f"writable folder (and run 'tdmon model warmup' with it), or "
+                f"{ENVIRONMENT}=python") from error
+    return types.SimpleNamespace(**{name: namespace[name] for name in ENTRY_POINTS})

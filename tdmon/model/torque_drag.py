@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
 from tdmon.model import kernels
+from tdmon.model.kernels import Engine
 from tdmon.model.survey import tangent_vectors, tvd_and_inclination
 from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
 from tdmon.vocabulary import Operation
@@ -160,10 +161,10 @@ def _run_breaks(well: Well, grid: HoleGrid) -> NDArray[np.bool_]:
     return np.asarray(breaks)
 
 
-def _check_friction_values(compiled: Any, values: NDArray[np.float64], what: str) -> None:
+def _check_friction_values(loops: Any, values: NDArray[np.float64], what: str) -> None:
     """Raise unless every friction factor of the C-contiguous ``values`` is finite and >= 0
-    (``compiled``: the model's kernels module)."""
-    if not compiled.all_finite_non_negative(values.reshape(-1)):
+    (``loops``: the model's kernels module)."""
+    if not loops.all_finite_non_negative(values.reshape(-1)):
         raise ModelError(f"{what} must be finite and >= 0")
 
 
@@ -177,9 +178,12 @@ class WellModel:
     Parameters
     ----------
     well : the well
+    engine : how the element loops run (`tdmon.model.kernels`): ``"numba"`` compiled, or
+        ``"python"`` interpreted (the same numbers; quicker for a few calls in a fresh
+        process, far slower per call); default ``TDMON_KERNELS``, else ``"numba"``
     """
 
-    def __init__(self, well: Well) -> None:
+    def __init__(self, well: Well, *, engine: Engine | str | None = None) -> None:
         self.well = well
         self.grid = hole_grid(well)
         grid = self.grid
@@ -192,11 +196,10 @@ class WellModel:
         self.component_radius = np.array([c.torque_radius for c in string.components],
                                          dtype=np.float64)
         self._section_mu: NDArray[np.float64] | None = None
-        # the compiled kernels (ahead of time, or numba's JIT: `kernels.load`), typed loosely:
-        # mypy cannot see into an extension module or a numba dispatcher
-        self.kernels = kernels.load()
-        self._compiled: Any = self.kernels.module
-        self._march_one: Any = self._compiled.march_one
+        # the kernels (`kernels.load`), typed loosely: mypy cannot see into numba's dispatchers
+        self.kernels = kernels.load(engine)
+        self._loops: Any = self.kernels.module
+        self._march_one: Any = self._loops.march_one
         # what every kernel call reads, packed once (see `kernels.KernelWell`)
         self.kernel_well = kernels.kernel_well(
             self.kernels,
@@ -240,7 +243,7 @@ class WellModel:
                 f"({self.n_elements}), got shape {values.shape}"
             )
         values = np.ascontiguousarray(values)
-        _check_friction_values(self._compiled, values, "per-element friction factors")
+        _check_friction_values(self._loops, values, "per-element friction factors")
         return values
 
     def _uniform_friction(self, value: float) -> NDArray[np.float64]:
@@ -357,7 +360,7 @@ class WellModel:
             friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = _cached_terms(
             operation, wob, bit_torque, psi)
-        # positional: the fast path of numba's dispatch, and all the ahead-of-time module takes
+        # positional: the fast path of numba's dispatch
         force, torque = self._march_one(self._well_real, self._well_index, kernel_method,
                                         friction, depth, bit_force, bit_torque_term,
                                         axial_factor, torque_factor)
@@ -394,9 +397,9 @@ class WellModel:
                 f"friction cases must be an array (n_cases, {self.n_elements}) with one value "
                 f"per hole-grid element, got shape {cases.shape}"
             )
-        _check_friction_values(self._compiled, cases, "friction factors")
+        _check_friction_values(self._loops, cases, "friction factors")
         terms = np.array(_cached_terms(operation, wob, bit_torque, psi))
-        forces, torques = self._compiled.march_cases(
+        forces, torques = self._loops.march_cases(
             *self.kernel_well, kernel_method, cases, depth, terms[0:1], terms[1:2], terms[2:3],
             terms[3:4])
         return forces[:, 0] + self.well.block_weight, torques[:, 0]
@@ -457,8 +460,7 @@ class WellModel:
         friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = operation_terms(
             operation, wob=wob, bit_torque=bit_torque, psi=psi)
-        # the kernels take positional arguments only (the ahead-of-time module has no names)
-        force, torque, gradient = self._compiled.march_gradient(
+        force, torque, gradient = self._loops.march_gradient(
             *self.kernel_well, kernel_method, friction, depth, bit_force, bit_torque_term,
             axial_factor, torque_factor, 1.0 - quantity_index, float(quantity_index))
         if quantity_index == 0:
@@ -496,7 +498,7 @@ class WellModel:
         torque = np.empty((terms.shape[0], size))
         component = np.empty(size, dtype=np.int64)
         tangent = np.empty((size, 3))
-        count = self._compiled.march_profile(
+        count = self._loops.march_profile(
             *self.kernel_well, kernel_method, friction, depth,
             np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
             np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]),
@@ -551,6 +553,7 @@ def torque_drag(
     wob: float = 0.0,
     bit_torque: float = 0.0,
     psi: float | None = None,
+    engine: Engine | str | None = None,
 ) -> Loads:
     """Hook load, surface torque and load profiles of every operation at one bit depth.
 
@@ -566,6 +569,7 @@ def torque_drag(
     bit_torque : torque at the bit for ``on_bottom`` [N m]
     psi : angle of combined motion for pick-up and slack-off while rotating [rad]; friction
         splits into ``mu sin(psi)`` axially and ``mu cos(psi)`` tangentially
+    engine : how the element loops run, as for `WellModel` (the same numbers either way)
 
     Returns
     -------
@@ -599,5 +603,5 @@ def torque_drag(
     .. [3] Aadnoy, B. S., Fazaelizadeh, M. and Hareland, G. (2010). A 3D analytical model for
        wellbore friction. J. Can. Pet. Technol. 49(10), 25-36.
     """
-    return WellModel(well).loads(bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque,
-                                 psi=psi)
+    return WellModel(well, engine=engine).loads(bit_depth, mu, method=method, wob=wob,
+                                                bit_torque=bit_torque, psi=psi)

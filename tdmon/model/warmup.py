@@ -1,27 +1,27 @@
-"""Prepare the model's kernels at set-up, so that no later command compiles them.
+"""Fill numba's on-disk cache with the model's kernels at set-up, so no later command compiles.
 
-`warm_up` (``tdmon model warmup``, run by the set-up scripts) builds the kernels ahead of time
-(`tdmon.model.aot`, about 15 s) unless the build of the current source is already there, then
-runs every entry point once on a small synthetic well through the kernels `tdmon.model.kernels`
-loads. Without a C compiler, or when the build fails, or with ``TDMON_KERNELS=jit``, those are
-numba's JIT kernels (``cache=True``): the run compiles them (about 10 s) and numba stores the
-machine code next to the source (``tdmon/model/__pycache__``, or numba's user-wide cache folder
-when that is not writable, or ``NUMBA_CACHE_DIR``), where later processes load it.
-
-Every call below passes the same argument types as the model's own callers: numba keeps one
-machine code per signature (a call with another type would compile again), and the
-ahead-of-time module has exactly one per entry point.
+`warm_up` (``tdmon model warmup``, run by the set-up scripts) runs every entry point of the
+numba kernels (`tdmon.model.kernels`) once on a small synthetic well, with the same argument
+types as the model's own callers: numba keeps one machine code per signature, and a call with
+another type would compile again in the first real command (`tests/model/test_warmup.py` checks
+that the real calls add none). Each one numba compiles (about a minute for all, on a busy
+machine) it stores in its cache: ``tdmon/model/__pycache__`` next to the source, or, when that
+folder is not writable (a package installed by another user or read-only), numba's user-wide
+cache folder for the user running the warm-up (``NUMBA_CACHE_DIR`` overrides both). So run it
+as the user that runs the daemon, or point ``NUMBA_CACHE_DIR`` at a folder both share; run it
+again after changing `tdmon/model/_kernels.py` or upgrading numba (the cache is keyed by the
+source file and numba's version, and a stale entry is compiled again on first use).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from tdmon.errors import ModelError
-from tdmon.model import aot, kernels
+from tdmon.model import kernels
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.survey import minimum_curvature
 from tdmon.model.well import Fluid, HoleSection, Well
@@ -29,14 +29,13 @@ from tdmon.model.well import Fluid, HoleSection, Well
 
 @dataclass(frozen=True)
 class Warmup:
-    """What `warm_up` did: the ``kernels`` now loaded, the ahead-of-time build's time [s]
-    (None when none was run), the time of one call of every entry point [s], and why the JIT
-    is used when it is (``note``, one line, empty otherwise)."""
+    """What `warm_up` did: how many entry points numba ``compiled`` (and stored) and how many
+    it ``loaded`` from its cache, the ``seconds`` it took, and numba's ``cache_folder``."""
 
-    kernels: kernels.Kernels
-    build_seconds: float | None
-    call_seconds: float
-    note: str
+    compiled: int
+    loaded: int
+    seconds: float
+    cache_folder: str
 
 
 def _small_well() -> Well:
@@ -55,14 +54,14 @@ def _small_well() -> Well:
                 fluid=Fluid(density=1200.0), element_length=30.0, name="warm-up")
 
 
-def compile_kernels() -> float:
-    """Call every entry point once through the loaded kernels (on the JIT: loading each from
-    numba's cache, or compiling and storing it). Returns the time it took [s]."""
+def compile_kernels(engine: str = "numba") -> float:
+    """Call every entry point once through ``engine``'s kernels (numba's: loading each from
+    its cache, or compiling and storing it). Returns the time it took [s]."""
     from tdmon.model.broomstick import broomstick_from_model
     from tdmon.model.torque_drag import METHODS, WellModel
 
     start = time.perf_counter()
-    model = WellModel(_small_well())
+    model = WellModel(_small_well(), engine=engine)
     depth = 900.0
     for method in METHODS:
         model.evaluate("pick_up", depth, 0.25, method=method)
@@ -75,36 +74,15 @@ def compile_kernels() -> float:
 
 
 def warm_up() -> Warmup:
-    """Build the kernels ahead of time if needed (and possible), then run each once.
-
-    A failed build is not an error but a note (the JIT serves), unless ``TDMON_KERNELS=aot``
-    asks for the ahead-of-time kernels.
-    """
-    mode = kernels.mode()
-    build_seconds = None
-    note = ""
-    if mode == "jit":
-        note = f"{kernels.ENVIRONMENT}=jit"
-    else:
-        try:
-            build_seconds = aot.ensure_built()
-        except Exception as error:  # compilers and numba fail in many ways: each means the JIT
-            first_line = (str(error).strip().splitlines() or [""])[0]
-            reason = f"{type(error).__name__}: {first_line}"
-            if not aot.compiler_available():
-                reason = "no C compiler found"
-            if mode == "aot":
-                raise ModelError(f"{kernels.ENVIRONMENT}=aot but the ahead-of-time build "
-                                 f"failed ({reason})") from error
-            note = f"no ahead-of-time build ({reason})"
-    kernels.forget()
-    loaded = kernels.load()
-    return Warmup(loaded, build_seconds, compile_kernels(), note)
-
-
-def cache_folder() -> str:
-    """Where numba keeps the JIT kernels' machine code (for messages)."""
-    from tdmon.model import _kernels
-
-    cache = getattr(_kernels.march_one, "_cache", None)
-    return str(getattr(cache, "cache_path", "numba's cache folder"))
+    """Compile the numba kernels of every entry point into numba's cache, or load them from
+    it when they are there already (a ModelError when numba cannot be imported)."""
+    seconds = compile_kernels("numba")
+    module = kernels.load("numba").module
+    compiled = loaded = 0
+    folder = ""
+    for name in kernels.ENTRY_POINTS:
+        stats: Any = getattr(module, name).stats  # numba's counters of this dispatcher
+        compiled += sum(stats.cache_misses.values()) > 0
+        loaded += sum(stats.cache_hits.values()) > 0
+        folder = str(stats.cache_path)
+    return Warmup(compiled, loaded, seconds, folder)

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tdmon.errors import ModelError
+from tdmon.model.hookload_sensor import HookloadSensor
 from tdmon.model.string import DrillString
 from tdmon.model.survey import Survey, interpolate_survey
 
@@ -107,6 +108,9 @@ class Well:
     element_length : target element length of the grid [m]
     limits : settings of the operating limits
     name : label
+    hookload_sensor : how the rig's hook-load channel reads the load on the hook (sensor
+        location, lines, sheave efficiency; :mod:`tdmon.model.hookload_sensor`); the default
+        reads the load on the hook
     """
 
     survey: Survey
@@ -117,6 +121,7 @@ class Well:
     element_length: float = 10.0
     limits: LimitSettings = field(default_factory=LimitSettings)
     name: str = ""
+    hookload_sensor: HookloadSensor = field(default_factory=HookloadSensor)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.element_length) and self.element_length > 0.0):

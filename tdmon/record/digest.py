@@ -20,10 +20,11 @@ from typing import Any, Final
 
 import numpy as np
 
+from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameters, join_words
 from tdmon.record.reader import read_messages, topic_counts
-from tdmon.vocabulary import AlarmKind, EstimateKind, Severity
+from tdmon.vocabulary import ALARM_WORDS, AlarmKind, EstimateKind, Severity
 
-__all__ = ["ReportData", "digest", "load", "mu_t_verdict", "summarize", "utc"]
+__all__ = ["ReportData", "alarm_meaning", "digest", "load", "mu_t_verdict", "summarize", "utc"]
 
 _TOPICS: Final = ("/tdmon/model", "/tdmon/estimate", "/tdmon/state", "/tdmon/alarm",
                   "/tdmon/profile", "/tdmon/well")
@@ -34,28 +35,6 @@ _OPERATION_WORDS: Final = {"pick_up": "pick-up", "slack_off": "slack-off",
                            "rotating": "rotating off bottom", "on_bottom": "on bottom",
                            "reaming": "reaming", "back_reaming": "back-reaming"}
 
-#: what each alarm kind means, in a drilling engineer's words
-ALARM_WORDS: Final[dict[str, str]] = {
-    AlarmKind.BAND: "hook load outside the modelled band (a trend, not a spike)",
-    AlarmKind.FRICTION_JUMP: "friction factor jumped above its recent level",
-    AlarmKind.LIMIT_TENSILE: "string tension near or over the tensile limit",
-    AlarmKind.LIMIT_SINUSOIDAL_BUCKLING: "compression near or over sinusoidal buckling",
-    AlarmKind.LIMIT_HELICAL_BUCKLING: "compression near or over helical buckling",
-    AlarmKind.LIMIT_MAKEUP_TORQUE: "torque near or over the connections' make-up torque",
-    AlarmKind.SENSOR_STALE: "a sensor stopped sending",
-    AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE: "hook load reading not physically plausible",
-    AlarmKind.SENSOR_BIT_BELOW_HOLE: "bit depth reading below the hole's total depth",
-    AlarmKind.SENSOR_HOOKLOAD_FROZEN: "hook load reading frozen (unchanged while moving)",
-    AlarmKind.SENSOR_TORQUE_FROZEN: "torque reading frozen while rotating",
-    AlarmKind.WINDOW_REJECTED: "a measurement window could not give a friction factor",
-    AlarmKind.BLOCK_WEIGHT: "block weight estimate disagrees with the configured one",
-    AlarmKind.WEIGHT_CHECK: "string weight in slips-off hangs disagrees with the well file",
-    AlarmKind.RECORDER_FAILED: "the flight recorder failed to write",
-    AlarmKind.RECORDER_RESUMED: "the flight recorder writes again",
-    AlarmKind.RECORDING_RECOVERED: "an unfinished recording was recovered at start-up",
-    AlarmKind.DATA_LOSS: "input messages were lost",
-    AlarmKind.CLOCK_JUMP: "the rig clock jumped; timing re-anchored",
-}
 
 
 @dataclass
@@ -242,12 +221,21 @@ def alarm_rows(alarms: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             _num(a.get("t"))) else -math.inf)
         rows.append({
             "kind": kind, "severity": severity, "count": len(chosen),
-            "meaning": ALARM_WORDS.get(kind, kind.replace("_", " ")),
+            "meaning": alarm_meaning(kind),
             "first_t": first, "last_t": last, "first_utc": utc(first), "last_utc": utc(last),
             "last_message": latest.get("message"),
         })
     rows.sort(key=lambda r: (_SEVERITY_ORDER.get(r["severity"], 3), -r["count"], r["kind"]))
     return rows
+
+
+def alarm_meaning(kind: str) -> str:
+    """An alarm kind in a drilling engineer's words (`tdmon.vocabulary.ALARM_WORDS`); a kind
+    this tdmon does not know (a newer daemon's recording) in its own words."""
+    try:
+        return ALARM_WORDS[AlarmKind(kind)]
+    except ValueError:
+        return kind.replace("_", " ")
 
 
 def mu_t_verdict(estimates: Sequence[dict[str, Any]], well: dict[str, Any] | None = None
@@ -290,41 +278,52 @@ def mu_t_verdict(estimates: Sequence[dict[str, Any]], well: dict[str, Any] | Non
     return verdict
 
 
-def joint_verdict(estimates: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Friction and string weight estimated together (``joint`` estimates,
-    docs/back-calculation.md): how often the data separated them, and the last estimate that
-    did (else the last one, with why they could not be separated)."""
+def joint_verdict(estimates: Sequence[dict[str, Any]],
+                  parameters: EstimatedParameters = JOINT_PARAMETERS) -> dict[str, Any]:
+    """Friction and the parameters estimated beside it (``joint`` estimates,
+    docs/back-calculation.md; the string weight): how often the data separated them, and the
+    last estimate that did (else the last one, with why they could not be separated). Each
+    parameter's value and standard deviation under its name, its words from its declaration
+    (:mod:`tdmon.calib.parameters`)."""
+    friction, nouns = parameters.friction, parameters.nouns()
+    together = join_words([friction.noun, *(p.noun for p in parameters.others)])
     joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
     if not joint:
         return {"status": "none", "estimates": 0,
-                "words": "No joint estimate of friction and string weight in this recording "
+                "words": f"No joint estimate of {together} in this recording "
                          "(calibration off, or no window)."}
     separated = [e for e in joint if e.get("identifiable")]
     last = (separated or joint)[-1]
-    w, w_std = _num(last.get("weight_factor")), _num(last.get("weight_factor_std"))
     verdict: dict[str, Any] = {
         "status": "identifiable" if separated else "not_identifiable",
         "estimates": len(joint), "identifiable": len(separated), "t": _num(last.get("t")),
         "bit_depth_m": _rounded(_num(last.get("bit_depth_m")), 1),
         "operation": last.get("operation"),
-        "mu": _rounded(_num(last.get("mu"))), "mu_std": _rounded(_num(last.get("mu_std"))),
-        "weight_factor": _rounded(w), "weight_factor_std": _rounded(w_std),
-        "correlation": _rounded(_num(last.get("correlation")), 3),
-        "reason": last.get("identifiability"),
     }
+    for parameter in parameters:
+        verdict[parameter.name] = _rounded(_num(last.get(parameter.name)))
+        verdict[parameter.std_field] = _rounded(_num(last.get(parameter.std_field)))
+    for i, j in parameters.pairs():
+        field = parameters.correlation_field(i, j)
+        verdict[field] = _rounded(_num(last.get(field)), 3)
+    verdict["reason"] = last.get("identifiability")
     if separated:
-        heavier = "lighter" if w < 1 else "heavier"
+        read = []
+        for parameter in parameters.others:
+            value = _num(last.get(parameter.name))
+            text = parameter.text(value, _num(last.get(parameter.std_field)))
+            reading = parameter.read(value)
+            read.append(text if reading is None else f"{reading} ({text})")
         verdict["words"] = (
-            f"Friction and string weight separated in {len(separated)} of {len(joint)} "
-            f"updates; the last at {_num(last.get('bit_depth_m')):.0f} m MD: friction factor "
-            f"{_num(last.get('mu')):.3f} ± {_num(last.get('mu_std')):.3f} with the string "
-            f"{100 * abs(w - 1):.1f} % {heavier} than modelled (weight factor {w:.3f} ± "
-            f"{w_std:.3f}).")
+            f"{together[:1].upper()}{together[1:]} separated in {len(separated)} of "
+            f"{len(joint)} updates; the last at {_num(last.get('bit_depth_m')):.0f} m MD: "
+            f"{friction.text(_num(last.get('mu')), _num(last.get('mu_std')))} with "
+            f"{join_words(read)}.")
     else:
         verdict["words"] = (
-            f"Friction and string weight could not be separated ({len(joint)} updates): "
-            f"{last.get('identifiability')}; the friction factors above assume the modelled "
-            "string weight.")
+            f"{together[:1].upper()}{together[1:]} could not be separated ({len(joint)} "
+            f"updates): {last.get('identifiability')}; the {friction.label}s above assume the "
+            f"modelled {nouns}.")
     return verdict
 
 

@@ -18,7 +18,8 @@ field: klbf, kft lbf, ft, degF), the unit in the entity's name; the messages sta
   ``residual/*``: scalars on ``time``; the same under ``vs_depth/`` on ``bit_depth_cm``
   (field: ``hookload_klbf``, ``torque_kftlbf``, ``bit_depth_in``).
 * ``friction/<operation>``: window estimates of mu; ``friction/joint`` and ``weight_factor``:
-  the joint estimate of friction and string weight; ``friction_mu_T/<param>``.
+  the joint estimate of friction and string weight (every parameter estimated beside the
+  friction has its entity and view, :func:`joint_entity`); ``friction_mu_T/<param>``.
 * ``rig_state``: state changes (state timeline view); ``bit_depth_m`` (``bit_depth_ft``).
 * ``profile/friction``, ``profile/temperature_C`` (``_F``): bar charts against MD; friction
   only in the bins the windows informed, ``profile/note`` (text) says why the others are out.
@@ -42,6 +43,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameter
 from tdmon.channels import CHANNEL_UNITS
 from tdmon.display import UnitSystem, current
 from tdmon.errors import RecordError
@@ -251,6 +253,14 @@ class RerunViews:
         finite = _finite(value)
         return None if finite is None else self.units.torque(finite)
 
+    def _shown(self, parameter: EstimatedParameter, value: Any) -> float | None:
+        """An estimated parameter's value as it is shown: as it is, in percent, or a force
+        in the display unit."""
+        finite = _finite(value)
+        if finite is None or parameter.shown == "factor":
+            return finite
+        return 100.0 * finite if parameter.shown == "percent" else self.units.force(finite)
+
     def _send_series(self, entity: str, series: _Series) -> None:
         rr = self._rr
         if not series.values:
@@ -360,9 +370,11 @@ class RerunViews:
             for name, value in (message.get("params") or {}).items():
                 self._scalar(f"friction_mu_T/{name}", TIME, t_ns, _finite(value))
         elif kind == EstimateKind.JOINT:
-            # friction with the string weight estimated beside it (docs/back-calculation.md)
-            self._scalar("friction/joint", TIME, t_ns, _finite(message.get("mu")))
-            self._scalar("weight_factor", TIME, t_ns, _finite(message.get("weight_factor")))
+            # friction with the parameters estimated beside it (docs/back-calculation.md),
+            # each as its declaration shows it (tdmon.calib.parameters)
+            for parameter in JOINT_PARAMETERS:
+                self._scalar(joint_entity(parameter, self.units), TIME, t_ns,
+                             self._shown(parameter, message.get(parameter.name)))
 
     def _on_profile(self, t_ns: int, message: Message) -> None:
         md = message["md_m"]
@@ -469,6 +481,16 @@ def _same(value: float) -> float:
     return value
 
 
+def joint_entity(parameter: EstimatedParameter, units: UnitSystem) -> str:
+    """The entity of a joint estimate's parameter: ``friction/joint`` for the friction (beside
+    the window frictions), else the parameter's name with its shown unit (``weight_factor``,
+    ``<name>_percent``, ``<name>_kN``)."""
+    if parameter.name == JOINT_PARAMETERS.friction.name:
+        return "friction/joint"
+    suffix = {"factor": "", "percent": "_percent", "force": f"_{units.key('force')}"}
+    return parameter.name + suffix[parameter.shown]
+
+
 @dataclass(frozen=True)
 class _Names:
     """Entity and timeline names carrying the display unit (``hookload_kN``/``_klbf``)."""
@@ -529,8 +551,11 @@ def blueprint(units: UnitSystem | None = None) -> Any:
         ),
         rrb.Horizontal(
             rrb.TimeSeriesView(origin="/friction", name="Friction factor per operation"),
-            rrb.TimeSeriesView(origin="/weight_factor",
-                               name="String weight factor (joint estimate, 1 = as modelled)"),
+            # every parameter estimated beside the friction (tdmon.calib.parameters)
+            *(rrb.TimeSeriesView(origin=f"/{joint_entity(p, units)}",
+                                 name=f"{p.label.capitalize()} [{p.display_unit(force)}] "
+                                      f"(joint estimate; {p.words})")
+              for p in JOINT_PARAMETERS.others),
             rrb.TimeSeriesView(origin="/residual", name=f"Residuals [{force}, {torque}]"),
         ),
         rrb.StateTimelineView(origin="/rig_state", name="Rig state"),

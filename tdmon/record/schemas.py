@@ -22,6 +22,7 @@ import json
 from collections.abc import Mapping
 from typing import Any, Final
 
+from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameters
 from tdmon.vocabulary import AlarmKind, EstimateKind, RigState, Severity
 
 JsonSchema = dict[str, Any]
@@ -30,7 +31,7 @@ DRAFT: Final = "https://json-schema.org/draft/2020-12/schema"
 
 TOPIC_PREFIX: Final = "/tdmon/"
 
-SOURCES: Final = ("mqtt", "zenoh", "mcap", "wits0")
+SOURCES: Final = ("mqtt", "zenoh", "mcap", "wits0", "opcua")
 PAYLOAD_ENCODINGS: Final = ("utf-8", "base64")
 # The enumerations of the vocabulary, as plain strings (the schema is serialised to JSON).
 RIG_STATES: Final = tuple(state.value for state in RigState)
@@ -167,9 +168,18 @@ MODEL: Final = _object(
     ("t", "bit_depth_m", "hookload_N", "torque_Nm", "band", "measured", "residual"),
 )
 
+def _joint_properties(parameters: EstimatedParameters) -> dict[str, JsonSchema]:
+    """The schema of each field the joint estimate's parameters give its message."""
+    kinds: dict[str, JsonSchema] = {"number": _NUMBER, "boolean": {"type": "boolean"},
+                                    "text": _TEXT}
+    return {field.name: {**kinds[field.kind], "description": f"joint: {field.description}"}
+            for field in parameters.message_fields()}
+
+
 ESTIMATE: Final = _object(
     "estimate",
-    "tdmon friction estimate (per window, profile along MD, or mu(T) fit)",
+    "tdmon friction estimate (per window, profile along MD, mu(T) fit, or joint with the "
+    "string weight)",
     {
         "t": _TIME,
         "kind": {"enum": list(ESTIMATE_KINDS)},
@@ -191,12 +201,21 @@ ESTIMATE: Final = _object(
         "params": {"type": "object", "additionalProperties": {"type": "number"}},
         "temperature_C": _NUMBERS,
         "mu_points": _NUMBERS,
-        # the joint friction and weight-factor estimate (kind "joint", docs/back-calculation.md)
-        "weight_factor": _NUMBER,
-        "weight_factor_std": _NUMBER,
-        "correlation": _NUMBER,
-        "identifiable": {"type": "boolean"},
-        "identifiability": _TEXT,
+        # the joint estimate (kind "joint", docs/back-calculation.md): its parameters' fields,
+        # from their declaration (tdmon.calib.parameters), and the estimator's own
+        **_joint_properties(JOINT_PARAMETERS),
+        "windows": {"type": "object", "additionalProperties": _COUNT,
+                    "description": "joint: measurements per kind within the horizon"},
+        "residuals": {"type": "object", "additionalProperties": _NUMBER,
+                      "description": "joint: mean residual per measurement kind [N or N m]"},
+        "gated": {**_COUNT, "description": "joint: measurements left out by the gate"},
+        "weight_difference_N": {**_OPTIONAL_NUMBER,
+                                "description": "joint: (weight factor - 1) times the modelled "
+                                               "static string weight at the bit depth [N]"},
+        "scatter": {"type": "object", "additionalProperties": _NUMBER,
+                    "description": "joint: between-window friction scatter per kind [-]"},
+        "mu_single": {"type": "object", "additionalProperties": _NUMBER,
+                      "description": "joint: median single-window friction per kind [-]"},
         # a window's friction spread: the measurement's and the between-window scatter
         "mu_std_measurement": _OPTIONAL_NUMBER,
         "scatter_std": _OPTIONAL_NUMBER,

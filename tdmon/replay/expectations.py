@@ -12,11 +12,13 @@ daemon configuration and states, all optional:
   and/or within ``truth_abs`` of ``/truth/friction`` at the window's end (median abs error),
   and/or at least a share ``within_2_std`` of the windows within two of their ``mu_std`` of
   the median;
-* ``[[joint]]``: the joint friction and weight-factor estimates (kind ``joint``) from ``after``
-  [s] on: median ``mu`` in [low, high] and/or within ``mu_truth_abs`` of ``/truth/friction``
-  (pick-up value), median ``weight_factor`` in [low, high] and/or within ``weight_truth_rel``
-  (relative) of ``/truth/weight``, median ``weight_difference_kN`` in [low, high], and the
-  last estimate's ``identifiable`` and ``identifiability`` (its verdict starts with it);
+* ``[[joint]]``: the joint estimates (kind ``joint``) from ``after`` [s] on: for each
+  estimated parameter (:data:`tdmon.calib.parameters.JOINT_PARAMETERS`), its median in
+  ``<name> = [low, high]`` (``mu``, ``weight_factor``) and/or, where the simulator records its
+  truth, within ``<key>_truth_abs`` or ``<key>_truth_rel`` (relative) of it (``mu_truth_abs``
+  against ``/truth/friction``'s pick-up value, ``weight_truth_rel`` against ``/truth/weight``);
+  median ``weight_difference_kN`` in [low, high], and the last estimate's ``identifiable`` and
+  ``identifiability`` (its verdict starts with it);
 * ``[[alarm]]``: an alarm that must be raised: ``event`` names a ``/truth/alarm`` kind (its
   ``nth`` occurrence, with its ``accept`` list and time), and/or ``kinds`` lists daemon kinds
   (with ``at`` [s from the replay's first message] when there is no event); ``window`` =
@@ -47,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameter
 from tdmon.config.expectations import (
     AlarmExpectation,
     Expectations,
@@ -136,7 +139,8 @@ class _Recorded:
     truth_states: list[tuple[float, str]] = field(default_factory=list)
     truth_friction: list[dict[str, Any]] = field(default_factory=list)
     truth_alarms: list[dict[str, Any]] = field(default_factory=list)
-    truth_weight: list[tuple[float, float]] = field(default_factory=list)
+    #: per estimated parameter with a simulated truth, (t, true value)
+    truth_parameters: dict[str, list[tuple[float, float | None]]] = field(default_factory=dict)
     activities: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -150,14 +154,24 @@ def _non_finite(value: Any) -> bool:
     return False
 
 
-def _read(replay: Path, recording: Path) -> _Recorded:
+def _read(replay: Path, recording: Path) -> _Recorded:  # noqa: C901  (complex today; simplify when next touched)
     from tdmon.record.reader import read_messages
 
     data = _Recorded()
-    for item in read_messages(replay, ["/truth/state", "/truth/friction", "/truth/alarm",
-                                        "/truth/weight", "/reference/rig_activity",
-                                        "/tdmon/raw"]):
+    # each estimated parameter's truth, where the simulator records one (its declaration)
+    truths: dict[str, list[tuple[str, str]]] = {}
+    for parameter in JOINT_PARAMETERS:
+        if parameter.truth is not None:
+            topic, key = parameter.truth
+            truths.setdefault(topic, []).append((parameter.name, key))
+    topics = ["/truth/state", "/truth/friction", "/truth/alarm", "/reference/rig_activity",
+              "/tdmon/raw"]
+    for item in read_messages(replay, [*topics, *(t for t in truths if t not in topics)]):
         message = item.message
+        for name, key in truths.get(item.topic, ()):
+            value = message.get(key)
+            data.truth_parameters.setdefault(name, []).append(
+                (float(message["t"]), None if value is None else float(value)))
         if item.topic == "/tdmon/raw":
             data.start = min(data.start, float(message.get("receive_time", math.inf)))
         elif item.topic == "/truth/state":
@@ -166,9 +180,7 @@ def _read(replay: Path, recording: Path) -> _Recorded:
             data.truth_friction.append(message)
         elif item.topic == "/truth/alarm":
             data.truth_alarms.append(message)
-        elif item.topic == "/truth/weight":
-            data.truth_weight.append((float(message["t"]), float(message["weight_factor"])))
-        else:
+        elif item.topic == "/reference/rig_activity":
             data.activities.append((float(message["t"]), str(message["activity"])))
     recorded_nulls = 0
     for item in read_messages(recording, ["/tdmon/state", "/tdmon/estimate", "/tdmon/alarm",
@@ -258,7 +270,7 @@ def _state_agreement(spec: StatesExpectation, data: _Recorded) -> list[Check]:
     return checks
 
 
-def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:
+def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:  # noqa: C901  (complex today; simplify when next touched)
     windows = [e for e in data.estimates
                if e.get("kind") == EstimateKind.WINDOW and e.get("operation") == spec.operation
                and (spec.include_revised or not e.get("revised"))
@@ -324,17 +336,17 @@ def _truth_at(series: Sequence[tuple[float, float | None]], t: float) -> float |
     return series[index][1]
 
 
-def _joint(spec: JointExpectation, data: _Recorded) -> Check:
+def _joint(spec: JointExpectation, data: _Recorded) -> Check:  # noqa: C901  (complex today; simplify when next touched)
     estimates = [e for e in data.estimates if e.get("kind") == EstimateKind.JOINT
                  and float(e["t"]) >= data.start + spec.after]
     name = "joint estimate" + (f" after {spec.after:.0f} s" if spec.after else "")
     if len(estimates) < spec.min_estimates:
         return Check(name, False, f"{len(estimates)} estimates", f">= {spec.min_estimates}")
-    mus = [float(e["mu"]) for e in estimates]
-    factors = [float(e["weight_factor"]) for e in estimates]
+    medians = {p.name: statistics.median(float(e[p.name]) for e in estimates)
+               for p in JOINT_PARAMETERS}
     last = estimates[-1]
-    measured = [f"mu {statistics.median(mus):.3f}, weight factor "
-                f"{statistics.median(factors):.4f} (median of {len(estimates)})"]
+    measured = [", ".join(_median_text(p, medians[p.name]) for p in JOINT_PARAMETERS)
+                + f" (median of {len(estimates)})"]
     expected: list[str] = []
     problems: list[str] = []
 
@@ -343,10 +355,10 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:
         if not bounds[0] <= value <= bounds[1]:
             problems.append(f"{label} {value:.4g} outside")
 
-    if spec.mu is not None:
-        within("mu", statistics.median(mus), spec.mu)
-    if spec.weight_factor is not None:
-        within("weight factor", statistics.median(factors), spec.weight_factor)
+    for parameter in JOINT_PARAMETERS:  # the median in a range: ``<name> = [low, high]``
+        bounds = getattr(spec, parameter.name)
+        if bounds is not None:
+            within(_label(parameter), medians[parameter.name], bounds)
     if spec.weight_difference_kN is not None:
         differences = [float(e["weight_difference_N"]) / 1e3 for e in estimates
                        if e.get("weight_difference_N") is not None]
@@ -355,33 +367,29 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:
                    spec.weight_difference_kN)
         else:
             problems.append("no weight difference")
-    if spec.mu_truth_abs is not None:
-        truth_mu = [(float(m["t"]), m.get("mu_pick_up")) for m in data.truth_friction]
-        errors = []
-        for e in estimates:
-            truth = _truth_at(truth_mu, float(e["t"]))
-            if truth is not None:
-                errors.append(abs(float(e["mu"]) - float(truth)))
-        expected.append(f"median |mu - truth| <= {spec.mu_truth_abs}")
-        if not errors:
-            problems.append("no friction truth")
-        else:
-            measured.append(f"median |mu - truth| {statistics.median(errors):.4f}")
-            if statistics.median(errors) > spec.mu_truth_abs:
-                problems.append("friction off the truth")
-    if spec.weight_truth_rel is not None:
-        ratios = []
-        for e in estimates:
-            truth = _truth_at(data.truth_weight, float(e["t"]))
-            if truth is not None:
-                ratios.append(abs(float(e["weight_factor"]) / truth - 1.0))
-        expected.append(f"median |w / truth - 1| <= {spec.weight_truth_rel}")
-        if not ratios:
-            problems.append("no weight truth")
-        else:
-            measured.append(f"median |w / truth - 1| {statistics.median(ratios):.4f}")
-            if statistics.median(ratios) > spec.weight_truth_rel:
-                problems.append("weight factor off the truth")
+    for parameter in JOINT_PARAMETERS:  # against the truth: ``<key>_truth_abs``, ``_rel``
+        if parameter.truth is None:
+            continue
+        series = data.truth_parameters.get(parameter.name, [])
+        for relative in (False, True):
+            tolerance = getattr(spec, f"{parameter.key}_truth_{'rel' if relative else 'abs'}")
+            if tolerance is None:
+                continue
+            errors = []
+            for e in estimates:
+                truth = _truth_at(series, float(e["t"]))
+                if truth is not None:
+                    value = float(e[parameter.name])
+                    errors.append(abs(value / truth - 1.0) if relative else abs(value - truth))
+            what = (f"median |{parameter.name} / truth - 1|" if relative
+                    else f"median |{parameter.name} - truth|")
+            expected.append(f"{what} <= {tolerance}")
+            if not errors:
+                problems.append(f"no {parameter.noun} truth")
+                continue
+            measured.append(f"{what} {statistics.median(errors):.4f}")
+            if statistics.median(errors) > tolerance:
+                problems.append(f"{parameter.noun} off the truth")
     if spec.identifiable is not None:
         expected.append(f"identifiable {spec.identifiable}")
         if bool(last.get("identifiable")) != spec.identifiable:
@@ -392,6 +400,21 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:
             problems.append(f"last verdict: {last.get('identifiability')}")
     return Check(name, not problems, "; ".join(measured), " and ".join(expected),
                  "; ".join(problems))
+
+
+def _label(parameter: EstimatedParameter) -> str:
+    """A parameter in a check's words: ``mu`` for the friction, else its label."""
+    return parameter.name if parameter is JOINT_PARAMETERS.friction else parameter.label
+
+
+def _median_text(parameter: EstimatedParameter, value: float) -> str:
+    if parameter is JOINT_PARAMETERS.friction:
+        return f"{parameter.name} {value:.3f}"
+    if parameter.shown == "force":
+        return f"{parameter.label} {value / 1e3:.2f} kN"
+    if parameter.shown == "percent":
+        return f"{parameter.label} {100 * value:.2f} %"
+    return f"{parameter.label} {value:.4f}"
 
 
 def _alarm(spec: AlarmExpectation, data: _Recorded, used: set[int]) -> Check:

@@ -21,15 +21,18 @@ from tdmon.config.scenario import (
     NoiseConfig,
     PhaseConfig,
     ScenarioConfig,
+    SensorTruthConfig,
     load_scenario,
 )
 from tdmon.config.well import WellConfig, load_well
 from tdmon.errors import ConfigError, ModelError
 from tdmon.model.friction import FrictionModel, local_friction
+from tdmon.model.hookload_sensor import HookloadSensor, SensorLocation
 from tdmon.model.string import DrillString
 from tdmon.model.well import Fluid, Well, hole_grid
 from tdmon.replay.spec import (
     FrictionAnomaly,
+    HookloadMeasurement,
     ModelMismatch,
     NoiseSettings,
     Phase,
@@ -102,7 +105,18 @@ def to_scenario(config: ScenarioConfig, source: str | Path = "<scenario>", *,
                      for f in config.fault),
         mismatch=mismatch,
         model_well=well if mismatch.any else None,
+        measurement=_measurement(config.sensor, well),
     )
+
+
+def _measurement(config: SensorTruthConfig | None, well: Well) -> HookloadMeasurement:
+    """The hook-load channel's truth: the scenario's ``[sensor]``, else the well file's
+    ``[hookload_sensor]`` with no offset."""
+    if config is None:
+        return HookloadMeasurement(well.hookload_sensor)
+    sensor = HookloadSensor(SensorLocation(config.location), config.lines, config.efficiency,
+                            config.above_sensor)
+    return HookloadMeasurement(sensor, config.offset_start, config.offset_end)
 
 
 def _mismatch(config: ModelErrorConfig, well: Well, source: str | Path) -> ModelMismatch:

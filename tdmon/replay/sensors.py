@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tdmon.channels import check_channel
 from tdmon.config.scenario import CHANNELS
@@ -19,7 +20,8 @@ from tdmon.replay.loads import Loads
 from tdmon.replay.spec import Array, NoiseSettings, Scenario
 from tdmon.replay.timeline import Timeline
 
-__all__ = ["ChannelSeries", "InjectedFault", "channel_truth", "sensor_series"]
+__all__ = ["ChannelSeries", "InjectedFault", "block_motion", "channel_truth", "measured_hookload",
+           "sensor_series"]
 
 
 @dataclass(frozen=True)
@@ -51,29 +53,55 @@ class InjectedFault:
     until: float | None = None
 
 
+def block_motion(timeline: Timeline, t: Array) -> NDArray[np.int64]:
+    """The travelling block's motion at times ``t`` [s from the start]: +1 hoisting, -1
+    lowering, 0 still (the segment's block travel; the empty block moves in slips too)."""
+    index = timeline.segment_at(t)
+    return np.sign(timeline.block1[index] - timeline.block0[index]).astype(np.int64)
+
+
+def measured_hookload(scenario: Scenario, timeline: Timeline, hook_load: Array,
+                      t: Array) -> Array:
+    """What the rig's hook-load sensor reads [N] of the load on the hook ``hook_load`` [N] at
+    times ``t`` [s from the start]: the sheave factor of the block's motion, the travelling
+    equipment above a load pin, and the drifting zero offset (``scenario.measurement``). The
+    block's speed changes step-wise between segments, so no inertia is added."""
+    measurement = scenario.measurement
+    if not measurement.any:
+        return hook_load
+    sensor = measurement.sensor
+    motion = block_motion(timeline, t)
+    reading = np.empty_like(hook_load)
+    for direction in (-1, 0, 1):
+        where = motion == direction
+        reading[where] = sensor.reading(hook_load[where], direction)
+    return reading + measurement.offset(t, timeline.duration)
+
+
 def channel_truth(name: str, scenario: Scenario, timeline: Timeline, loads: Loads,
                   t: Array) -> Array:
-    """Noise-free values [SI] of channel ``name`` at times ``t`` [s from the start]."""
+    """Noise-free values [SI] of channel ``name`` at times ``t`` [s from the start] (the hook
+    load as the rig's sensor reads it, :func:`measured_hookload`)."""
     where = timeline.at(t)
     index = where.segment
     if name in ("hookload", "torque"):
         hookload, torque = loads.at(timeline, t)
-        return hookload if name == "hookload" else torque
+        if name == "torque":
+            return torque
+        return measured_hookload(scenario, timeline, hookload, t)
     if name in ("bit_depth", "hole_depth", "block_position"):
         return np.asarray(getattr(where, name), dtype=np.float64)
-    if name == "rpm":
-        return timeline.rpm[index]
-    if name == "flow_in":
-        return timeline.flow[index]
+    # constant over each segment of the timeline
+    per_segment = {"rpm": timeline.rpm, "flow_in": timeline.flow, "wob": timeline.wob}
+    if name in per_segment:
+        return per_segment[name][index]
     if name == "spp":
         rig = scenario.rig
         return np.asarray(rig.spp_reference * (timeline.flow[index] / rig.flow_reference) ** 2)
-    if name == "wob":
-        return timeline.wob[index]
-    if name == "mud_temp_in":
-        return np.full(t.size, np.nan if scenario.mud_temp_in is None else scenario.mud_temp_in)
-    if name == "mud_temp_out":
-        return np.full(t.size, np.nan if scenario.mud_temp_out is None else scenario.mud_temp_out)
+    constant = {"mud_temp_in": scenario.mud_temp_in, "mud_temp_out": scenario.mud_temp_out}
+    if name in constant:
+        value = constant[name]
+        return np.full(t.size, np.nan if value is None else value)
     try:
         check_channel(name, CHANNELS)
     except ValueError as exc:
@@ -92,7 +120,7 @@ def sensor_series(name: str, scenario: Scenario, tau: Array, truth: Array, inter
     gauss_rel, gauss_abs, jitter = rng.standard_normal(n), rng.standard_normal(n), \
         rng.standard_normal(n)
     spike_draw, spike_sign, missing_draw = rng.random(n), rng.random(n), rng.random(n)
-    value = truth * (1.0 + noise.relative * gauss_rel) + noise.absolute * gauss_abs
+    value = truth * (1.0 + noise.relative * gauss_rel) + noise.absolute * gauss_abs + noise.offset
     faults: list[InjectedFault] = []
     scale = float(np.max(np.abs(truth))) if n else 0.0
     spikes = spike_draw < noise.spike_rate

@@ -69,7 +69,11 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
         "truth.scenario", "simulated session: what it was generated from",
         {"t": _TIME, "name": _TEXT, "seed": {"type": "integer"}, "well": _TEXT,
          "method": _TEXT, "prefix": _TEXT, "block_weight_N": _NUMBER, "duration_s": _NUMBER,
-         "sample_interval_s": {"type": "object", "additionalProperties": _NUMBER}},
+         "sample_interval_s": {"type": "object", "additionalProperties": _NUMBER},
+         "hookload_sensor": {"type": "object", "properties": {
+             "location": {"enum": ["deadline", "hook", "top_drive"]},
+             "lines": {"type": "integer"}, "efficiency": _NUMBER, "above_sensor_N": _NUMBER,
+             "offset_start_N": _NUMBER, "offset_end_N": _NUMBER}}},
         ("t", "name", "seed", "method", "prefix", "block_weight_N", "duration_s")),
     "/truth/state": _schema(
         "truth.state", "true rig state, at the start and at every change",
@@ -80,6 +84,15 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
         {"t": _TIME, "state": _STATES, "bit_depth_m": _NUMBER, "hole_depth_m": _NUMBER,
          "block_position_m": _NUMBER, "hookload_N": _NUMBER, "torque_Nm": _NUMBER},
         ("t", "state", "bit_depth_m", "hookload_N", "torque_Nm")),
+    "/truth/sensor": _schema(
+        "truth.sensor",
+        "the hook-load channel against the load on the hook at every true hook-load sample "
+        "time: the block's motion (+1 hoisting, -1 lowering, 0 still), the sensor's factor on "
+        "the load for that motion, its zero offset and its noise-free reading (only in "
+        "sessions whose hook-load sensor does not read the load on the hook)",
+        {"t": _TIME, "state": _STATES, "block_motion": {"type": "integer"},
+         "factor": _NUMBER, "offset_N": _NUMBER, "hookload_N": _NUMBER, "reading_N": _NUMBER},
+        ("t", "block_motion", "factor", "offset_N", "hookload_N", "reading_N")),
     "/truth/friction": _schema(
         "truth.friction",
         "uniform friction factors reproducing the true pick-up and slack-off hook load and the "
@@ -164,6 +177,57 @@ def _model_error(scenario: Scenario) -> dict[str, Any]:
             "model_string_length_m": paper.string.length}
 
 
+def _sensor_fields(scenario: Scenario) -> dict[str, Any]:
+    """The hook-load sensor's truth for ``/truth/scenario`` (nothing when the channel reads
+    the load on the hook, as in sessions made before the sensor was modelled)."""
+    measurement = scenario.measurement
+    if not measurement.any:
+        return {}
+    sensor = measurement.sensor
+    return {"hookload_sensor": {
+        "location": str(sensor.location), "lines": sensor.lines,
+        "efficiency": sensor.efficiency, "above_sensor_N": sensor.above_sensor,
+        "offset_start_N": measurement.offset_start, "offset_end_N": measurement.offset_end}}
+
+
+def _truth_sample_records(session: Session) -> list[MessageRecord]:
+    """The truth at every true hook-load sample: ``/truth/load``, ``/truth/sensor`` (when the
+    hook-load channel is not the load on the hook), and off the slips ``/truth/friction`` and
+    ``/truth/weight`` (with an injected model error)."""
+    scenario = session.scenario
+    truth = session.truth
+    records: list[MessageRecord] = []
+    for k, t in enumerate(session.truth_t.tolist()):
+        state = str(truth["state"][k])
+        bit = float(truth["bit_depth"][k])
+        records.append((_ns(t), "/truth/load", {
+            "t": t, "state": state, "bit_depth_m": bit,
+            "hole_depth_m": float(truth["hole_depth"][k]),
+            "block_position_m": float(truth["block_position"][k]),
+            "hookload_N": float(truth["hookload"][k]), "torque_Nm": float(truth["torque"][k])}))
+        if "hookload_reading" in truth:
+            motion = int(truth["block_motion"][k])
+            records.append((_ns(t), "/truth/sensor", {
+                "t": t, "state": state, "block_motion": motion,
+                "factor": scenario.measurement.sensor.factor(motion),
+                "offset_N": float(truth["hookload_offset"][k]),
+                "hookload_N": float(truth["hookload"][k]),
+                "reading_N": float(truth["hookload_reading"][k])}))
+        if state == RigState.IN_SLIPS:
+            continue
+        records.append((_ns(t), "/truth/friction", {
+            "t": t, "state": state, "bit_depth_m": bit,
+            "mu_pick_up": _finite_or_none(float(truth["mu_pick_up"][k])),
+            "mu_slack_off": _finite_or_none(float(truth["mu_slack_off"][k])),
+            "mu_rotating": _finite_or_none(float(truth["mu_rotating"][k])),
+            "mu_mean": float(truth["mu_mean"][k])}))
+        if "weight_factor" in truth:
+            records.append((_ns(t), "/truth/weight", {
+                "t": t, "state": state, "bit_depth_m": bit,
+                "weight_factor": float(truth["weight_factor"][k])}))
+    return records
+
+
 def session_messages(session: Session) -> list[MessageRecord]:
     """Every message of a simulated session, in log-time order (inputs and truth)."""
     scenario = session.scenario
@@ -174,7 +238,8 @@ def session_messages(session: Session) -> list[MessageRecord]:
         "method": scenario.method, "prefix": scenario.prefix,
         "block_weight_N": scenario.well.block_weight,
         "duration_s": session.timeline.duration,
-        "sample_interval_s": dict(scenario.sample_interval)}))
+        "sample_interval_s": dict(scenario.sample_interval),
+        **_sensor_fields(scenario)}))
     profile: dict[str, Any] = {"t": start, "md_m": session.profile_md.tolist(),
                                "mu": session.profile_mu.tolist(),
                                "mu_base": list(map(float, scenario.friction))}
@@ -197,26 +262,7 @@ def session_messages(session: Session) -> list[MessageRecord]:
         records.append((_ns(t), "/truth/state", {
             "t": t, "state": changed_to, "bit_depth_m": float(where.bit_depth[0]),
             "hole_depth_m": float(where.hole_depth[0])}))
-    truth = session.truth
-    for k, t in enumerate(session.truth_t.tolist()):
-        state = str(truth["state"][k])
-        bit = float(truth["bit_depth"][k])
-        records.append((_ns(t), "/truth/load", {
-            "t": t, "state": state, "bit_depth_m": bit,
-            "hole_depth_m": float(truth["hole_depth"][k]),
-            "block_position_m": float(truth["block_position"][k]),
-            "hookload_N": float(truth["hookload"][k]), "torque_Nm": float(truth["torque"][k])}))
-        if state != RigState.IN_SLIPS:
-            records.append((_ns(t), "/truth/friction", {
-                "t": t, "state": state, "bit_depth_m": bit,
-                "mu_pick_up": _finite_or_none(float(truth["mu_pick_up"][k])),
-                "mu_slack_off": _finite_or_none(float(truth["mu_slack_off"][k])),
-                "mu_rotating": _finite_or_none(float(truth["mu_rotating"][k])),
-                "mu_mean": float(truth["mu_mean"][k])}))
-            if "weight_factor" in truth:
-                records.append((_ns(t), "/truth/weight", {
-                    "t": t, "state": state, "bit_depth_m": bit,
-                    "weight_factor": float(truth["weight_factor"][k])}))
+    records += _truth_sample_records(session)
     for alarm in session.alarms:
         records.append((_ns(alarm.t), "/truth/alarm", {
             "t": alarm.t, "kind": alarm.kind, "severity": alarm.severity,

@@ -15,11 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.model.hookload_sensor import HookloadSensor
 from tdmon.model.well import Well
 
 __all__ = [
     "Array",
     "FrictionAnomaly",
+    "HookloadMeasurement",
     "ModelMismatch",
     "NoiseSettings",
     "Phase",
@@ -119,6 +121,8 @@ class NoiseSettings:
     missing_rate : probability that a sample is never sent [-]
     clock_jitter : standard deviation of the error of the payload time stamp [s] (clipped to
         0.45 of the sampling interval so that a channel stays in order)
+    offset : a constant zero offset added to every reading [SI unit of the channel] (a torque
+        sensor reading a few hundred N m on a still string)
     """
 
     relative: float = 0.0
@@ -127,6 +131,38 @@ class NoiseSettings:
     spike_size: float = 0.2
     missing_rate: float = 0.0
     clock_jitter: float = 0.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class HookloadMeasurement:
+    """How the rig's hook-load channel is made of the load on the hook (the truth; the
+    daemon's well file may describe the sensor differently).
+
+    Attributes
+    ----------
+    sensor : where the sensor sits, the lines and the true sheave efficiency
+        (:class:`tdmon.model.hookload_sensor.HookloadSensor`); the default reads the load on
+        the hook
+    offset_start, offset_end : zero offset of the sensor at the session's start and end [N],
+        drifting linearly in between
+    """
+
+    sensor: HookloadSensor = field(default_factory=HookloadSensor)
+    offset_start: float = 0.0
+    offset_end: float = 0.0
+
+    @property
+    def any(self) -> bool:
+        """Whether the channel differs from the load on the hook at all."""
+        return (self.sensor.reads_sheave_friction and self.sensor.efficiency != 1.0) \
+            or self.sensor.above_sensor != 0.0 or self.offset_start != 0.0 \
+            or self.offset_end != 0.0
+
+    def offset(self, tau: Array, duration: float) -> Array:
+        """Zero offset [N] at times ``tau`` [s from the start] of a session of ``duration``."""
+        share = np.clip(tau / duration, 0.0, 1.0) if duration > 0 else np.zeros_like(tau)
+        return self.offset_start + share * (self.offset_end - self.offset_start)
 
 
 @dataclass(frozen=True)
@@ -191,6 +227,8 @@ class Scenario:
     mismatch : injected model errors; ``well`` is then the true well (fluid density and string
         changed, the fill level applied per bit depth by :class:`tdmon.replay.loads.Loads`)
     model_well : the well as the daemon's well file describes it (None: ``well``)
+    measurement : how the hook-load channel reads the load on the hook (sheave friction of a
+        deadline sensor, zero offset)
     """
 
     name: str
@@ -215,3 +253,4 @@ class Scenario:
     faults: tuple[SensorFault, ...] = ()
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
     model_well: Well | None = None
+    measurement: HookloadMeasurement = field(default_factory=HookloadMeasurement)

@@ -17,6 +17,7 @@ from tdmon.daemon.steps.coverage import SHORT_TOLERANCE
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Well
 from tdmon.replay.loads import MOVING_DOWN, MOVING_UP, Loads
+from tdmon.replay.sensors import block_motion, measured_hookload
 from tdmon.replay.spec import Array, Scenario
 from tdmon.replay.timeline import Timeline
 from tdmon.vocabulary import AlarmKind, Operation, RigState, Severity
@@ -135,9 +136,15 @@ def truth_samples(timeline: Timeline, loads: Loads, tau: Array, element_md: Arra
                             float(np.sum(loads.mu * inside) / max(np.sum(inside), _EPS)))
         for key, value in zip(mus, cache[depth], strict=True):
             mus[key][k] = value
-    return {"state": state, "bit_depth": bit, "hole_depth": where.hole_depth,
-            "block_position": where.block_position, "hookload": hookload, "torque": torque,
-            **mus}
+    out = {"state": state, "bit_depth": bit, "hole_depth": where.hole_depth,
+           "block_position": where.block_position, "hookload": hookload, "torque": torque,
+           **mus}
+    scenario = loads.scenario
+    if scenario.measurement.any:
+        out["hookload_reading"] = measured_hookload(scenario, timeline, hookload, tau)
+        out["block_motion"] = block_motion(timeline, tau)
+        out["hookload_offset"] = scenario.measurement.offset(tau, timeline.duration)
+    return out
 
 
 

@@ -1,4 +1,5 @@
-"""WITSML 1.4.1.1 time logs into the input format: ``/tdmon/raw`` messages in an MCAP file.
+"""WITSML 1.4.1.1 and 1.3.1.1 time logs into the input format: ``/tdmon/raw`` messages in an
+MCAP file.
 
 The output is the same as the CSV importers' (:mod:`tdmon.replay.importers`): one payload
 ``{"t", "value", "unit"}`` per non-null mapped cell on ``<prefix>/<channel>``, in SI, the rig
@@ -6,12 +7,14 @@ activity code (when the log has one) on ``/reference/rig_activity``, and where t
 from on ``/reference/source`` (the log's well, name, uid and service company, with the licence
 and attribution: given, or Equinor's when the well is a Volve one, ``15/9-F-*``).
 
-Several files (or several ``<log>`` chunks of one log) are joined in time order: the files are
+Several files (or several ``<log>`` chunks of one log: the same well, wellbore and log name,
+whatever their uids, as runs exported apart have) are joined in time order: the files are
 merged on their row times, each file being read in order; a row whose time was already written
 (an overlap between chunks) is a duplicate and is dropped (on equal times the file given first
 wins); a row earlier than one already written is dropped and counted as out of order. Memory
 stays flat: rows stream from the parser (:func:`tdmon.ingest.witsml.iter_log`) to the recorder.
-See docs/witsml.md.
+The result lists every curve of the log and what became of it
+(:func:`tdmon.ingest.witsml.curve_fates`). See docs/witsml.md.
 """
 
 from __future__ import annotations
@@ -32,10 +35,12 @@ from tdmon.errors import IngestError
 from tdmon.ingest.witsml import (
     CURVE_TABLE,
     CurveChoice,
+    CurveFate,
     DataRow,
     LogBlock,
     ResolvedCurve,
     block_samples,
+    curve_fates,
     iter_log,
     resolve_curves,
     rig_activity_column,
@@ -57,6 +62,8 @@ WITSML_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
             "files": {"type": "array", "items": {"type": "string"}},
             "well": {"type": "string"}, "wellbore": {"type": "string"},
             "log_name": {"type": "string"}, "log_uid": {"type": "string"},
+            "log_uids": {"type": "array", "items": {"type": "string"}},
+            "runs": {"type": "array", "items": {"type": "string"}},
             "service_company": {"type": "string"},
             "curves": {"type": "object", "additionalProperties": {"type": "string"}},
             "note": {"type": ["string", "null"]},
@@ -76,7 +83,9 @@ class WitsmlImportResult:
 
     ``rows`` counts rows written, ``duplicates`` rows dropped because their time was already
     written, ``out_of_order`` rows dropped because they came after a later one; ``curves`` is
-    channel -> ``"MNEMONIC [uom]"`` of the first block.
+    channel -> ``"MNEMONIC [uom]"`` of the first block; ``curve_report`` every curve of the log
+    (over all its chunks, in the order first seen) with what became of it; ``log_uids`` the
+    uids of the chunks joined, ``version`` the WITSML version of the first.
     """
 
     path: Path
@@ -88,6 +97,9 @@ class WitsmlImportResult:
     duplicates: int = 0
     out_of_order: int = 0
     curves: dict[str, str] = field(default_factory=dict)
+    curve_report: tuple[CurveFate, ...] = ()
+    log_uids: tuple[str, ...] = ()
+    version: str = "1.4.1.1"
 
 
 class _Progress:
@@ -104,6 +116,36 @@ class _Progress:
 
 
 @dataclass
+class _Log:
+    """What the chunks of the one log being imported share: its identity (the first block's,
+    and where it came from) and the fate of each curve seen so far."""
+
+    first: tuple[LogBlock, str] | None = None
+    fates: dict[str, CurveFate] = field(default_factory=dict)
+
+    def add(self, block: LogBlock, source: str, curves: tuple[ResolvedCurve, ...]) -> None:
+        """Take a chunk, or refuse one of another log."""
+        if self.first is None:
+            self.first = (block, source)
+        else:
+            first, where = self.first
+            if block.identity != first.identity:
+                raise IngestError(
+                    f"{source}: log {_describe(block)} is not {_describe(first)} of {where}: "
+                    "chunks of one log share well, wellbore and log name; import one log at "
+                    "a time")
+        for fate in curve_fates(block, curves):
+            known = self.fates.get(fate.mnemonic.lower())
+            if known is None or (known.channel is None and fate.channel is not None):
+                self.fates[fate.mnemonic.lower()] = fate
+
+
+def _describe(block: LogBlock) -> str:
+    return (f"'{block.name or block.uid}' (uid {block.uid}, well '{block.well}', wellbore "
+            f"'{block.wellbore}')")
+
+
+@dataclass
 class _Stream:
     """One file's rows, mapped to samples with its current block's curves."""
 
@@ -111,6 +153,7 @@ class _Stream:
     events: Iterator[LogBlock | DataRow]
     overrides: Mapping[str, tuple[str, str | None]]
     table: Mapping[str, CurveChoice]
+    log: _Log
     blocks: list[LogBlock] = field(default_factory=list)
     curves: tuple[ResolvedCurve, ...] = ()
     activity: int | None = None
@@ -118,12 +161,9 @@ class _Stream:
     def rows(self, order: int) -> Iterator[tuple[float, int, list[tuple[str, float]], int | None]]:
         for item in self.events:
             if isinstance(item, LogBlock):
-                if self.blocks and item.uid != self.blocks[0].uid:
-                    raise IngestError(f"{self.source}: holds different logs (uids "
-                                      f"{self.blocks[0].uid}, {item.uid}); import one log at "
-                                      "a time")
                 self.curves = resolve_curves(item, self.source, overrides=self.overrides,
                                              table=self.table)
+                self.log.add(item, self.source, self.curves)
                 self.activity = rig_activity_column(item)
                 self.blocks.append(item)
                 continue
@@ -143,7 +183,7 @@ class _Stream:
         return int(code)
 
 
-def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
+def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,  # noqa: C901  (complex today; simplify when next touched)
                   overrides: Mapping[str, tuple[str, str | None]] | None = None,
                   table: Mapping[str, CurveChoice] = CURVE_TABLE,
                   licence: str | None = None, attribution: str | None = None,
@@ -171,6 +211,7 @@ def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
     """
     if not paths:
         raise IngestError("no WITSML log file given")
+    log = _Log()
     prefix = prefix.strip("/")
     topics = {channel: f"{prefix}/{channel}" for channel in CHANNEL_UNITS}
     counts: Counter[str] = Counter()
@@ -193,7 +234,7 @@ def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
                 raise IngestError(f"cannot read {source}: {exc.strerror or exc}") from exc
             reader: Any = _Progress(handle, bar) if bar is not None else handle
             streams.append(_Stream(str(source), iter_log(reader, str(source)),
-                                   overrides or {}, table))
+                                   overrides or {}, table, log))
         merged = heapq.merge(*(stream.rows(order) for order, stream in enumerate(streams)),
                              key=lambda item: (item[0], item[1]))
 
@@ -227,28 +268,72 @@ def import_witsml(paths: Sequence[str | Path], out: str | Path, *, prefix: str,
     return WitsmlImportResult(path=Path(out), rows=tally["rows"], messages=written,
                               per_channel=dict(counts), first_t=span[0] if span else None,
                               last_t=span[1] if span else None, duplicates=tally["duplicates"],
-                              out_of_order=tally["out_of_order"], curves=curves)
+                              out_of_order=tally["out_of_order"], curves=curves,
+                              curve_report=tuple(log.fates.values()),
+                              log_uids=_uids(streams), version=first.blocks[0].version)
+
+
+def _uids(streams: list[_Stream]) -> tuple[str, ...]:
+    """The chunks' uids, each once, in the order the files were given and read."""
+    return tuple(dict.fromkeys(block.uid for stream in streams for block in stream.blocks))
 
 
 _DATA_END: Final = re.compile(rb"</(?:[\w.-]+:)?data>")
+#: a ``<log ...>`` start tag's uid (not ``<logs>``, ``<logData>``, ``<logCurveInfo>``), and a
+#: ``runNumber``: the chunks a file holds, listed in ``/reference/source`` before its rows are
+#: parsed
+_LOG_HEADER: Final = re.compile(rb"<(?:[\w.-]+:)?log(?=[\s>])[^>]*?\suid=[\"']([^\"']*)[\"']"
+                                rb"|<(?:[\w.-]+:)?runNumber>\s*([^<]*?)\s*</")
+#: bytes kept from one read to the next so that a tag cut by the read is found whole
+_TAIL: Final = 4096
 
 
-def count_rows(path: Path) -> int:
-    """``<data>`` rows in a file, counted on the bytes (1 MB at a time, flat memory): the
-    ``rows`` of ``/reference/source``, written before the rows are parsed."""
+@dataclass(frozen=True)
+class LogFileScan:
+    """What :func:`scan_log_file` counts in a file: ``<data>`` rows, the ``<log>`` uids and the
+    ``runNumber`` values (each once, in file order)."""
+
+    rows: int
+    uids: tuple[str, ...]
+    runs: tuple[str, ...]
+
+
+def scan_log_file(path: Path) -> LogFileScan:
+    """Rows, log uids and run numbers of a file, read on the bytes 1 MB at a time (flat
+    memory), for ``/reference/source``, which is written before the rows are parsed."""
     count = 0
+    uids: dict[str, None] = {}
+    runs: dict[str, None] = {}
     tail = b""
+    scanned = 0  # bytes of `tail` already searched for log headers
     try:
         with path.open("rb") as handle:
             while chunk := handle.read(1 << 20):
                 block = tail + chunk
                 matches = list(_DATA_END.finditer(block))
                 count += len(matches)
-                keep = max(len(block) - 32, matches[-1].end() if matches else 0)
+                last = matches[-1].end() if matches else 0
+                header_end = 0
+                for match in _LOG_HEADER.finditer(block):
+                    if match.end() <= scanned:
+                        continue  # found in the previous read already
+                    uid, run = match.group(1), match.group(2)
+                    if uid is not None:
+                        uids.setdefault(uid.decode("utf-8", "replace"), None)
+                    elif run:
+                        runs.setdefault(run.decode("utf-8", "replace"), None)
+                    header_end = match.end()
+                keep = max(len(block) - _TAIL, last, header_end)
                 tail = block[keep:]
+                scanned = len(tail)  # a match inside it was found in this read
     except OSError as exc:
         raise IngestError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    return count
+    return LogFileScan(count, tuple(uids), tuple(runs))
+
+
+def count_rows(path: Path) -> int:
+    """``<data>`` rows in a file, counted on the bytes (:func:`scan_log_file`)."""
+    return scan_log_file(path).rows
 
 
 def _size(path: Path) -> int:
@@ -261,21 +346,21 @@ def _size(path: Path) -> int:
 def _source_message(t: float, streams: list[_Stream], licence: str | None,
                     attribution: str | None, note: str | None) -> dict[str, Any]:
     block = next(stream.blocks[-1] for stream in streams if stream.blocks)
-    uids = {stream.blocks[0].uid for stream in streams if stream.blocks}
-    if len(uids) > 1:
-        raise IngestError(f"the files hold different logs (uids {', '.join(sorted(uids))}); "
-                          "import one log at a time")
     volve = is_volve_well(block.well) or is_volve_well(block.wellbore)
     if volve:
         licence = licence or VOLVE_LICENCE
         attribution = attribution or VOLVE_ATTRIBUTION
     curves = next(stream.curves for stream in streams if stream.blocks)
+    first = next(stream.blocks[0] for stream in streams if stream.blocks)
+    scans = [scan_log_file(Path(stream.source)) for stream in streams]
     return {"t": t, "file": Path(streams[0].source).name,
             "files": [Path(stream.source).name for stream in streams],
-            "layout": "witsml-1.4.1.1",
-            "rows": sum(count_rows(Path(stream.source)) for stream in streams), "licence": licence,
+            "layout": f"witsml-{first.version}",
+            "rows": sum(scan.rows for scan in scans), "licence": licence,
             "attribution": attribution, "well": block.well, "wellbore": block.wellbore,
-            "log_name": block.name, "log_uid": block.uid,
+            "log_name": block.name, "log_uid": first.uid,
+            "log_uids": list(dict.fromkeys(uid for scan in scans for uid in scan.uids)),
+            "runs": list(dict.fromkeys(run for scan in scans for run in scan.runs)),
             "service_company": block.service_company,
             "curves": {curve.channel: f"{curve.mnemonic} [{curve.unit}]" for curve in curves},
             "note": note}

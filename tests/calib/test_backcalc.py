@@ -164,31 +164,6 @@ def test_block_weight_and_buoyancy_check_by_hand(well_open: Any) -> None:
     assert state.estimate.value == pytest.approx(655e3)
 
 
-@pytest.mark.parametrize("scenario", ["trip-out-tight-spot", "drill-ream-stuck-torque",
-                                      "trip-in-noisy"])
-def test_replay_window_friction_against_the_simulator_truth(replayed: Any,
-                                                            scenario: str) -> None:
-    result = replayed(scenario)
-    session = result.run.session
-    truth = session.truth
-    errors = []
-    for name, message in result.messages:
-        if name != "estimate" or message["kind"] != "window":
-            continue
-        operation = message["operation"]
-        state = "rotating_off_bottom" if operation == "rotating" else operation
-        # reaming windows are solved from torque: compare with the rotating-torque truth
-        key = "mu_rotating" if operation in ("reaming", "back_reaming") else f"mu_{operation}"
-        rows = np.flatnonzero(truth["state"] == state)
-        nearest = rows[np.argmin(np.abs(truth["bit_depth"][rows] - message["bit_depth_m"]))]
-        errors.append(message["mu"] - float(truth[key][nearest]))
-    errors_array = np.abs(np.array(errors))
-    assert errors_array.size >= 5
-    # the tight spot's overpull window is the one allowed outlier (it raises an alarm instead)
-    assert float(np.median(errors_array)) <= 0.01
-    assert float(np.mean(errors_array <= 0.02)) >= 0.85
-
-
 def test_reaming_friction_from_torque_with_the_motion_angle(model_open: WellModel) -> None:
     speed, rpm = 0.3, 100 * 2 * math.pi / 60
     radius = float(model_open.component_radius[-1])

@@ -113,7 +113,7 @@ def test_pick_up_alone_is_not_identifiable(model_open: WellModel) -> None:
     fields = joint_fields(state, SETTINGS)
     # the friction published is the one at the prior weight: the single window's
     assert fields["mu"] == pytest.approx(0.3, abs=0.005)
-    assert fields["weight_factor_std"] > 0.8 * SETTINGS.weight_factor_std
+    assert fields["weight_factor_std"] > 0.8 * SETTINGS.parameters.get("weight_factor").prior_std
 
 
 def _trip(model: WellModel, mu: float, factor: float, rng: np.random.Generator,
@@ -292,8 +292,8 @@ def test_the_weight_prior_comes_from_the_daemon_file(tmp_path: Any) -> None:
     _, steps = calibration_steps_for(load_daemon_config(good))
     step = next(s for s in steps if isinstance(s, CalibrationStep))
     joint = step.settings.joint
-    assert (joint.weight_factor, joint.weight_factor_std, joint.mismatch_tolerance) == (
-        0.97, 0.02, 0.03)
+    weight = joint.parameters.get("weight_factor")
+    assert (weight.prior, weight.prior_std, joint.mismatch_tolerance) == (0.97, 0.02, 0.03)
     assert step.state.windows.joint is not None
     assert step.state.windows.joint.mean[1] == 0.97
     bad = tmp_path / "bad.toml"

@@ -20,7 +20,15 @@ from tdmon.calib.mu_calibration import (
     update,
 )
 from tdmon.calib.windows import Window
-from tdmon.model.friction import KAARSTAD_2009, FrictionModel
+from tdmon.errors import ModelError
+from tdmon.model.friction import (
+    EVERY_COEFFICIENT,
+    FAMILIES,
+    KAARSTAD_2009,
+    FrictionFamily,
+    FrictionModel,
+    power,
+)
 from tdmon.model.torque_drag import WellModel
 
 GLYDRIL = KAARSTAD_2009["glydril"]  # mu = 0.23 + 0.0013 T
@@ -193,3 +201,38 @@ def test_measurement_cases_are_those_built_one_by_one(model_open: WellModel,
                 assert (predicted, jacobian.tobytes()) == expected[:2]
                 assert effective == expected[2] or (math.isnan(effective)
                                                     and math.isnan(expected[2]))
+
+
+#: a law of each family, T in degC
+_LAWS = [("constant", {"mu": 0.3}), ("linear", {"a": 0.23, "b": 0.0013}),
+         ("power", {"a": 0.17, "b": 0.14}), ("exponential", {"a": 0.25, "b": 0.003}),
+         ("saturation-growth", {"a": 0.34, "b": 7.0}),
+         ("polynomial", {"a0": 0.25, "a1": 0.001, "a2": -1e-6})]
+
+
+def test_every_family_declares_what_scale_mode_scales() -> None:
+    assert sorted(FAMILIES) == sorted(name for name, _ in _LAWS)
+    temperature = np.array([5.0, 40.0, 95.0])
+    for family, coefficients in _LAWS:
+        scale, _ = scale_parametrisation(FrictionModel(family, coefficients))
+        # s mu_lab(T): the declared coefficients multiplied, the others (an exponent, a
+        # half-saturation temperature) as they are
+        expected = 1.3 * FrictionModel(family, coefficients)(temperature)
+        np.testing.assert_allclose(scale.mu([1.3], temperature), expected, rtol=1e-12)
+        law = scale.friction_model([1.3])
+        kept = {k for k, v in coefficients.items() if law.coefficients[k] == v}
+        assert kept == {"power": {"b"}, "exponential": {"b"},
+                        "saturation-growth": {"b"}}.get(family, set()), family
+
+
+def test_a_family_without_its_scaled_coefficients_is_an_error() -> None:
+    with pytest.raises(TypeError, match="scaled"):
+        FrictionFamily(power)  # type: ignore[call-arg]
+    with pytest.raises(ModelError, match="must be some of a, b"):
+        FrictionFamily(power, scaled=("c",))
+    with pytest.raises(ModelError, match="must be some of a, b"):
+        FrictionFamily(power, scaled=())
+    assert FrictionFamily(power, scaled=EVERY_COEFFICIENT).scale({"a": 0.2, "b": 0.1}, 2.0) == {
+        "a": 0.4, "b": 0.2}
+    assert FAMILIES["power"].scale({"a": 0.2, "b": 0.1}, 2.0) == {"a": 0.4, "b": 0.1}
+    assert FAMILIES["power"](10.0, a=0.2, b=0.1) == power(10.0, 0.2, 0.1)  # callable as before

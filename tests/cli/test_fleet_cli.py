@@ -186,7 +186,12 @@ def test_operations_centre_router_and_three_rig_daemons(
             lambda s: results[str(s.key_expr)].append(json.loads(s.payload.to_bytes())))
         _wait(lambda: all(results[f"{rig}/tdmon/status"] for rig in rigs), 120,
               "a status from every rig daemon", processes)
-        time.sleep(0.5)  # the daemons' subscriptions have reached the router by now
+        # the daemons' subscriptions have reached the router (was: a 0.5 s pause)
+        probes = [session.declare_publisher(f"{rig}/hookload") for rig in rigs]
+        _wait(lambda: all(p.matching_status.matching for p in probes), 120,
+              "the daemons' subscriptions", processes)
+        for probe in probes:
+            probe.undeclare()
         messages = list(recording_messages(REPLAY))
         block = zenoh.CongestionControl.BLOCK
         for rig in rigs:  # the rigs' data through the router, as their WITS gateways would

@@ -98,10 +98,10 @@ def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
 
 def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     scenarios = sorted((REPO / "replays" / "scenarios").glob("*.toml"))
-    assert len(scenarios) == 7
+    assert len(scenarios) == 11
     prefixes = {load_scenario(path).scenario.prefix for path in scenarios}
     assert prefixes == {"sim/trip-out", "sim/trip-in", "sim/faults", "sim/drill",
-                        "sim/model-error"}
+                        "sim/model-error", "sim/sheave", "sim/shallow"}
     for path in sorted((REPO / "replays" / "expectations").glob("*.toml")):
         expectations = load_expectations(path)
         assert expectations.replay_path.exists(), path
@@ -111,7 +111,8 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     for path in sorted((REPO / "config" / "daemon").glob("*.toml")):
         assert load_daemon_config(path).prefix in {"rig/F4", "sim/trip-out", "sim/trip-in",
                                                     "sim/faults", "sim/drill",
-                                                    "sim/model-error",
+                                                    "sim/model-error", "sim/sheave",
+                                                    "sim/shallow",
                                                     "rig"}, path  # rig: fleet-zenoh.toml's root
 
 

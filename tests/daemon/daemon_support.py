@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from tdmon.config.daemon import DaemonConfig, parse_daemon_config
 from tdmon.daemon.build import Built, build_daemon
-from tdmon.daemon.monitor import GridLoadModel, LoadModel
+from tdmon.daemon.steps.monitor import GridLoadModel, LoadModel
 from tdmon.daemon.supervisor import Backoff
 
 FAST_BACKOFF = Backoff(initial=0.1, maximum=0.5)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,15 +28,18 @@ def _messages(t0: float) -> list[tuple[str, bytes]]:
     return out
 
 
-async def _publish_all(broker: Any, messages: list[tuple[str, bytes]]) -> int:
-    """Publish every message at QoS 1, retrying over the restart; returns the retries."""
+async def _publish_all(broker: Any, messages: list[tuple[str, bytes]],
+                       retrying: Callable[[], bool]) -> int:
+    """Publish every message at QoS 1, retrying over the restart (the broker comes back once
+    ``retrying()``: the daemon has failed a reconnect); returns the retries."""
     index = 0
     retries = 0
     restart: asyncio.Task[None] | None = None
 
     async def bounce() -> None:
         await asyncio.to_thread(broker.stop)
-        await asyncio.sleep(0.7)  # long enough for the daemon to fail a reconnect or two
+        # the daemon has failed a reconnect (was: a 0.7 s pause)
+        await wait_until(retrying, 60, "the daemon retrying")
         await asyncio.to_thread(broker.start)
 
     while index < len(messages):
@@ -72,7 +76,9 @@ async def test_broker_restart_loses_nothing(mosquitto: Any, tmp_path: Path) -> N
                 await asyncio.sleep(0.05)
 
         watcher = asyncio.create_task(watch())
-        retries = await _publish_all(mosquitto, messages)
+        retries = await _publish_all(
+            mosquitto, messages,
+            lambda: built.daemon.connections.get("mqtt", "").startswith("retrying"))
         await wait_until(
             lambda: built.stats.samples_in - built.stats.duplicates >= TOTAL - bad
             and built.stats.rejected >= bad, 20, "every message processed")

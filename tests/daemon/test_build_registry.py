@@ -61,7 +61,7 @@ def test_what_the_checks_allow(tmp_path: Path) -> None:
 
 def test_every_config_section_has_a_row() -> None:
     # a section added to the config without a builder would be silently ignored
-    assert list(SOURCES) == ["zenoh", "mqtt", "mcap", "wits0"]  # the order the sources start in
+    assert list(SOURCES) == ["zenoh", "mqtt", "mcap", "wits0", "opcua"]  # the start order
     assert set(SOURCES) == set(SourcesConfig.model_fields)
     assert set(PUBLISHERS) == {"mqtt", "zenoh"} <= set(PublishConfig.model_fields)
     assert list(SINKS) == ["recorder", "rerun"]

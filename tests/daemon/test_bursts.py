@@ -22,8 +22,8 @@ from mcap.writer import Writer
 from tdmon.config.daemon import ZenohConfig
 from tdmon.daemon.aligner import Aligner
 from tdmon.daemon.inbox import Inbox
-from tdmon.daemon.monitor import MonitorStep
 from tdmon.daemon.pipeline import Pipeline, Sink, Step
+from tdmon.daemon.steps.monitor import MonitorStep
 from tdmon.daemon.steps.rig_state import RigStateStep
 from tdmon.errors import IngestError
 from tdmon.ingest import mcap_source
@@ -374,10 +374,13 @@ async def test_zenoh_hands_over_what_waits_in_lists(free_tcp_port: Callable[[], 
     n = 1000
     try:
         async with ZenohSource(session, key_expr_for("rig/B"), ("rig/B/tdmon/",)) as source:
-            deadline = time.monotonic() + 10
-            while not list(rig.info.peers_zid()) and time.monotonic() < deadline:
+            # the source's subscription has reached the rig (was: a 0.3 s pause)
+            probe = rig.declare_publisher("rig/B/hookload")
+            deadline = time.monotonic() + 60
+            while not probe.matching_status.matching:
+                assert time.monotonic() < deadline, "the subscription never reached the rig"
                 await asyncio.sleep(0.02)
-            await asyncio.sleep(0.3)
+            probe.undeclare()
             block = zenoh.CongestionControl.BLOCK
             rig.put("rig/B/tdmon/model", b"{}", congestion_control=block)  # ignored
             for i in range(n):

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import contextlib
+import json
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import paho.mqtt.client as mqtt
 import pytest
+import zenoh
 
 from tdmon.cli import main
 
@@ -62,6 +66,48 @@ def _wait_for(path: Path, text: str, timeout: float = 20) -> None:
         time.sleep(0.05)
 
 
+def _until(predicate: Callable[[], bool], what: str, timeout: float = 60) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.05)
+
+
+@contextlib.contextmanager
+def _zenoh_status(port: int) -> Iterator[dict[str, Any]]:
+    """The latest ``status`` the daemon listening on ``port`` published (rig/F4)."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    session = zenoh.open(conf)
+    latest: dict[str, Any] = {}
+    subscriber = session.declare_subscriber(
+        "rig/F4/tdmon/status", lambda s: latest.update(json.loads(s.payload.to_bytes())))
+    try:
+        yield latest
+    finally:
+        subscriber.undeclare()
+        session.close()
+
+
+@contextlib.contextmanager
+def _mqtt_status(port: int) -> Iterator[dict[str, Any]]:
+    """The latest ``status`` the daemon published on the broker at ``port`` (rig/F4)."""
+    latest: dict[str, Any] = {}
+    client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="status-watch")
+    client.on_connect = lambda c, *_: c.subscribe("rig/F4/tdmon/status", qos=0)
+    client.on_message = lambda _c, _u, m: latest.update(json.loads(m.payload))
+    client.connect("127.0.0.1", port)
+    client.loop_start()
+    try:
+        yield latest
+    finally:
+        client.loop_stop()
+        client.disconnect()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_run_publish_and_stop_with_a_signal(tmp_path: Path, sig: signal.Signals,
                                             free_tcp_port: Callable[[], int],
@@ -78,12 +124,14 @@ output = "{tmp_path / 'rec'}"
                                   stderr=err, stdout=subprocess.DEVNULL)
         try:
             _wait_for(log, "daemon running")
-            published = subprocess.run(
-                [*TDMON, "publish", str(volve_csv), "--config", str(config), "--limit", "900"],
-                capture_output=True, text=True, timeout=60)
-            assert published.returncode == 0, published.stderr
-            assert "published 900 messages" in published.stderr
-            time.sleep(0.5)
+            with _zenoh_status(port) as status:
+                published = subprocess.run(
+                    [*TDMON, "publish", str(volve_csv), "--config", str(config), "--limit",
+                     "900"], capture_output=True, text=True, timeout=60)
+                assert published.returncode == 0, published.stderr
+                assert "published 900 messages" in published.stderr
+                # the daemon has them all (was: a 0.5 s pause)
+                _until(lambda: status.get("samples_in") == 900, "900 samples counted")
             daemon.send_signal(sig)
             assert daemon.wait(30) == 0, log.read_text()
         finally:
@@ -113,17 +161,19 @@ client_id = "tdmon-cli"
 mqtt = true
 """)
     log = tmp_path / "daemon.log"
-    with log.open("w") as err:
+    with log.open("w") as err, _mqtt_status(mosquitto.port) as status:
         daemon = subprocess.Popen([*TDMON, "run", "--config", str(config)], stderr=err)
         try:
             _wait_for(log, "daemon running")
-            time.sleep(0.5)
+            # subscribed (was: a 0.5 s pause), then every sample counted (was: 1 s)
+            _until(lambda: status.get("connections", {}).get("mqtt") == "connected",
+                   "the daemon's subscription")
             published = subprocess.run(
                 [*TDMON, "publish", str(volve_csv), "--mqtt", f"127.0.0.1:{mosquitto.port}",
                  "--prefix", "rig/F4", "--limit", "500", "--speed", "max"],
                 capture_output=True, text=True, timeout=60)
             assert published.returncode == 0, published.stderr
-            time.sleep(1.0)
+            _until(lambda: status.get("samples_in") == 500, "500 samples counted")
             daemon.send_signal(signal.SIGTERM)
             assert daemon.wait(30) == 0
         finally:

@@ -213,8 +213,10 @@ async def _live(transport: str, tmp_path: Path, mosquitto_port: int | None,
     session = zenoh.open(rig_conf)
     try:
         async with running(config, connected=("zenoh",)) as (built, sink):
-            await wait_until(lambda: len(list(session.info.peers_zid())) > 0, 10, "zenoh peer")
-            await asyncio.sleep(0.3)  # let the subscriptions propagate
+            # the daemon's subscription has reached the rig (was: a 0.3 s pause)
+            probe = session.declare_publisher("rig/T1/hookload")
+            await wait_until(lambda: probe.matching_status.matching, 60, "the subscription")
+            probe.undeclare()
 
             async def put_zenoh(topic: str, data: bytes) -> None:
                 session.put(topic, data, congestion_control=zenoh.CongestionControl.BLOCK)

@@ -115,11 +115,13 @@ def _feed_and_kill(config: Path, log: Path, port: int, seconds: int, rows_after:
     published: list[tuple[str, float]] = []
     try:
         _wait_for(log, "daemon running")
-        deadline = time.monotonic() + 20
-        while not list(rig.info.peers_zid()):
-            assert time.monotonic() < deadline, "the rig never met the daemon"
+        # the daemon's subscription has reached the rig (was: a 0.5 s pause)
+        probe = rig.declare_publisher("rig/K1/hookload")
+        deadline = time.monotonic() + 60
+        while not probe.matching_status.matching:
+            assert time.monotonic() < deadline, "the rig never met the daemon's subscription"
             time.sleep(0.05)
-        time.sleep(0.5)
+        probe.undeclare()
         t0 = time.time()
         started = time.monotonic()
         for row in range(seconds * ROWS_PER_S):

@@ -115,8 +115,10 @@ async def test_zenoh_end_to_end(tmp_path: Path, free_tcp_port: Callable[[], int]
         subscriber = rig.declare_subscriber(
             "rig/T1/tdmon/model", lambda s: results.append(json.loads(s.payload.to_bytes())))
         async with running(config, connected=("zenoh",)) as (built, _):
-            await wait_until(lambda: len(list(rig.info.peers_zid())) > 0, 10, "zenoh peer")
-            await asyncio.sleep(0.3)  # let the subscriptions propagate both ways
+            # the daemon's subscription has reached the rig (was: a 0.3 s pause)
+            probe = rig.declare_publisher("rig/T1/hookload")
+            await wait_until(lambda: probe.matching_status.matching, 60, "the subscription")
+            probe.undeclare()
             sequence = _sequence(time.time())
             block = zenoh.CongestionControl.BLOCK
             for t, hookload, torque, bit_depth in sequence:

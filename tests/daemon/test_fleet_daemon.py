@@ -189,8 +189,12 @@ async def test_three_rigs_over_zenoh(tmp_path: Path, free_tcp_port: Callable[[],
     sequences = {prefix: _sequence(time.time(), offset) for prefix, (_, offset) in RIGS.items()}
 
     async def publish() -> None:
-        await wait_until(lambda: len(list(rigs.info.peers_zid())) > 0, 10, "zenoh peer")
-        await asyncio.sleep(0.3)  # let the subscriptions propagate both ways
+        # the daemon's subscriptions have reached the rigs (was: a 0.3 s pause)
+        probes = [rigs.declare_publisher(f"{prefix}/hookload") for prefix in sequences]
+        await wait_until(lambda: all(p.matching_status.matching for p in probes), 60,
+                         "the subscriptions")
+        for probe in probes:
+            probe.undeclare()
         block = zenoh.CongestionControl.BLOCK
         for prefix, sequence in sequences.items():
             for t, hookload, torque, bit_depth in sequence:

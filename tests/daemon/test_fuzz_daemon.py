@@ -65,10 +65,13 @@ def harness(tmp_path_factory: pytest.TempPathFactory,
     thread = threading.Thread(target=asyncio.run, args=(serve(),), daemon=True)
     thread.start()
     assert ready.wait(20), "daemon did not start"
-    deadline = time.monotonic() + 10
-    while not list(rig.info.peers_zid()) and time.monotonic() < deadline:
+    # the daemon's subscription has reached the rig (was: a 0.3 s pause)
+    probe = rig.declare_publisher("rig/T1/hookload")
+    deadline = time.monotonic() + 60
+    while not probe.matching_status.matching:
+        assert time.monotonic() < deadline, "the subscription never reached the rig"
         time.sleep(0.02)
-    time.sleep(0.3)  # subscription propagation
+    probe.undeclare()
     built = holder["built"]
     try:
         yield Harness(built, holder["sink"], rig, built.pipeline.decoder)

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from tdmon.config.daemon import load_daemon_config
-from tdmon.daemon.build import read_well_path
+from tdmon.config.well_file import read_well_path
 from tdmon.daemon.pipeline import Frame
 from tdmon.daemon.steps.coverage import CoverageStep
 from tdmon.errors import ConfigError
@@ -291,6 +291,10 @@ stale_timeout = "30 s"            # rows 15 s apart
 [recorder]
 enabled = true
 output = "{tmp_path / 'rec'}"
+[publish]
+zenoh = true
+names = ["status"]
+status_interval = "0.2 s"
 """)
     parts = []
     for name, rows in (("first", (0, 50)), ("second", (50, 100))):
@@ -298,6 +302,18 @@ output = "{tmp_path / 'rec'}"
         part.write_text(_volve_rows(*rows))
         parts.append(part)
     tdmon = [sys.executable, "-m", "tdmon"]
+    import json
+
+    import zenoh
+
+    # the daemon's published status: how many samples it has counted (was: a 0.5 s pause)
+    conf = zenoh.Config()
+    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    watch = zenoh.open(conf)
+    status: dict[str, Any] = {}
+    watch.declare_subscriber("rig/F4/tdmon/status",
+                             lambda s: status.update(json.loads(s.payload.to_bytes())))
     log = tmp_path / "daemon.log"
     with log.open("w") as err:
         daemon = subprocess.Popen([*tdmon, "run", "--config", str(config)], stderr=err,
@@ -310,7 +326,11 @@ output = "{tmp_path / 'rec'}"
                                            timeout=60)
                 assert published.returncode == 0, published.stderr
                 if number == 0:
-                    time.sleep(0.5)
+                    sent = int(published.stderr.split("published ")[1].split()[0])
+                    deadline = time.monotonic() + 60
+                    while status.get("samples_in", 0) < sent:  # the first half processed
+                        assert time.monotonic() < deadline, f"counted {status}, sent {sent}"
+                        time.sleep(0.05)
                     well.write_text(well.read_text().replace('length = "2574 m"',
                                                              'length = "2400 m"'))
                     daemon.send_signal(signal.SIGHUP)
@@ -321,6 +341,7 @@ output = "{tmp_path / 'rec'}"
         finally:
             if daemon.poll() is None:
                 daemon.kill()
+            watch.close()
     assert "Traceback" not in log.read_text()
     [recording] = sorted((tmp_path / "rec").glob("*.mcap"))
     messages = list(read_messages(recording, ["/tdmon/well", "/tdmon/alarm"]))

@@ -14,8 +14,8 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from tdmon.daemon.monitor import ModelledLoads, model_message
 from tdmon.daemon.pipeline import Frame
+from tdmon.daemon.steps.monitor import ModelledLoads, model_message
 from tdmon.record.mcap_recorder import McapRecorder, _has_nonfinite
 from tdmon.record.reader import read_messages
 from tdmon.record.sink import FiniteMessage

@@ -239,8 +239,8 @@ def _parsed(folder: Path, calibration: dict[str, Any]) -> Any:
 
 
 def test_scale_mode_and_section_choice(tmp_path: Path) -> None:
-    from tdmon.daemon.build import calibration_steps_for
-    from tdmon.daemon.calibrate import CalibrationStep
+    from tdmon.daemon.steps.calibrate import CalibrationStep
+    from tdmon.daemon.steps.compose import calibration_steps_for
     from tdmon.errors import ConfigError
 
     config = _parsed(tmp_path, {"mu_t": "scale", "lab_fit": {"family": "linear", "a": 0.2,

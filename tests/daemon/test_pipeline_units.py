@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 from tdmon.calib.rigstate import classify
 from tdmon.config.daemon import RigStateConfig
 from tdmon.daemon.aligner import Aligner
-from tdmon.daemon.monitor import GridLoadModel, ModelledLoads, MonitorStep
 from tdmon.daemon.pipeline import Emit, Frame, Pipeline, Sink, Step
+from tdmon.daemon.steps.monitor import GridLoadModel, ModelledLoads, MonitorStep
 from tdmon.daemon.steps.rig_state import RigStateStep, rig_state_thresholds
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.types import RawMessage, Sample

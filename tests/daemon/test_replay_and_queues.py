@@ -96,8 +96,10 @@ async def test_zenoh_source_and_publisher_on_one_session_do_not_deadlock(
     rig = zenoh.open(conf)
     try:
         async with running(config, connected=("zenoh",)) as (built, _):
-            await wait_until(lambda: bool(list(rig.info.peers_zid())), 10, "peer")
-            await asyncio.sleep(0.3)
+            # the daemon's subscription has reached the rig (was: a 0.3 s pause)
+            probe = rig.declare_publisher("rig/T1/hookload")
+            await wait_until(lambda: probe.matching_status.matching, 60, "the subscription")
+            probe.undeclare()
             rows = 1500
 
             def burst() -> None:

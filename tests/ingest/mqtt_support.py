@@ -1,5 +1,5 @@
-"""Helpers of the MQTT tests: a rig publishing QoS 1 messages (paho, in a thread) and a source's
-messages taken with a timeout."""
+"""Helpers of the MQTT tests: a rig publishing QoS 1 messages (paho, in a thread), a source's
+messages taken with a timeout, and a wait until the broker has its acknowledgements."""
 
 from __future__ import annotations
 
@@ -32,6 +32,15 @@ async def take(source: MqttSource, n: int, timeout: float = 10.0) -> list[RawMes
     """The next ``n`` messages of ``source`` (each within ``timeout`` seconds)."""
     iterator = aiter(source)
     return [await asyncio.wait_for(anext(iterator), timeout) for _ in range(n)]
+
+
+async def acknowledged(source: MqttSource, timeout: float = 10.0) -> None:
+    """Return once the broker has the acknowledgements ``source`` gave so far: a QoS 1 round
+    trip on the same connection, whose packets the broker reads in order (a fixed pause, on a
+    loaded machine, left acknowledgements unread when the connection closed, and the broker
+    sent their messages again)."""
+    assert source._client is not None
+    await source._client.publish("probe/acknowledged", b"", qos=1, timeout=timeout)
 
 
 async def nothing_within(source: MqttSource, seconds: float) -> bool:

@@ -12,7 +12,7 @@ from typing import Any
 
 import paho.mqtt.client as mqtt
 import pytest
-from mqtt_support import nothing_within, publish, take
+from mqtt_support import acknowledged, nothing_within, publish, take
 
 from tdmon.config.daemon import MqttConfig
 from tdmon.ingest.mqtt import MqttPublisher, MqttSource, RecentDeliveries
@@ -32,7 +32,7 @@ async def test_unacknowledged_messages_come_back_as_recognised_duplicates(mosqui
         for message in first[:4]:
             assert message.ack is not None
             message.ack()  # the first four are safe with us; six are not acknowledged
-        await asyncio.sleep(0.5)  # the acknowledgements reach the broker
+        await acknowledged(source)
 
     # the broker resends the six it has no acknowledgement for, in order: this run handed
     # them out already
@@ -44,7 +44,7 @@ async def test_unacknowledged_messages_come_back_as_recognised_duplicates(mosqui
         for message in again:
             assert message.ack is not None
             message.ack()
-        await asyncio.sleep(0.5)
+        await acknowledged(source)
 
     # a new run (its own memory) after acknowledging everything: nothing comes back
     async with MqttSource(config, ["rig/D0/#"], base=None,
@@ -68,7 +68,7 @@ async def test_a_redelivery_this_run_has_not_seen_is_processed(mosquitto: Any) -
         for message in again:
             assert message.ack is not None
             message.ack()
-        await asyncio.sleep(0.3)
+        await acknowledged(source)
 
 
 async def test_a_payload_sent_twice_is_a_duplicate_only_on_a_resumed_session(
@@ -87,7 +87,7 @@ async def test_a_payload_sent_twice_is_a_duplicate_only_on_a_resumed_session(
             for message in received:
                 assert message.ack is not None
                 message.ack()
-            await asyncio.sleep(0.3)
+            await acknowledged(source)
 
 
 def test_recent_deliveries_window_forgets_the_oldest() -> None:
@@ -119,7 +119,7 @@ async def test_a_burst_arrives_whole_in_order_and_every_ack_counts(mosquitto: An
             received.append((raw.topic, raw.payload))
         await publisher
         assert received == messages
-        await asyncio.sleep(0.5)  # the acknowledgements reach the broker
+        await acknowledged(source)
 
     async with MqttSource(config, ["rig/B0/#"], base=None,
                           recent=RecentDeliveries()) as source:
@@ -138,15 +138,18 @@ async def test_results_are_all_delivered_in_order(mosquitto: Any, qos: int) -> N
         if len(got) == n:
             done.set()
 
+    subscribed = threading.Event()
     dashboard = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=f"dash-{qos}")
     dashboard.on_message = on_message
+    dashboard.on_subscribe = lambda *_: subscribed.set()
     dashboard.connect("127.0.0.1", mosquitto.port)
     dashboard.subscribe(f"rig/Q{qos}/tdmon/#", qos=qos)
     dashboard.loop_start()
     publisher = MqttPublisher(MqttConfig(port=mosquitto.port, client_id=f"tdmon-q{qos}"),
                               f"rig/Q{qos}", ["model"], qos=qos, queue_size=n)
     try:
-        await asyncio.sleep(0.3)  # the subscription is in place
+        # the subscription is in place: the broker's SUBACK came
+        assert await asyncio.to_thread(subscribed.wait, 60)
         for i in range(n):
             publisher.write("/tdmon/model", 0, {"i": i})
         async with publisher.connect() as client:
@@ -183,7 +186,7 @@ async def test_a_backlog_is_handed_over_in_lists_in_order(mosquitto: Any) -> Non
                 received.append((raw.topic, raw.payload))
         assert received == messages
         assert max(sizes) > 1 and len(sizes) < len(messages)
-        await asyncio.sleep(0.3)
+        await acknowledged(source)
 
 
 async def test_a_resumed_session_s_backlog_does_not_hold_the_subscription_up(
@@ -204,12 +207,8 @@ async def test_a_resumed_session_s_backlog_does_not_hold_the_subscription_up(
             if i % 2 and raw.ack is not None:  # half acknowledged; the run ends here
                 raw.ack()
                 acknowledged.add(raw.payload)
-        # the broker reads a connection's packets in order: once it has acknowledged a
-        # message published after the acknowledgements, it has read them all (a fixed pause
-        # was not enough on a loaded machine, and what the broker has not read when the
-        # connection closes is lost, and its messages sent again)
-        assert source._client is not None
-        await source._client.publish("test/after-the-acks", b"", qos=1, timeout=20)
+        # the probe's answer comes behind the backlog the broker is sending
+        await acknowledged(source, timeout=20)
     expected = [message for message in messages if message[1] not in acknowledged]
     async with MqttSource(config, ["rig/R0/#"], base=None) as source:
         assert source._client is not None
@@ -223,4 +222,4 @@ async def test_a_resumed_session_s_backlog_does_not_hold_the_subscription_up(
                 received.append((raw.topic, raw.payload))
         assert received == expected
         assert waiting < len(expected) // 10  # entered long before all of it had been read
-        await asyncio.sleep(0.3)
+        await acknowledged(source)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from mqtt_support import nothing_within, publish, take
+from mqtt_support import acknowledged, nothing_within, publish, take
 
 from tdmon.config.daemon import MqttConfig
 from tdmon.ingest.mqtt import MqttSource, RecentDeliveries
@@ -32,7 +32,7 @@ async def test_call_1_nothing_is_acknowledged_on_receipt_not_even_on_a_resumed_s
         first = await take(source, 5)
         assert [(m.topic, m.payload) for m in first] == messages
         assert all(m.ack is not None for m in first)  # handed out, never called
-        await asyncio.sleep(0.5)  # anything paho sent of its own would reach the broker
+        await acknowledged(source)  # anything paho sent of its own is with the broker
 
     async with MqttSource(config, ["rig/K1/#"], recent=RecentDeliveries()) as source:
         again = await take(source, 5)
@@ -40,7 +40,7 @@ async def test_call_1_nothing_is_acknowledged_on_receipt_not_even_on_a_resumed_s
         for message in again:
             assert message.ack is not None
             message.ack()
-        await asyncio.sleep(0.5)
+        await acknowledged(source)
 
 
 async def test_call_2_acknowledges_the_messages_acked_and_no_other(mosquitto: Any) -> None:
@@ -54,7 +54,7 @@ async def test_call_2_acknowledges_the_messages_acked_and_no_other(mosquitto: An
         for message in first[::2]:
             assert message.ack is not None
             message.ack()
-        await asyncio.sleep(0.5)
+        await acknowledged(source)
     late = first[1].ack
     assert late is not None
     late()  # its connection is closed: nothing is sent
@@ -66,7 +66,7 @@ async def test_call_2_acknowledges_the_messages_acked_and_no_other(mosquitto: An
         for message in again:
             assert message.ack is not None
             message.ack()
-        await asyncio.sleep(0.5)
+        await acknowledged(source)
 
     async with MqttSource(config, ["rig/K2/#"], recent=RecentDeliveries()) as source:
         assert await nothing_within(source, 1.5)

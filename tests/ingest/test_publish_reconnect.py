@@ -45,16 +45,15 @@ class Subscriber:
         self._lock = threading.Lock()
         self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="rig-watch",
                                   clean_session=False)
+        self.subscribed = threading.Event()
         self.client.on_connect = lambda c, *_: c.subscribe("rig/P1/#", qos=1)
+        self.client.on_subscribe = lambda *_: self.subscribed.set()
         self.client.on_message = self._on_message
         self.client.reconnect_delay_set(0.1, 1)
         self.client.connect("127.0.0.1", port)
         self.client.loop_start()
-        deadline = time.monotonic() + 10
-        while not self.client.is_connected():
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
-        time.sleep(0.3)  # the subscription is in place
+        # the subscription is in place: the broker's SUBACK came (was: a 0.3 s pause)
+        assert self.subscribed.wait(60), "no SUBACK from the broker"
 
     def _on_message(self, _c: Any, _u: Any, message: mqtt.MQTTMessage) -> None:
         with self._lock:
@@ -127,14 +126,15 @@ def test_kill_int_stops_a_publish_started_with_sigint_ignored(mosquitto: Any,
             if publisher.poll() is None:
                 publisher.kill()
                 publisher.wait(10)
-        time.sleep(0.5)
+        log = (tmp_path / "publish.err").read_text()
+        line = next(x for x in log.splitlines() if "stopped by SIGINT" in x)
+        delivered = int(line.split(": ")[2].split(" of ")[0])
+        # what the broker acknowledged reaches the subscriber (was: a 0.5 s pause)
+        _wait(lambda: len(set(watch.snapshot())) >= delivered, 60, "the delivered messages")
         received = len(set(watch.snapshot()))
     finally:
         watch.close()
-    log = (tmp_path / "publish.err").read_text()
     assert "Traceback" not in log
-    line = next(x for x in log.splitlines() if "stopped by SIGINT" in x)
-    delivered = int(line.split(": ")[2].split(" of ")[0])
     assert line.endswith("messages delivered on rig/P1/...") and " of 600 " in line
     assert 10 <= delivered < 600
     assert received == delivered  # the summary counts what the broker acknowledged

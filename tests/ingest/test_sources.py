@@ -8,6 +8,7 @@ import json
 import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import zenoh
@@ -16,6 +17,7 @@ from mcap.writer import Writer
 from tdmon.config.daemon import ZenohConfig
 from tdmon.daemon.supervisor import Backoff, supervise
 from tdmon.errors import IngestError
+from tdmon.ingest import mcap_source
 from tdmon.ingest.mcap_source import McapSource
 from tdmon.ingest.types import RawMessage, raw_message
 from tdmon.ingest.zenoh_io import ZenohSource, key_expr_for, open_session
@@ -65,13 +67,20 @@ async def test_mcap_source_as_fast_as_possible(tmp_path: Path, raw: bool) -> Non
     assert json.loads(messages[1].payload)["value"] == 1.0
 
 
-async def test_mcap_source_paced(tmp_path: Path) -> None:
+async def test_mcap_source_paced(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / "rec.mcap"
     _write_mcap(path, raw=False, n=26)  # 0.5 s of data
-    started = time.monotonic()
+    # the source's clock and waits on a clock of the test's own: its waits add up exactly,
+    # whatever the machine's load (a wall-clock bound failed on a loaded machine)
+    clock = [100.0]
+
+    async def sleep(delay: float) -> None:
+        clock[0] += delay
+
+    monkeypatch.setattr(mcap_source, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    monkeypatch.setattr(mcap_source, "asyncio", SimpleNamespace(sleep=sleep))
     messages = await _read(McapSource(path, speed=2.0))
-    elapsed = time.monotonic() - started
-    assert len(messages) == 26 and 0.22 <= elapsed < 1.0
+    assert len(messages) == 26 and clock[0] - 100.0 == pytest.approx(0.25, abs=1e-9)
 
 
 async def test_mcap_source_reads_a_file_without_footer(tmp_path: Path) -> None:
@@ -97,10 +106,13 @@ async def test_zenoh_bridge_applies_backpressure_and_loses_nothing(
     try:
         async with ZenohSource(session, key_expr_for("rig/Z"), ("rig/Z/tdmon/",),
                                max_buffer=50) as source:
-            deadline = time.monotonic() + 10
-            while not list(rig.info.peers_zid()) and time.monotonic() < deadline:
+            # the source's subscription has reached the rig (was: a 0.3 s pause)
+            probe = rig.declare_publisher("rig/Z/hookload")
+            deadline = time.monotonic() + 60
+            while not probe.matching_status.matching:
+                assert time.monotonic() < deadline, "the subscription never reached the rig"
                 await asyncio.sleep(0.02)
-            await asyncio.sleep(0.3)
+            probe.undeclare()
 
             def publish() -> None:
                 block = zenoh.CongestionControl.BLOCK
@@ -162,7 +174,10 @@ async def test_supervisor_retries_a_lost_connection_until_cancelled() -> None:
 
     task = asyncio.create_task(supervise("src", connect, work, seen,
                                          Backoff(initial=0.01, maximum=0.02)))
-    await asyncio.sleep(0.3)
+    deadline = time.monotonic() + 60  # five retries, however slow the machine (was: 0.3 s)
+    while runs < 5:
+        assert time.monotonic() < deadline and not task.done()
+        await asyncio.sleep(0.01)
     task.cancel()
     with contextlib.suppress(asyncio.CancelledError):
         await task

@@ -1,6 +1,7 @@
-"""The model tests run on the ahead-of-time kernels (built here if the set-up did not, unless
-``TDMON_KERNELS=jit``); wells shared by the model tests, as fixtures (a helper module named
-conftest cannot be imported safely when several test folders have one)."""
+"""Wells shared by the model tests, as fixtures (a helper module named conftest cannot be
+imported safely when several test folders have one). The model tests run on the kernels
+``TDMON_KERNELS`` chooses: numba's unless it says ``python`` (`tests/model/test_kernels.py`
+holds the two engines to the same numbers)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,6 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from tdmon.model import aot, kernels
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.survey import minimum_curvature
 from tdmon.model.well import Fluid, HoleSection, Well
@@ -91,14 +91,3 @@ def three_d() -> Well:
 @pytest.fixture(scope="session")
 def three_d_survey_stations() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return three_d_stations()
-
-
-@pytest.fixture(scope="session", autouse=True)
-def model_kernels() -> kernels.Kernels:
-    """The kernels every `WellModel` of the model tests runs: the ahead-of-time ones."""
-    if kernels.mode() != "jit":
-        aot.ensure_built()
-    kernels.forget()
-    loaded = kernels.load()
-    assert loaded.kind == ("jit" if kernels.mode() == "jit" else "aot"), loaded
-    return loaded

@@ -1,26 +1,36 @@
-"""The compiled kernels' packed arguments: `pack_well` stores every array under its own name,
-`kernel_well` converts dtypes and layouts, and the entry points called by keyword give the
-model's numbers (whichever kernels the model loaded: the JIT's equal them)."""
+"""The element loops and their two engines: numba's compiled functions and the same functions as
+plain Python give every model call the same numbers bit for bit; `pack_well` stores every array
+under its own name, `kernel_well` converts dtypes and layouts, the entry points called by keyword
+give the model's numbers, and several cases marched together equal marches one by one."""
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
-from numba import njit
 
 from tdmon.errors import ModelError
 from tdmon.model import _kernels, kernels
+from tdmon.model.broomstick import broomstick_from_model
 from tdmon.model.survey import tangent_vectors
-from tdmon.model.torque_drag import WellModel
+from tdmon.model.torque_drag import WellModel, torque_drag
 from tdmon.model.well import Well
 
+ROOT = Path(__file__).resolve().parents[2]
 
-@njit
-def _fields(real, index):  # the views the loops read, by name
-    well = _kernels._unpack(real, index)
-    return (well.node_md, well.tangents, well.dogleg, well.curve_kind, well.run_break,
-            well.element_kk, well.element_ke, well.element_ee, well.element_dtvd,
-            well.component_top, well.component_weight, well.component_radius)
+_FIELDS = ("node_md", "tangents", "dogleg", "curve_kind", "run_break", "element_kk",
+           "element_ke", "element_ee", "element_dtvd", "component_top", "component_weight",
+           "component_radius")
+
+
+def _fields(packed: kernels.KernelWell) -> dict[str, np.ndarray]:
+    """The views the loops read, by name (the plain `_unpack` reads either engine's buffers)."""
+    return dict(zip(_FIELDS, _kernels._unpack(*packed), strict=True))
 
 
 def _distinct_inputs(n_nodes: int) -> dict[str, np.ndarray]:
@@ -40,13 +50,11 @@ def _distinct_inputs(n_nodes: int) -> dict[str, np.ndarray]:
     }
 
 
-def test_pack_well_stores_each_array_under_its_name() -> None:
+@pytest.mark.parametrize("engine", kernels.ENGINES)
+def test_pack_well_stores_each_array_under_its_name(engine: str) -> None:
     inputs = _distinct_inputs(6)
-    stored = _fields(*_kernels.pack_well(**inputs))
-    names = ("node_md", "tangents", "dogleg", "curve_kind", "run_break", "element_kk",
-             "element_ke", "element_ee", "element_dtvd", "component_top", "component_weight",
-             "component_radius")
-    by_name = dict(zip(names, stored, strict=True))
+    loaded = kernels.load(engine)
+    by_name = _fields(kernels.KernelWell(*loaded.module.pack_well(**inputs)))
     for name, value in inputs.items():
         assert np.array_equal(by_name[name], value), name
     assert by_name["run_break"].tolist() == inputs["run_break"].astype(int).tolist()
@@ -54,33 +62,111 @@ def test_pack_well_stores_each_array_under_its_name() -> None:
     for name, expected in (("element_kk", kk), ("element_ke", ke), ("element_ee", ee),
                            ("element_dtvd", dtvd)):
         assert np.array_equal(by_name[name], expected), name
+    assert kk[0] > 0.0 and dtvd[0] > 0.0  # a bent, descending element
 
 
 def test_kernel_well_converts_dtype_and_layout() -> None:
     inputs = _distinct_inputs(6)
-    jit = kernels.Kernels("jit", _kernels, "numba's JIT")
-    reference = _fields(*kernels.kernel_well(jit, **inputs))
+    numba = kernels.load("numba")
+    reference = _fields(kernels.kernel_well(numba, **inputs))
     converted = dict(inputs)
     converted["node_md"] = np.linspace(0.0, 100.0, 11)[::2]  # same values, strided
     converted["curve_kind"] = inputs["curve_kind"].astype(np.int32)
     converted["component_top"] = [10, 100]  # a list of ints
     converted["run_break"] = inputs["run_break"].astype(np.int8)
-    for got, expected in zip(_fields(*kernels.kernel_well(jit, **converted)), reference,
-                             strict=True):
-        assert np.array_equal(got, expected)
-        assert got.dtype == expected.dtype
+    got = _fields(kernels.kernel_well(numba, **converted))
+    for name, expected in reference.items():
+        assert np.array_equal(got[name], expected), name
+        assert got[name].dtype == expected.dtype, name
+
+
+def _everything(model: WellModel, method: str) -> list[np.ndarray]:
+    """Every number the model's calls return, flattened, one array per call."""
+    cases = np.stack([model.friction(mu) for mu in (0.0, 0.17, 0.41)])
+    cases[1, 40:90] = 0.6
+    out: list[np.ndarray] = []
+    for depth in (350.0, 1777.7, 3000.0):
+        for operation, extra in (("pick_up", {}), ("slack_off", {}), ("rotating", {}),
+                                 ("on_bottom", {"wob": 9e4, "bit_torque": 3e3}),
+                                 ("pick_up", {"psi": 0.3})):
+            out.append(np.array(model.evaluate(operation, depth, 0.23, method=method, **extra)))
+            out.append(np.concatenate(model.evaluate_cases(operation, depth, cases,
+                                                           method=method, **extra)))
+        for operation, index in (("rotating", 0), ("rotating", 1), ("slack_off", 0)):
+            value, gradient = model.evaluate_gradient(operation, depth, cases[1],
+                                                      quantity_index=index, method=method)
+            out.append(np.append(gradient, value))
+        loads = model.loads(depth, None, method=method)
+        out.extend([loads.md, *loads.axial_force.values(), *loads.torque.values(),
+                    loads.component.astype(float)])
+    broom = broomstick_from_model(model, [500.0, 2000.0, 3000.0], [0.1, 0.3], method=method)
+    out.extend([*broom.hookload.values(), *broom.surface_torque.values()])
+    return out
+
+
+@pytest.mark.parametrize("method", ["soft-string", "aadnoy"])
+def test_numba_and_plain_python_give_the_same_numbers(
+        three_d: Well, example_71: Well, method: str) -> None:
+    for well in (three_d, example_71):
+        compiled = WellModel(well, engine="numba")
+        plain = WellModel(well, engine="python")
+        assert (compiled.kernels.engine, plain.kernels.engine) == ("numba", "python")
+        assert plain.kernels.module is _kernels
+        assert np.array_equal(compiled.kernel_well.real, plain.kernel_well.real)
+        assert np.array_equal(compiled.kernel_well.integer, plain.kernel_well.integer)
+        got, expected = _everything(compiled, method), _everything(plain, method)
+        assert len(got) == len(expected) > 50
+        for one, other in zip(got, expected, strict=True):
+            assert one.tolist() == other.tolist()  # bit for bit
+
+
+def test_the_engine_comes_from_the_argument_or_the_environment(
+        three_d: Well, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(kernels.ENVIRONMENT, raising=False)
+    assert kernels.default_engine() == "numba"
+    monkeypatch.setenv(kernels.ENVIRONMENT, " Python ")
+    assert WellModel(three_d).kernels.engine == "python"
+    assert WellModel(three_d, engine="numba").kernels.engine == "numba"
+    loads = torque_drag(three_d, 2000.0, 0.2)
+    assert loads.hookload["pick_up"] == torque_drag(three_d, 2000.0, 0.2,
+                                                    engine="numba").hookload["pick_up"]
+    monkeypatch.setenv(kernels.ENVIRONMENT, "aot")  # the choice before pycc was dropped
+    with pytest.raises(ModelError, match="TDMON_KERNELS='aot'"):
+        WellModel(three_d)
+    with pytest.raises(ModelError, match="unknown kernels engine 'jit'"):
+        WellModel(three_d, engine="jit")
+
+
+def test_the_plain_python_engine_imports_no_numba() -> None:
+    """`tdmon model loads` runs the loops as plain Python: numba is not even imported."""
+    script = (
+        "import json, sys\n"
+        "from tdmon.model.torque_drag import torque_drag\n"
+        "sys.path.insert(0, 'tests/model')\n"
+        "from conftest import example_71_well\n"
+        "loads = torque_drag(example_71_well(), 4000.0, 0.15, engine='python')\n"
+        "print(json.dumps([loads.hookload['pick_up'], sorted(sys.modules)]))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, cwd=ROOT, timeout=120,
+                          check=True)
+    pick_up, modules = json.loads(done.stdout.strip().splitlines()[-1])
+    assert 1.3e6 < pick_up < 1.6e6  # Example 7.1 near TD, mu 0.15
+    assert "tdmon.model._kernels" in modules
+    assert [m for m in modules if m.split(".")[0] in ("numba", "llvmlite")] == []
 
 
 @pytest.mark.parametrize("method", [kernels.SOFT_STRING, kernels.AADNOY])
 def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: int) -> None:
-    model = WellModel(three_d)
+    model = WellModel(three_d, engine="numba")
+    loops = model.kernels.module
     mu = model.friction(0.25)
     # pick-up, slack-off, rotating
     ops = {"bit_forces": np.zeros(3), "bit_torques": np.zeros(3),
            "axial_factors": np.array([1.0, -1.0, 0.0]), "torque_factors": np.array([0.0, 0.0, 1.0])}
     depth = 3000.0
-    force, torque = _kernels.march(*model.kernel_well, method=method, mu=mu,
-                                   bit_depth=depth, **ops)
+    forces, torques = loops.march_cases(*model.kernel_well, method=method,
+                                        mu_cases=mu[None, :], bit_depth=depth, **ops)
+    force, torque = forces[0], torques[0]
     name = "soft-string" if method == kernels.SOFT_STRING else "aadnoy"
     for i, operation in enumerate(("pick_up", "slack_off", "rotating")):
         hookload, surface_torque = model.evaluate(operation, depth, mu, method=name)
@@ -91,15 +177,17 @@ def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: i
     out = {"out_md": np.empty(size), "out_force": np.empty((3, size)),
            "out_torque": np.empty((3, size)), "out_comp": np.empty(size, dtype=np.int64),
            "out_tan": np.empty((size, 3))}
-    count = _kernels.march_profile(*model.kernel_well, method=method, mu=mu,
-                                   bit_depth=depth, **ops, **out)
+    count = loops.march_profile(*model.kernel_well, method=method, mu=mu,
+                                bit_depth=depth, **ops, **out)
     assert out["out_md"][0] == depth and out["out_md"][count - 1] == model.node_md[0]
     assert np.array_equal(out["out_force"][:, count - 1], force)
     assert np.array_equal(out["out_torque"][:, count - 1], torque)
-    forces, torques = _kernels.sweep(*model.kernel_well, method=method, mu_cases=mu[None, :],
-                                     bit_depths=np.array([depth]), **ops)
-    assert np.array_equal(forces[0, 0], force) and np.array_equal(torques[0, 0], torque)
-    value, _, gradient = _kernels.march_gradient(
+    swept_forces, swept_torques = loops.sweep(*model.kernel_well, method=method,
+                                              mu_cases=mu[None, :],
+                                              bit_depths=np.array([depth]), **ops)
+    assert np.array_equal(swept_forces[0, 0], force)
+    assert np.array_equal(swept_torques[0, 0], torque)
+    value, _, gradient = loops.march_gradient(
         *model.kernel_well, method=method, mu=mu, bit_depth=depth, bit_force=0.0,
         bit_torque=0.0, axial_factor=1.0, torque_factor=0.0, force_seed=1.0, torque_seed=0.0)
     assert value == force[0]
@@ -108,9 +196,11 @@ def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: i
 
 @pytest.mark.parametrize("method", [kernels.SOFT_STRING, kernels.AADNOY])
 def test_cases_marched_together_equal_marches_one_by_one(three_d: Well, method: int) -> None:
-    """`march_cases`, `march_one` and `sweep` give `march`'s numbers bit for bit: the same
-    steps in the same order, only interleaved across cases."""
-    model = WellModel(three_d)
+    """`march_cases` of several cases, `march_one` and `sweep` give the numbers of one case
+    marched alone bit for bit: the same steps in the same order, only interleaved across
+    cases."""
+    model = WellModel(three_d, engine="numba")
+    loops = model.kernels.module
     rng = np.random.default_rng(7)
     cases = np.ascontiguousarray(rng.uniform(0.05, 0.45, (5, model.n_elements)))
     ops = {"bit_forces": np.array([0.0, 0.0, 0.0, -9e4]),
@@ -118,22 +208,23 @@ def test_cases_marched_together_equal_marches_one_by_one(three_d: Well, method: 
            "axial_factors": np.array([1.0, -1.0, 0.0, 0.0]),
            "torque_factors": np.array([0.0, 0.0, 1.0, 1.0])}
     depths = np.array([350.0, 1234.5, 2999.0, 4100.0])
-    swept_f, swept_t = _kernels.sweep(*model.kernel_well, method=method, mu_cases=cases,
-                                      bit_depths=depths, **ops)
+    swept_f, swept_t = loops.sweep(*model.kernel_well, method=method, mu_cases=cases,
+                                   bit_depths=depths, **ops)
     for d, depth in enumerate(depths):
-        together_f, together_t = _kernels.march_cases(*model.kernel_well, method, cases, depth,
-                                                      *ops.values())
+        together_f, together_t = loops.march_cases(*model.kernel_well, method, cases, depth,
+                                                   *ops.values())
         for c in range(cases.shape[0]):
-            alone_f, alone_t = _kernels.march(*model.kernel_well, method=method,
-                                              mu=cases[c], bit_depth=depth, **ops)
-            assert together_f[c].tolist() == alone_f.tolist()
-            assert together_t[c].tolist() == alone_t.tolist()
-            assert swept_f[c, d].tolist() == alone_f.tolist()
-            assert swept_t[c, d].tolist() == alone_t.tolist()
+            alone_f, alone_t = loops.march_cases(*model.kernel_well, method, cases[c:c + 1],
+                                                 depth, *ops.values())
+            assert together_f[c].tolist() == alone_f[0].tolist()
+            assert together_t[c].tolist() == alone_t[0].tolist()
+            assert swept_f[c, d].tolist() == alone_f[0].tolist()
+            assert swept_t[c, d].tolist() == alone_t[0].tolist()
             for o in range(4):
                 terms = [ops[name][o] for name in ops]
-                one = _kernels.march_one(*model.kernel_well, method, cases[c], depth, *terms)
-                assert one == (alone_f[o], alone_t[o])
+                one = loops.march_one(*model.kernel_well, method, cases[c], depth, *terms)
+                assert one == (alone_f[0, o], alone_t[0, o])
+    assert len({tuple(row) for row in together_f.tolist()}) == cases.shape[0]  # cases differ
 
 
 def test_evaluate_cases_equals_evaluate(three_d: Well) -> None:

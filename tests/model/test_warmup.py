@@ -1,44 +1,38 @@
-"""`tdmon model warmup` prepares what the model's callers use: on numba's JIT the real calls add
-no signature after it (each new one would be compiled in the first real command), and the
-ahead-of-time module holds exactly those signatures (it converts nothing: a call with other
-types would read its arrays wrongly)."""
+"""`tdmon model warmup` prepares what the model's callers use: the real calls add no numba
+signature after it (each new one would be compiled in the first real command), and a new
+process finds every entry point in numba's cache and compiles none."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
-from numba.core.sigutils import normalize_signature
 
 from tdmon.calib.backcalc import back_calculate
-from tdmon.model import _kernels, aot, kernels, warmup
+from tdmon.cli import main
+from tdmon.model import kernels, warmup
 from tdmon.model.broomstick import broomstick_from_model
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Well
 
+ROOT = Path(__file__).resolve().parents[2]
+
 
 def _signatures() -> list[list[object]]:
-    return [list(getattr(_kernels, name).signatures) for name in kernels.ENTRY_POINTS]
+    module = kernels.load("numba").module
+    return [list(getattr(module, name).signatures) for name in kernels.ENTRY_POINTS]
 
 
-@pytest.fixture
-def jit(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    """New `WellModel`s run numba's JIT kernels."""
-    monkeypatch.setenv(kernels.ENVIRONMENT, "jit")
-    kernels.forget()
-    yield
-    monkeypatch.undo()
-    kernels.forget()
-
-
-@pytest.mark.usefixtures("jit")
 def test_the_model_calls_only_signatures_the_warmup_compiled(three_d: Well) -> None:
     warmup.compile_kernels()
     compiled = _signatures()
     assert all(compiled)  # each entry point has machine code
-    model = WellModel(three_d)  # a well file's shapes: sections' friction, two components
-    assert model.kernels.kind == "jit"
+    model = WellModel(three_d, engine="numba")  # a well file's shapes: sections' friction
     for method in ("soft-string", "aadnoy"):
         model.evaluate("pick_up", 3000.0, None, method=method)
         model.evaluate("rotating", 3000, 0.3, method=method, psi=0.2)
@@ -53,10 +47,44 @@ def test_the_model_calls_only_signatures_the_warmup_compiled(three_d: Well) -> N
         measured = model.evaluate("pick_up", 2500.0, 0.22, method=method)[0]
         back_calculate(model, "pick_up", 2500.0, measured, 1e3, method=method)
     assert _signatures() == compiled
-    # one signature per entry point, and it is the ahead-of-time module's
-    assert set(aot.SIGNATURES) == set(kernels.ENTRY_POINTS)
-    for name in kernels.ENTRY_POINTS:
-        dispatcher = getattr(_kernels, name)
-        (signature,) = dispatcher.nopython_signatures
-        arguments, returned = normalize_signature(aot.SIGNATURES[name])
-        assert (signature.args, signature.return_type) == (arguments, returned), name
+    assert [len(signatures) for signatures in compiled] == [1] * len(kernels.ENTRY_POINTS)
+
+
+def test_after_the_warmup_a_new_process_compiles_nothing(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["model", "warmup"]) == 0
+    (line,) = capsys.readouterr().out.strip().splitlines()
+    assert line.startswith("model kernels: ") and "numba cache: " in line
+    done = warmup.warm_up()  # again, in this process: each entry point counted once
+    assert done.compiled + done.loaded == len(kernels.ENTRY_POINTS)
+    assert sorted(Path(done.cache_folder).glob("_kernels.march_one-*.nbi"))
+    script = ("import json\n"
+              "from tdmon.model import kernels, warmup\n"
+              "warmup.compile_kernels()\n"
+              "module = kernels.load('numba').module\n"
+              "stats = [getattr(module, name).stats for name in kernels.ENTRY_POINTS]\n"
+              "print(json.dumps([[sum(s.cache_hits.values()), sum(s.cache_misses.values())]"
+              " for s in stats]))\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env.pop(kernels.ENVIRONMENT, None)
+    new = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         env=env, cwd=ROOT, timeout=600, check=True)
+    hits_and_misses = json.loads(new.stdout.strip().splitlines()[-1])
+    assert hits_and_misses == [[1, 0]] * len(kernels.ENTRY_POINTS)  # loaded, none compiled
+
+
+def test_without_a_cache_folder_numba_can_write_the_error_says_what_to_do() -> None:
+    """numba's locators find no folder (here: only the one for zipped sources is allowed):
+    loading the numba kernels is a ModelError naming the remedies, not numba's RuntimeError."""
+    script = ("from tdmon.errors import ModelError\n"
+              "from tdmon.model import kernels\n"
+              "try:\n"
+              "    kernels.load('numba')\n"
+              "except ModelError as error:\n"
+              "    print(error)\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_LOCATOR_CLASSES": "ZipCacheLocator"}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env=env, cwd=ROOT, timeout=120, check=True)
+    message = done.stdout.strip()
+    assert "no locator available" in message
+    assert "NUMBA_CACHE_DIR" in message and "TDMON_KERNELS=python" in message

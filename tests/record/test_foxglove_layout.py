@@ -1,5 +1,6 @@
-"""The Foxglove layout beside the Rerun blueprint (config/foxglove/tdmon-layout.json): valid
-JSON of Foxglove's layout shape, every panel placed once, and every message path it plots
+"""The Foxglove layout beside the Rerun blueprint (config/foxglove/tdmon-layout.json): the
+file is what `tdmon.record.foxglove_layout` makes of the estimated parameters' declaration,
+valid JSON of Foxglove's layout shape, every panel placed once, and every message path it plots
 resolving to a number (or the rig state's text) in messages the daemon records."""
 
 from __future__ import annotations
@@ -10,6 +11,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from tdmon.calib.joint import JointSettings, initial_joint, joint_fields
+from tdmon.calib.parameters import JOINT_PARAMETERS
+from tdmon.messages import estimate_message
+from tdmon.record.foxglove_layout import layout, layout_text
 from tdmon.record.reader import RecordedMessage
 from tdmon.record.schemas import TOPIC_SCHEMAS
 from tdmon.vocabulary import EstimateKind, Operation
@@ -44,7 +49,29 @@ def _resolve(path: str, messages: list[RecordedMessage]) -> list[Any]:
     return values
 
 
+def _joint_estimate() -> RecordedMessage:
+    """A joint estimate as the estimator makes it (its prior state)."""
+    settings = JointSettings()
+    fields = joint_fields(initial_joint(settings), settings)
+    message = estimate_message(1.7e9, EstimateKind.JOINT, Operation.PICK_UP, fields.pop("mu"),
+                               fields.pop("mu_std"), bit_depth_m=2400.0, **fields)
+    return RecordedMessage("/tdmon/estimate", 1_700_000_000_000_000_000, message)
+
+
+def test_the_file_is_made_from_the_declaration() -> None:
+    # written again with: python -m tdmon.record.foxglove_layout config/foxglove/...
+    assert LAYOUT.read_text() == layout_text()
+    panels = layout()["configById"]
+    joint = [p["value"] for p in panels["Plot!friction"]["paths"] if '"joint"' in p["value"]]
+    assert joint == ['/tdmon/estimate{kind=="joint"}.mu']
+    for parameter in JOINT_PARAMETERS.others:
+        [path] = panels[f"Plot!joint_{parameter.name}"]["paths"]
+        assert path["value"] == f'/tdmon/estimate{{kind=="joint"}}.{parameter.name}'
+    assert panels["Plot!joint_weight_factor"]["title"].startswith("Weight factor [-]")
+
+
 def test_layout_panels_and_paths(stream: list[RecordedMessage]) -> None:
+    stream = [*stream, _joint_estimate()]
     document = json.loads(LAYOUT.read_text())
     assert set(document) >= {"configById", "layout", "globalVariables", "userNodes"}
     panels = document["configById"]

@@ -110,3 +110,38 @@ def test_report_refuses_an_unfinished_recording(tmp_path: Path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "tdmon recover" in err[0], err
     assert not (tmp_path / "report").exists()
+
+
+def _joint(t: float, mu: float, w: float, identifiable: bool, verdict: str) -> dict[str, Any]:
+    return {"t": t, "kind": "joint", "operation": "pick_up", "mu": mu, "mu_std": 0.0052,
+            "bit_depth_m": 2391.6, "weight_factor": w, "weight_factor_std": 0.0041,
+            "correlation": -0.4123, "identifiable": identifiable, "identifiability": verdict}
+
+
+def test_joint_verdict_in_the_words_it_always_had() -> None:
+    """The summary's and report's sentence on friction and weight, now made from the
+    parameters' declaration, says what it said before the declaration."""
+    from tdmon.record.digest import joint_verdict
+
+    assert joint_verdict([])["words"] == ("No joint estimate of friction and string weight in "
+                                          "this recording (calibration off, or no window).")
+    pick_up = "pick-up only: weight and friction not separable, friction given at the prior weight"
+    alone = joint_verdict([_joint(1.0, 0.21, 1.01, False, pick_up)])
+    assert alone["words"] == (f"Friction and string weight could not be separated (1 updates): "
+                              f"{pick_up}; the friction factors above assume the modelled string "
+                              "weight.")
+    estimates = [_joint(1.0, 0.21, 1.01, False, pick_up),
+                 _joint(2.0, 0.2134, 0.9766, True, "identifiable"),
+                 _joint(3.0, 0.3, 1.2, False, pick_up)]
+    verdict = joint_verdict(estimates)
+    assert verdict == {
+        "status": "identifiable", "estimates": 3, "identifiable": 1, "t": 2.0,
+        "bit_depth_m": 2391.6, "operation": "pick_up", "mu": 0.2134, "mu_std": 0.0052,
+        "weight_factor": 0.9766, "weight_factor_std": 0.0041, "correlation": -0.412,
+        "reason": "identifiable",
+        "words": "Friction and string weight separated in 1 of 3 updates; the last at 2392 m "
+                 "MD: friction factor 0.213 ± 0.005 with the string 2.3 % lighter than "
+                 "modelled (weight factor 0.977 ± 0.004)."}
+    assert list(verdict) == ["status", "estimates", "identifiable", "t", "bit_depth_m",
+                             "operation", "mu", "mu_std", "weight_factor", "weight_factor_std",
+                             "correlation", "reason", "words"]

@@ -102,7 +102,9 @@ def test_durable_marks_follow_the_childs_flushes(tmp_path: Path) -> None:
     the child has flushed it into the file, after a flush asked for without waiting, or after
     the recorder's own scheduled flush."""
     path = tmp_path / "x.mcap"
-    with RecorderProcess(path=path, flush_interval_s=0.4, batch_size=10_000) as recorder:
+    # an interval long enough that "not yet durable" holds however slow the machine is between
+    # a write and the check (was: 0.4 s, a 0.2 s window)
+    with RecorderProcess(path=path, flush_interval_s=4.0, batch_size=10_000) as recorder:
         for i in range(100):
             recorder.write("/tdmon/raw", 1_000 + i, _raw(i))
         mark = recorder.durable_mark()

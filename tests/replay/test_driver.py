@@ -25,7 +25,7 @@ from .conftest import REPO
 REPLAYS = sorted((REPO / "replays").glob("*.mcap"))
 
 #: Every alarm kind the daemon can raise: tdmon/calib/alarms.py (band, limit_*,
-#: friction_jump, sensor_*), tdmon/daemon/calibrate.py (window_rejected, block_weight,
+#: friction_jump, sensor_*), tdmon/calib/estimator.py (window_rejected, block_weight,
 #: weight_check) and tdmon/record/mcap_recorder.py (recorder_failed, recorder_resumed,
 #: recording_recovered).
 DAEMON_ALARM_KINDS = frozenset(AlarmKind)

@@ -1,9 +1,9 @@
 """The calibration step: the daemon's adapter of :class:`~tdmon.calib.estimator.FrictionEstimator`.
 
 Per frame it hands the rig-state step's sample and detection to the estimator and emits what
-comes back (``estimate`` messages of kinds ``window``, ``profile`` and ``mu_T``; the window-level
-alarms), and gives the rig-state detector the block weight the estimator learns in slips. All
-the policy is in `tdmon.calib.estimator` (docs/back-calculation.md).
+comes back (``estimate`` messages of kinds ``window``, ``profile``, ``mu_T`` and ``joint``; the
+window-level alarms), and gives the rig-state detector the block weight the estimator learns in
+slips. All the policy is in `tdmon.calib.estimator` (docs/back-calculation.md).
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from tdmon.calib.joint import initial_joint
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
-from tdmon.calib.rigstate import with_block_weight
 from tdmon.calib.windows import Window
 from tdmon.daemon.pipeline import Emit, Frame
 from tdmon.daemon.steps.rig_state import RigStateStep
@@ -75,7 +74,7 @@ class CalibrationStep:
             learnt = self.estimator.learnt_block_weight(self.state)
             thresholds = self.rig_state.thresholds
             if learnt is not None and thresholds.block_weight != learnt:
-                self.rig_state.thresholds = with_block_weight(thresholds, learnt)
+                self.rig_state.thresholds = replace(thresholds, block_weight=learnt)
         if outputs:
             _send(outputs, emit)
 

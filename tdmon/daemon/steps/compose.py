@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tdmon.daemon.monitor import LoadModel, MonitorStep
 from tdmon.daemon.pipeline import Step
+from tdmon.daemon.steps.monitor import LoadModel, MonitorStep
 from tdmon.daemon.steps.rig_state import (
     RigStateStep,
     calibration_thresholds,
@@ -21,7 +21,7 @@ from tdmon.errors import FitError
 
 if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
-    from tdmon.daemon.build import WellFile
+    from tdmon.config.well_file import WellFile
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,7 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
 
     assert config.well is not None
     if well_file is None:
-        from tdmon.daemon.build import read_well_file
+        from tdmon.config.well_file import read_well_file
 
         well_file = read_well_file(config)
     assert well_file is not None
@@ -65,8 +65,8 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     setup = mu_t_setup(config, well_file, model.grid)
     cal = config.calibration
     settings = CalibrationSettings(mu_t_mode=setup.mode, joint=JointSettings(
-        weight_factor=cal.weight_factor, weight_factor_std=cal.weight_factor_std,
-        mismatch_tolerance=cal.weight_mismatch_tolerance))
+        mismatch_tolerance=cal.weight_mismatch_tolerance).with_prior(
+        "weight_factor", cal.weight_factor, cal.weight_factor_std))
     try:
         calibration = CalibrationStep(
             model, rig_state, settings, temperature=setup.temperature if setup.law else None,

@@ -5,7 +5,7 @@ without any sensor noticing:
 
 * the bit goes deeper than the well file's string is long (a short tally, a stand added and not
   booked). The model then takes the top component to surface (the daemon's well is always
-  extended to the bottom of the hole, :func:`tdmon.daemon.build.read_well_path`), so loads and
+  extended to the bottom of the hole, :func:`tdmon.config.well_file.read_well_path`), so loads and
   estimates keep coming, and a critical ``model_coverage`` alarm says so at once, in metres;
 * the string changes between runs (a trip for a new BHA). ``[[runs]]`` of the daemon file name a
   well file per run from a rig time on, and SIGHUP (``tdmon run``) re-reads the well file in
@@ -36,7 +36,7 @@ from tdmon.vocabulary import AlarmKind, Severity
 
 if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
-    from tdmon.daemon.build import WellFile
+    from tdmon.config.well_file import WellFile
 
 __all__ = ["SHORT_TOLERANCE", "CoverageStep", "coverage_step"]
 
@@ -62,7 +62,7 @@ class CoverageStep:
     ----------
     well_file : the well file in use at start-up
     runs : (rig time [Unix s], well file path) of each later run, in time order
-    reader : reads a well file (:func:`tdmon.daemon.build.read_well_path`)
+    reader : reads a well file (:func:`tdmon.config.well_file.read_well_path`)
     targets : called with each new well file (monitor, calibration, well message)
     """
 
@@ -152,9 +152,9 @@ def coverage_step(config: DaemonConfig, well_file: WellFile, steps: Sequence[Ste
                   own_model: bool = True) -> CoverageStep:
     """The coverage step for the daemon's steps: a new well goes to the monitor (when its
     model is the well file's, ``own_model``), the calibration and the well/profile step."""
-    from tdmon.daemon.build import read_well_path
-    from tdmon.daemon.monitor import MonitorStep
+    from tdmon.config.well_file import read_well_path
     from tdmon.daemon.steps.calibrate import CalibrationStep
+    from tdmon.daemon.steps.monitor import MonitorStep
     from tdmon.daemon.steps.profile import ProfileStep
 
     targets: list[WellTarget] = []

@@ -16,7 +16,7 @@ from tdmon.model.friction import FrictionModel
 
 if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
-    from tdmon.daemon.build import WellFile
+    from tdmon.config.well_file import WellFile
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from tdmon.daemon.steps.mu_t import MuTSetup, mu_t_setup
 
 if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
-    from tdmon.daemon.build import WellFile
+    from tdmon.config.well_file import WellFile
     from tdmon.daemon.steps.calibrate import CalibrationStep
 
 __all__ = ["MAX_PROFILE_POINTS", "ProfileStep", "profile_step", "run_context"]
