@@ -201,15 +201,15 @@ async def test_a_resumed_session_s_backlog_does_not_hold_the_subscription_up(
     async with MqttSource(config, ["rig/R0/#"], base=None):
         pass  # the broker keeps a session for this client id from now on
     await asyncio.to_thread(publish, broker.port, messages)
-    acknowledged = set()
+    acked = set()
     async with MqttSource(config, ["rig/R0/#"], base=None) as source:
         for i, raw in enumerate(await take(source, 500)):
             if i % 2 and raw.ack is not None:  # half acknowledged; the run ends here
                 raw.ack()
-                acknowledged.add(raw.payload)
+                acked.add(raw.payload)
         # the probe's answer comes behind the backlog the broker is sending
         await acknowledged(source, timeout=20)
-    expected = [message for message in messages if message[1] not in acknowledged]
+    expected = [message for message in messages if message[1] not in acked]
     async with MqttSource(config, ["rig/R0/#"], base=None) as source:
         assert source._client is not None
         waiting = len(source._client.messages)
