@@ -501,16 +501,29 @@ def run_transport(transport: str, args: argparse.Namespace, folder: Path,
 
 
 def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Throughput per (tree, recorder) over the rounds: every figure, and the best."""
+    """Throughput per (tree, recorder) over the rounds: every figure, and the best; with a
+    baseline tree, this tree's samples/s over the baseline's, round by round (the two ran
+    one after the other, under about the same load)."""
     out: dict[str, Any] = {}
     for run in runs:
         key = f"{run['tree']}, recorder {run['recorder']}"
         out.setdefault(key, []).append((run["throughput"]["samples_per_s"],
                                         run["throughput"]["daemon_cpu_us_per_sample"]))
-    return {key: {"samples_per_s": [rate for rate, _ in runs],
-                  "best": max(rate for rate, _ in runs),
-                  "daemon_cpu_us_per_sample": [cpu for _, cpu in runs]}
-            for key, runs in out.items()}
+    result: dict[str, Any] = {
+        key: {"samples_per_s": [rate for rate, _ in runs],
+              "best": max(rate for rate, _ in runs),
+              "daemon_cpu_us_per_sample": [cpu for _, cpu in runs]}
+        for key, runs in out.items()}
+    for recorder in ("on", "off"):
+        this, base = out.get(f"this, recorder {recorder}"), out.get(
+            f"baseline, recorder {recorder}")
+        if this and base:
+            result[f"this / baseline, recorder {recorder}"] = {
+                "samples_per_s": [round(a / b, 3) if b else None
+                                  for (a, _), (b, _) in zip(this, base, strict=True)],
+                "daemon_cpu_us_per_sample": [round(a / b, 3) if b else None
+                                             for (_, a), (_, b) in zip(this, base, strict=True)]}
+    return result
 
 
 def main() -> int:
@@ -550,8 +563,10 @@ def main() -> int:
                                      "round": run, **result})
             results[transport] = {"runs": runs, "summary": summary(runs)}
             for key, figures in results[transport]["summary"].items():
-                print(f"{transport}, {key}: {figures['samples_per_s']} samples/s, daemon CPU "
-                      f"{figures['daemon_cpu_us_per_sample']} us per sample", flush=True)
+                unit = " (ratio)" if "/" in key else ""
+                print(f"{transport}, {key}: {figures['samples_per_s']} samples/s{unit}, daemon "
+                      f"CPU {figures['daemon_cpu_us_per_sample']} us per sample{unit}",
+                      flush=True)
     print(json.dumps(results, indent=2))
     if args.json:
         args.json.write_text(json.dumps(results, indent=2) + "\n")

@@ -14,8 +14,8 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from typing import Any
 
-import msgspec
 import orjson
 
 # CHANNEL_UNITS and ChannelSpec live in tdmon.channels (the config builds channel specs
@@ -40,10 +40,7 @@ _MAX_CACHED_UNITS = 32
 #: JSON numbers (a tuple: ``int | float`` would build a union type on every call).
 _NUMBER = (int, float)
 
-#: The decoder ``json.loads`` uses (default settings), for its faster ``raw_decode``.
-_JSON = json.JSONDecoder()
-_NOT_PLAIN = object()  # no object yet: the next, slower parser must look
-#: Payload fields whose type could differ between orjson and json (integers beyond 64 bits):
+#: Payload numbers whose type could differ between orjson and json (integers beyond 64 bits):
 #: ``t``, ``value`` and ``seq`` (see _beyond_int64).
 _INT64 = 2.0**63
 
@@ -53,24 +50,6 @@ _INT64 = 2.0**63
 #: range [SI] a value passes every check in (all bounds and ``ABS_VALUE_MAX`` together).
 _Route = tuple[str, str, "tuple[float, float] | None", dict[str, tuple[float, float]],
                "float | None", "float | None", "tuple[float, str] | None", float, float]
-
-
-class _UsualPayload(msgspec.Struct, gc=False):
-    """The usual payload's shape, for msgspec to read into at once: a time and a value as
-    numbers, an optional unit, counter and error text; other fields are passed over, as the
-    rules do."""
-
-    t: float
-    value: float
-    unit: str | None = None
-    seq: int | None = None
-    error: str | None = None
-
-
-#: Reads the usual payload into a :class:`_UsualPayload`, or raises ``msgspec.DecodeError``
-#: (``UnicodeDecodeError`` for invalid UTF-8): 0.44 instead of 0.74 us a payload through
-#: orjson's dict and its look-ups (docs/benchmarks.md)
-_read_usual = msgspec.json.Decoder(_UsualPayload).decode
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,7 +128,7 @@ class Decoder:
         """Full topics this decoder accepts."""
         return list(self._by_topic)
 
-    def decode(self, raw: RawMessage) -> Sample | Rejected:
+    def decode(self, raw: RawMessage) -> Sample | Rejected:  # noqa: C901  (complex today; simplify when next touched)
         """Decode one message (see :func:`parse_payload` for the rules)."""
         route = self._routes.get(raw.topic)
         if route is None:
@@ -238,7 +217,7 @@ def parse_payload(payload: bytes) -> tuple[float, float, str | None] | str:
     return parsed if isinstance(parsed, str) else parsed[:3]
 
 
-def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | None] | str:
+def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | None] | str:  # noqa: C901  (complex today; simplify when next touched)
     """Parse one JSON payload into ``(t, value, unit, seq)``, or return the rejection reason.
 
     Rules: a JSON object; ``t`` a finite number of Unix seconds or an ISO 8601 string (naive
@@ -247,46 +226,10 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     message counter per topic, is a non-negative integer or None (anything else is ignored, never
     a rejection: the sample is good without it).
     """
-    # The usual payload read by msgspec into its struct and answered at once, when its
-    # fields pass the rules below as they are: a time in range (msgspec reads an integer as
-    # the float ``parse_time`` makes of it), a value inside 2**63 (read alike by json, as
-    # float() of an integer), a unit that is not blank, no error text. Anything msgspec
-    # refuses (another type, NaN, a lone surrogate, invalid UTF-8, damage) or that fails
-    # these goes on to the rules.
     try:
-        usual = _read_usual(payload)
-    except (msgspec.DecodeError, ValueError):
-        pass
-    else:
-        unit = usual.unit
-        if (T_MIN <= usual.t < T_MAX and -_INT64 < usual.value < _INT64
-                and (unit is None or unit.strip()) and not usual.error):
-            count = usual.seq
-            return usual.t, usual.value, unit, (count if count is None or count >= 0 else None)
-    # Any other payload: parsed by orjson (~4x faster than ``json``) only where the two
-    # agree: anything orjson refuses (invalid UTF-8, NaN, lone surrogates, errors of any kind)
-    # and any object where it may have read a number otherwise is left to the ``json`` path,
-    # whose results and messages stay the decoder's.
-    try:
-        obj = orjson.loads(payload)
-    except orjson.JSONDecodeError:
-        obj = _NOT_PLAIN
-    else:
-        if type(obj) is not dict or _beyond_int64(obj):
-            obj = _NOT_PLAIN
-    if obj is _NOT_PLAIN:
-        try:
-            # decode explicitly: json.loads on bytes would also guess UTF-16/32 from the
-            # first bytes
-            text = payload.decode("utf-8")
-        except UnicodeDecodeError:
-            return "payload is not UTF-8"
-        obj = _plain_json_object(text)
-        if obj is _NOT_PLAIN:
-            try:
-                obj = json.loads(text)
-            except (ValueError, RecursionError) as exc:
-                return f"malformed JSON: {_clip(str(exc), 80)}"
+        obj = _json_value(payload)
+    except _NotJson as exc:
+        return str(exc)
     if not isinstance(obj, dict):
         return f"payload is a JSON {type(obj).__name__}, not an object"
     error = obj.get("error")
@@ -321,29 +264,45 @@ def parse_payload_seq(payload: bytes) -> tuple[float, float, str | None, int | N
     return t, value, unit, seq
 
 
-def _beyond_int64(obj: dict[str, object]) -> bool:
+class _NotJson(ValueError):
+    """A payload that is not JSON, with the rejection reason."""
+
+
+def _json_value(payload: bytes) -> Any:
+    """What ``json.loads`` makes of ``payload`` (decoded as UTF-8), read by orjson where the
+    two agree; raises :class:`_NotJson` with the reason for anything else.
+
+    orjson reads strict JSON only, so what it refuses (invalid UTF-8, a byte-order mark, NaN
+    and Infinity, lone surrogates, numbers beyond a double, damage) goes to ``json``, which
+    reads JSON's non-standard words and words the error for the rest; so does anything but an
+    object, and an object where orjson may have read a number that matters otherwise
+    (:func:`_beyond_int64`). The rules after it see json's values either way.
+    """
+    try:
+        obj = orjson.loads(payload)
+    except orjson.JSONDecodeError:
+        pass
+    else:
+        if type(obj) is dict and not _beyond_int64(obj):
+            return obj
+    try:
+        # decoded explicitly: json.loads on bytes would also guess UTF-16/32 from the first
+        # bytes
+        text = payload.decode("utf-8")
+    except UnicodeDecodeError:
+        raise _NotJson("payload is not UTF-8") from None
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise _NotJson(f"malformed JSON: {_clip(str(exc), 80)}") from None
+
+
+def _beyond_int64(obj: dict[str, Any]) -> bool:
     """Whether orjson may have read one of the numbers that matter (``t``, ``value``, ``seq``)
     otherwise than ``json``: a float beyond 2**63 in magnitude, which orjson makes of an
     integer too large for 64 bits (``json`` keeps it an integer)."""
-    # the three keys written out: once per message, a loop over them cost a third of this
-    t, value, seq = obj.get("t"), obj.get("value"), obj.get("seq")
-    return ((type(t) is float and not -_INT64 < t < _INT64)
-            or (type(value) is float and not -_INT64 < value < _INT64)
-            or (type(seq) is float and not -_INT64 < seq < _INT64))
-
-
-def _plain_json_object(text: str) -> object:
-    """``json.loads(text)`` at half the cost for the usual payload, an object with nothing
-    before or after it (no whitespace scans), else ``_NOT_PLAIN``: anything else, errors
-    included, is left to ``json.loads`` itself, so that results and messages are its own."""
-    if text.startswith("{"):
-        try:
-            obj, end = _JSON.raw_decode(text)
-        except (ValueError, RecursionError):
-            return _NOT_PLAIN
-        if end == len(text):
-            return obj
-    return _NOT_PLAIN
+    return any(type(number) is float and not -_INT64 < number < _INT64
+               for number in (obj.get("t"), obj.get("value"), obj.get("seq")))
 
 
 def _reject(raw: RawMessage, reason: str) -> Rejected:
@@ -362,8 +321,8 @@ def _source_error(raw: RawMessage) -> str | None:
     if raw.source != "wits0" or b'"error"' not in raw.payload:
         return None
     try:
-        obj = json.loads(raw.payload)
-    except (ValueError, RecursionError):
+        obj = _json_value(raw.payload)
+    except _NotJson:
         return None
     error = obj.get("error") if isinstance(obj, dict) else None
     return _clip(error, 200) if isinstance(error, str) and error else None

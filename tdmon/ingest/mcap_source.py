@@ -14,56 +14,35 @@ from __future__ import annotations
 import asyncio
 import base64
 import binascii
-import io
 import json
 import logging
-import struct
 import time
-from collections.abc import AsyncIterator, Iterable, Iterator
+from collections.abc import AsyncIterator, Iterator
 from itertools import islice
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
-import msgspec
 import orjson
-import zstandard
-from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
-from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Message
-from mcap.stream_reader import StreamReader, breakup_chunk
-from mcap.summary import Summary
+from mcap.records import Channel, Message
+from mcap.stream_reader import StreamReader
 
 from tdmon.errors import IngestError
 from tdmon.ingest.types import RawMessage
 
 RAW_TOPIC = "/tdmon/raw"
 
+#: The fields of a ``/tdmon/raw`` record as :func:`tdmon.ingest.types.raw_message` writes it
+#: for a payload kept whole
+_RAW_FIELDS = frozenset({"source", "topic", "receive_time", "payload", "payload_encoding"})
+
 log = logging.getLogger(__name__)
 
 
 class _Truncated(Exception):
     """A recorded payload kept only in part: nothing to replay."""
-
-
-class _UsualRecord(msgspec.Struct, forbid_unknown_fields=True, gc=False):
-    """A ``/tdmon/raw`` record as tdmon writes it: exactly :func:`raw_message`'s fields, a
-    text payload. ``receive_time`` keeps an integer apart from a float: raw_message writes a
-    float, so only then do the record's bytes say what it would."""
-
-    source: str
-    topic: str
-    payload: str
-    receive_time: float | int
-    payload_encoding: str
-
-
-#: Reads the usual record into a :class:`_UsualRecord`, or raises ``msgspec.DecodeError``
-#: (``UnicodeDecodeError`` for invalid UTF-8): with the RawMessage made of it, 1.49 instead of
-#: 1.83 us a record through orjson's dict (docs/benchmarks.md)
-_read_usual = msgspec.json.Decoder(_UsualRecord).decode
 
 
 def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMessage | None:
@@ -73,32 +52,34 @@ def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMes
     """
     if channel_topic == RAW_TOPIC:
         try:
-            usual = _read_usual(data)
-        except (msgspec.DecodeError, ValueError):
-            pass  # another record (more fields, a base64 payload...) or damage: read below
-        else:
-            # strict JSON, as orjson's below (no NaN, no lone surrogate): the bytes say what
-            # raw_message would of this RawMessage, so they may be recorded again as they are
-            if type(usual.receive_time) is float and usual.payload_encoding == "utf-8":
-                return RawMessage(usual.source, usual.topic, usual.payload.encode("utf-8"),
-                                  usual.receive_time, None, False, False, data)
-        try:
-            # any other record: orjson (~5x faster than json); what it refuses (NaN, lone
-            # surrogates, huge integers, damage) goes to json, whose result or error is the
-            # one given. Never ``recorded``: such a record is not what raw_message writes
             record = orjson.loads(data)
         except orjson.JSONDecodeError:
+            # what orjson refuses (NaN, lone surrogates, damage) goes to json, whose result
+            # or error is the one given
             return _raw_of_record(data, log_time_ns, json_module=True)
-        return _raw_of_record(record, log_time_ns)
+        # bytes that say what raw_message would of the RawMessage may be recorded again as
+        # they are (RawMessage.recorded)
+        recorded = data if _says_what_raw_message_would(record) else None
+        return _raw_of_record(record, log_time_ns, recorded=recorded)
     if channel_topic.startswith("/tdmon/"):
         return None  # derived data (samples, results): replay recomputes it
     return RawMessage("mcap", channel_topic.lstrip("/"), bytes(data), log_time_ns / 1e9)
 
 
-def _raw_of_record(record: Any, log_time_ns: int, json_module: bool = False) -> RawMessage:
-    """The RawMessage of a ``/tdmon/raw`` record in general: ``record`` parsed, or its bytes
-    to parse with the json module (``json_module``). Raises ``_Truncated`` for a payload kept
-    only in part, :class:`IngestError` for a record that is not a raw message."""
+def _says_what_raw_message_would(record: Any) -> bool:
+    """Whether a record (strict JSON, read by orjson) holds exactly what ``raw_message`` writes
+    of the RawMessage made of it: its five fields, a float time, a text payload as UTF-8."""
+    return (type(record) is dict and record.keys() == _RAW_FIELDS
+            and type(record["receive_time"]) is float and type(record["payload"]) is str
+            and record["payload_encoding"] == "utf-8" and type(record["source"]) is str
+            and type(record["topic"]) is str)
+
+
+def _raw_of_record(record: Any, log_time_ns: int, json_module: bool = False,
+                   recorded: bytes | None = None) -> RawMessage:
+    """The RawMessage of a ``/tdmon/raw`` record: ``record`` parsed, or its bytes to parse
+    with the json module (``json_module``). Raises ``_Truncated`` for a payload kept only in
+    part, :class:`IngestError` for a record that is not a raw message."""
     try:
         if json_module:
             record = json.loads(record)
@@ -116,156 +97,51 @@ def _raw_of_record(record: Any, log_time_ns: int, json_module: bool = False) -> 
             topic=str(record["topic"]),
             payload=payload,
             receive_time=float(record.get("receive_time", log_time_ns / 1e9)),
+            recorded=recorded,
         )
     except (ValueError, KeyError, TypeError, binascii.Error) as exc:
         raise IngestError(f"recorded {RAW_TOPIC} message is unreadable: {exc}") from exc
 
 
-def _summary(stream: IO[bytes]) -> Summary | None:
-    """A finished file's summary (None without one, e.g. a footer-less file)."""
+def _has_raw_channel(stream: IO[bytes]) -> bool:
+    """Whether a finished file's summary lists a ``/tdmon/raw`` channel (False without a
+    summary, e.g. a footer-less file: then its channel record decides, when it comes)."""
     start = stream.tell()
     try:
-        return make_reader(stream).get_summary()
+        summary = make_reader(stream).get_summary()
     except Exception:  # no footer or summary (a killed writer): decided while reading
-        return None
+        return False
     finally:
         stream.seek(start)
-
-
-def _all_in_indexed_chunks(summary: Summary) -> bool:
-    """Whether every message of the file sits in a chunk its summary indexes.
-
-    The chunk indexes give each chunk's message-index records' total length; each such record
-    is 15 bytes of opcode, length, channel id and entry length, then 16 bytes per message, so
-    the chunks hold (length - 15 x channels) / 16 messages. Equal to the statistics' count:
-    no message lies outside the chunks (an unchunked writer), none is left without an index.
-    """
-    statistics = summary.statistics
-    if statistics is None or not summary.chunk_indexes:
-        return False
-    indexed = 0
-    for index in summary.chunk_indexes:
-        entries, rest = divmod(index.message_index_length - 15 * len(index.message_index_offsets),
-                               16)
-        if rest or entries < 0:
-            return False
-        indexed += entries
-    return indexed == statistics.message_count
-
-
-#: A record's opcode and length; a message record's channel id, sequence, log and publish time.
-_RECORD = struct.Struct("<BQ")
-_MESSAGE = struct.Struct("<HIQQ")
-
-
-def _chunk_data(chunk: Chunk) -> bytes | None:
-    """A chunk's records, decompressed (None: a compression this reader leaves to ``mcap``)."""
-    if chunk.compression == "zstd":
-        return zstandard.decompress(chunk.data, chunk.uncompressed_size)
-    if chunk.compression == "":
-        return chunk.data
-    return None
-
-
-def _chunk_records(data: bytes) -> Iterator[Channel | tuple[int, int, bytes]]:
-    """The channel records and messages of a chunk's decompressed records, messages as
-    ``(channel id, log time [ns], data)``.
-
-    The message record's layout (MCAP specification: opcode 0x05, a 64-bit length, then
-    channel id u16, sequence u32, log time u64, publish time u64 and the data) read with one
-    ``struct`` call, where ``breakup_chunk`` builds a ``Message`` from a field-by-field
-    stream: about five times faster on a replay's small messages. Other records (channel
-    records, rare in chunks) are read by the ``mcap`` package; the rest are skipped, as there.
-    A record that runs past the chunk's end, or a message record too short for its fields,
-    raises ``McapError``.
-    """
-    offset, end = 0, len(data)
-    record, message = _RECORD.unpack_from, _MESSAGE.unpack_from
-    try:
-        while offset < end:
-            opcode, length = record(data, offset)
-            start = offset + 9
-            offset = start + length
-            if offset > end:
-                raise McapError(f"a chunk's record runs {offset - end} bytes past its end")
-            if opcode == Opcode.MESSAGE:
-                if length < 22:
-                    raise McapError(f"a chunk's message record of {length} bytes is too short")
-                channel_id, _, log_time, _ = message(data, start)
-                yield channel_id, log_time, data[start + 22:offset]
-            elif opcode == Opcode.CHANNEL:
-                yield Channel.read(ReadDataStream(io.BytesIO(data[start:offset])))
-    except struct.error as exc:
-        raise McapError(f"a chunk's record is cut short: {exc}") from exc
-
-
-def _indexed_messages(stream: IO[bytes], summary: Summary
-                      ) -> Iterator[Channel | tuple[int, int, bytes]]:
-    """The channels and messages of the file, chunk by chunk in file order (the summary's
-    channels first); messages as ``(channel id, log time [ns], data)``.
-
-    Each chunk is reached through the summary's chunk indexes, as the ``mcap`` package's
-    seeking reader does, but in file order and one chunk at a time (that reader's file-order
-    mode decodes every chunk before the first message), and the message-index records after
-    each chunk are skipped (the stream reader parses them entry by entry). The chunk's
-    records are read by :func:`_chunk_records`; a chunk compressed otherwise than zstd or
-    not at all goes through the package's ``breakup_chunk``.
-    """
-    yield from summary.channels.values()
-    for index in sorted(summary.chunk_indexes, key=lambda chunk: chunk.chunk_start_offset):
-        stream.seek(index.chunk_start_offset + 1 + 8)  # past the opcode and record length
-        chunk = Chunk.read(ReadDataStream(stream))
-        data = _chunk_data(chunk)
-        if data is not None:
-            yield from _chunk_records(data)
-            continue
-        for item in breakup_chunk(chunk):
-            if isinstance(item, Message):
-                yield item.channel_id, item.log_time, item.data
-            elif isinstance(item, Channel):
-                yield item
-
-
-def _streamed_messages(stream: IO[bytes]) -> Iterator[Channel | tuple[int, int, bytes]]:
-    """Every channel and message record in turn (``mcap``'s stream reader), messages as
-    :func:`_indexed_messages` gives them: for a file without a summary (a killed writer) or
-    with messages outside indexed chunks."""
-    for record in StreamReader(stream, skip_magic=False).records:
-        if isinstance(record, Message):
-            yield record.channel_id, record.log_time, record.data
-        elif isinstance(record, Channel):
-            yield record
+    return summary is not None and any(
+        channel.topic == RAW_TOPIC for channel in summary.channels.values())
 
 
 def iter_raw(stream: IO[bytes]) -> Iterator[tuple[int, RawMessage]]:
-    """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those."""
+    """(log_time_ns, RawMessage) in file order; a file with ``/tdmon/raw`` yields only those.
+
+    The records are read one after another by the ``mcap`` package's stream reader, which
+    reads a file without a footer (a killed writer) up to its first incomplete record too.
+    """
     channels: dict[int, str] = {}
-    summary = _summary(stream)
-    has_raw = summary is not None and any(
-        channel.topic == RAW_TOPIC for channel in summary.channels.values())
-    records: Iterable[Channel | tuple[int, int, bytes]]
-    if summary is not None and _all_in_indexed_chunks(summary):
-        records = _indexed_messages(stream, summary)
-    else:
-        # a channel's record comes with its first message, so other topics (``/truth/...``)
-        # may come before the first /tdmon/raw one
-        records = _streamed_messages(stream)
+    has_raw = _has_raw_channel(stream)
     truncated = 0
     try:
-        for record in records:
-            if type(record) is tuple:
-                channel_id, log_time, data = record
-                topic = channels.get(channel_id)
+        for record in StreamReader(stream, skip_magic=False).records:
+            if type(record) is Message:
+                topic = channels.get(record.channel_id)
                 if topic is None or (has_raw and topic != RAW_TOPIC):
                     continue
                 try:
-                    raw = raw_from_record(topic, data, log_time)
+                    raw = raw_from_record(topic, record.data, record.log_time)
                 except _Truncated:
                     truncated += 1
                     continue
                 if raw is not None:
-                    yield log_time, raw
-            elif isinstance(record, Channel):
+                    yield record.log_time, raw
+            elif type(record) is Channel:
+                # a channel's record comes with its first message, so without a summary other
+                # topics (``/truth/...``) may come before the first /tdmon/raw one
                 channels[record.id] = record.topic
                 has_raw = has_raw or record.topic == RAW_TOPIC
     except (McapError, EOFError, ValueError) as exc:

@@ -10,12 +10,13 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
+import math
 import socket
 import ssl
-import struct
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
+from itertools import islice
 from pathlib import Path
 from types import TracebackType
 from typing import Any, cast
@@ -32,6 +33,11 @@ from tdmon.record.batch import Batch
 from tdmon.record.sink import Sink
 
 log = logging.getLogger(__name__)
+
+#: Messages the source hands to the daemon at once, at most (:meth:`MqttSource.batches`).
+BATCH = 256
+#: Results handed to paho at once, at most (:meth:`MqttPublisher.pump`).
+PUBLISH_BATCH = 64
 
 
 def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext | None:
@@ -66,7 +72,8 @@ def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext 
 
 
 def make_client(config: MqttConfig, client_id: str, base: Path | None = None,
-                queue_type: type[asyncio.Queue[aiomqtt.Message]] | None = None) -> aiomqtt.Client:
+                queue_type: type[asyncio.Queue[aiomqtt.Message]] | None = None
+                ) -> aiomqtt.Client:
     """An aiomqtt client for ``config`` (must be called inside the running loop); incoming
     messages wait in a ``queue_type`` (default asyncio.Queue)."""
     return aiomqtt.Client(
@@ -121,18 +128,22 @@ def connect_error(config: MqttConfig, exc: BaseException) -> IngestError:
     return _translate(config, "cannot connect", exc)
 
 
-class _Inbox(asyncio.Queue[Any]):
-    """A client's incoming-message queue whose object the source holds.
+class _Inbox(asyncio.Queue[aiomqtt.Message]):
+    """The queue aiomqtt puts incoming messages in, with an event set by the first one."""
 
-    aiomqtt builds this queue itself from the class passed as ``queue_type`` and keeps it
-    private; :func:`_inbox_class` makes a subclass per connection that hands the object back.
-    It holds :class:`_Delivery` objects (:func:`_enable_manual_ack` puts them there), not
-    aiomqtt's messages.
-    """
+    def __init__(self, maxsize: int = 0) -> None:
+        super().__init__(maxsize)
+        self.arrived = asyncio.Event()
+
+    def put_nowait(self, item: aiomqtt.Message) -> None:
+        super().put_nowait(item)
+        self.arrived.set()
 
 
-def _inbox_class(made: list[_Inbox]) -> type[_Inbox]:
-    """A queue class whose instances are appended to ``made`` when aiomqtt builds them."""
+def _inbox_class(made: list[_Inbox]) -> type[asyncio.Queue[aiomqtt.Message]]:
+    """A queue class for aiomqtt's ``queue_type`` whose instance, once aiomqtt has made it,
+    is in ``made``: the source takes what waits there without aiomqtt's message iterator,
+    which makes a task per message (:meth:`MqttSource.batches`)."""
 
     class Inbox(_Inbox):
         def __init__(self, maxsize: int = 0) -> None:
@@ -142,130 +153,41 @@ def _inbox_class(made: list[_Inbox]) -> type[_Inbox]:
     return Inbox
 
 
-class _Delivery:
-    """What the source needs of one incoming PUBLISH, DUP flag included (aiomqtt's own message
-    drops it, and building one validates the topic again: a third of the daemon's cost per
-    message at 5 000 messages/s)."""
+class ManualAcks:
+    """Acknowledge QoS 1/2 messages only when told to: the adapter for the two calls aiomqtt
+    2.5 lacks (aiomqtt issue 345, "Application-controlled acknowledgements").
 
-    __slots__ = ("dup", "mid", "payload", "qos", "receive_time", "topic")
-
-    def __init__(self, message: mqtt.MQTTMessage) -> None:
-        try:
-            self.topic: str = message.topic
-        except UnicodeDecodeError:  # the decoder rejects it as an unknown topic, with its text
-            self.topic = message._topic.decode("utf-8", "replace")
-        self.payload = bytes(message.payload)
-        self.qos: int = message.qos
-        self.mid: int = message.mid
-        self.dup = bool(message.dup)
-        self.receive_time = time.time()
-
-
-def _enable_manual_ack(client: aiomqtt.Client) -> None:
-    """Let ``client`` acknowledge QoS 1/2 messages only when told to, and keep DUP flags.
-
-    aiomqtt 2.5 has no public hook for either (aiomqtt issue 345): the paho client it wraps
-    (``_client``) is switched to manual acknowledgement before connecting, so that nothing
-    the broker sends on a resumed session is acknowledged early, and its message callback is
-    replaced by one that keeps the flag. Messages go into the same queue aiomqtt reads.
-
-    paho's dispatch to that callback (``_handle_on_message``: two locks and a walk of its
-    per-topic callback tree, which nobody fills here) is replaced too, when this paho has it:
-    it cost a tenth of the daemon's time per message.
-    """
-    paho = client._client  # private: see the docstring
-    paho.manual_ack_set(True)
-    put = cast(_Inbox, client._queue).put_nowait  # our own _Inbox class, unbounded
-
-    def on_message(_client: mqtt.Client, _userdata: Any, message: mqtt.MQTTMessage) -> None:
-        put(_Delivery(message))
-
-    paho.on_message = on_message
-    if callable(getattr(paho, "_handle_on_message", None)):
-        def handle_on_message(message: mqtt.MQTTMessage) -> None:
-            put(_Delivery(message))
-
-        paho._handle_on_message = handle_on_message  # type: ignore[method-assign]
-
-
-class _BufferedReads:
-    """paho's socket, read up to 64 kB at a time.
-
-    paho reads each packet with three ``recv`` calls (type, length, rest), and aiomqtt's reader
-    hands it one packet per event-loop turn. Served from a buffer, with :meth:`pending` saying
-    how much is left (the hook aiomqtt already uses for TLS sockets), a burst of messages is
-    read with one system call and handled in one turn. Everything else goes to the socket.
+    aiomqtt acknowledges each message as paho hands it over, before the daemon has it; paho
+    itself can wait for the application. The two paho calls that switch this on and send an
+    acknowledgement are made here, on the paho client aiomqtt wraps (its private ``_client``),
+    and nowhere else in tdmon. ``tests/ingest/test_mqtt_manual_ack.py`` holds each to what it
+    must do on a real broker, so a paho release that changes either fails there.
     """
 
-    def __init__(self, sock: Any) -> None:
-        self._sock = sock
-        self._data = b""
-        self._pos = 0
+    def __init__(self, client: aiomqtt.Client) -> None:
+        # private: the paho client, for the two calls below only
+        self._paho: mqtt.Client = client._client  # noqa: SLF001  aiomqtt issue 345: no public way
+        # call 1 of 2: manual acknowledgement, switched on before connecting, so that nothing
+        # a resumed session brings (messages queued while the daemon was away) is
+        # acknowledged on receipt (paho >= 2.0; also its constructor's manual_ack=True,
+        # which aiomqtt does not pass on)
+        self._paho.manual_ack_set(True)
 
-    def recv(self, size: int) -> bytes:
-        data, pos = self._data, self._pos
-        if pos >= len(data):
-            data = self._sock.recv(65536)  # BlockingIOError, TLS and EOF (b"") as they come
-            self._data, pos = data, 0
-        end = min(pos + size, len(data))
-        self._pos = end
-        return data[pos:end]
+    def ack(self, mid: int, qos: int) -> None:
+        """Acknowledge message ``mid`` received at ``qos`` (1: PUBACK, 2: PUBCOMP).
 
-    def pending(self) -> int:
-        """Bytes read and not yet handed to paho (plus what TLS holds decrypted)."""
-        held = len(self._data) - self._pos
-        more = getattr(self._sock, "pending", None)
-        return held + (more() if more is not None else 0)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._sock, name)
-
-
-def _buffer_reads(client: aiomqtt.Client) -> None:
-    """Put :class:`_BufferedReads` under ``client``'s paho client once it is connected (its
-    private ``_sock``); any bytes paho has not read yet are read through the buffer, in order."""
-    paho = client._client
-    sock = getattr(paho, "_sock", None)
-    if sock is not None and not isinstance(sock, _BufferedReads):
-        paho._sock = _BufferedReads(sock)
-
-
-#: PUBACK's fixed header (packet type 4, remaining length 2), the packet id follows
-_PUBACK = 0x4002 << 16
-
-
-class _PubAcks:
-    """The PUBACKs of one connection, queued in paho as one write per event-loop turn.
-
-    ``paho.ack`` queues a 4-byte packet and makes a system call per message; the daemon releases
-    hundreds of acknowledgements at once (after each recorder flush), so they are collected and
-    handed to paho's output queue together (its private ``_packet_queue``, the call ``ack``
-    makes). After the connection is gone they go nowhere, as with ``paho.ack``: the broker
-    resends the messages on the next session.
-    """
-
-    def __init__(self, paho: mqtt.Client, loop: asyncio.AbstractEventLoop) -> None:
-        self._paho = paho
-        self._loop = loop
-        self._mids: list[int] = []
-
-    def ack(self, mid: int) -> None:
-        if not self._mids:
-            self._loop.call_soon(self.flush)
-        self._mids.append(mid)
-
-    def flush(self) -> None:
-        mids, self._mids = self._mids, []
-        if mids:
-            packets = struct.pack(f"!{len(mids)}I", *[_PUBACK | mid for mid in mids])
-            self._paho._packet_queue(mqtt.PUBACK, packets, 0, 0)
+        On a connection that is gone paho has no socket to send on and nothing is sent: the
+        broker keeps the message and resends it on the next session.
+        """
+        # call 2 of 2: paho queues the acknowledgement; aiomqtt's event-loop writer sends it
+        self._paho.ack(mid, qos)
 
 
 class RecentDeliveries:
     """The last ``size`` (topic, payload) pairs handed out, to recognise a redelivery.
 
-    A broker resends a QoS 1 message with the DUP flag when it had no acknowledgement for it
-    before the connection dropped; at most 65 535 such messages can be outstanding (the packet
+    A broker resends a QoS 1 message it had no acknowledgement for when the session resumes
+    after a dropped connection; at most 65 535 such messages can be outstanding (the packet
     identifier space), so a window of that size holds every one this run could have handed out.
     """
 
@@ -289,6 +211,9 @@ class RecentDeliveries:
     def __contains__(self, item: tuple[str, bytes]) -> bool:
         return hash(item) in self._seen
 
+    def __len__(self) -> int:
+        return len(self._order)
+
 
 class MqttSource:
     """Subscribe to ``<prefix>/#`` with QoS 1 on a persistent session and yield RawMessages.
@@ -300,8 +225,9 @@ class MqttSource:
     Acknowledgements are manual (docs/daemon.md, "At-least-once delivery"): each RawMessage
     carries an ``ack`` the daemon calls once the message is processed and flushed to the
     recording; until then the broker keeps it and resends it after a reconnect or a restart.
-    A resent message (DUP flag) whose topic and payload this run already handed out is marked
-    ``duplicate`` (``recent`` is shared by every connection of one daemon).
+    On a connection after this run's first (``recent`` is shared by every connection of one
+    daemon), a message whose topic and payload this run already handed out is one the broker
+    sent again, and is marked ``duplicate``.
     """
 
     name = "mqtt"
@@ -320,33 +246,38 @@ class MqttSource:
         self.base = base
         self.recent = recent if recent is not None else RecentDeliveries()
         self._client: aiomqtt.Client | None = None
+        self._messages: aiomqtt.MessagesIterator | None = None
         self._inbox: _Inbox | None = None
-        self._iterator: aiomqtt.MessagesIterator | None = None
-        self._acks: _PubAcks | None = None
-        self._lost: IngestError | None = None
+        self._subscribing: asyncio.Future[None] | None = None
+        self._acks: ManualAcks | None = None
+        self._resumed = False
 
     async def __aenter__(self) -> MqttSource:
         made: list[_Inbox] = []
         client = make_client(self.config, self.config.client_id, self.base,
                              queue_type=_inbox_class(made))
-        (inbox,) = made  # built by the client's constructor
-        _enable_manual_ack(client)
+        (inbox,) = made  # made by the client's constructor
+        acks = ManualAcks(client)  # before connecting: see ManualAcks
         try:
             await client.__aenter__()
         except aiomqtt.MqttError as exc:
             raise _translate(self.config, "cannot connect", exc) from exc
-        _buffer_reads(client)
+        subscribing = asyncio.ensure_future(self._subscribe(client))
         try:
-            for topic in self.subscribe:
-                await client.subscribe(topic, qos=self.config.qos)
-        except aiomqtt.MqttError as exc:
+            await self._subscribed(client, subscribing, inbox)
+        except BaseException:
+            subscribing.cancel()
+            await asyncio.gather(subscribing, return_exceptions=True)
             await _quiet_exit(client)
-            raise _translate(self.config, "cannot subscribe", exc) from exc
+            raise
+        self._subscribing = subscribing
         self._client = client
+        self._messages = client.messages
         self._inbox = inbox
-        self._iterator = client.messages
-        self._acks = _PubAcks(client._client, asyncio.get_running_loop())
-        self._lost = None
+        self._acks = acks
+        # the broker resends only on a session resumed within this run: nothing handed out
+        # before, nothing to recognise
+        self._resumed = len(self.recent) > 0
         return self
 
     async def __aexit__(
@@ -355,64 +286,115 @@ class MqttSource:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
+        if self._subscribing is not None:
+            self._subscribing.cancel()
+            await asyncio.gather(self._subscribing, return_exceptions=True)
+            self._subscribing = None
         if self._client is not None:
             await _quiet_exit(self._client)
             self._client = None
+            self._messages = None
             self._inbox = None
+
+    async def _subscribe(self, client: aiomqtt.Client) -> None:
+        for topic in self.subscribe:
+            # no timeout here: see _subscribed
+            await client.subscribe(topic, qos=self.config.qos, timeout=math.inf)
+
+    async def _subscribed(self, client: aiomqtt.Client, subscribing: asyncio.Future[None],
+                          inbox: _Inbox) -> None:
+        """Wait until the broker has answered the subscription, or a message has come.
+
+        On a resumed session mosquitto sends the whole queue it kept for it before its
+        answer (aiomqtt read 57 000 messages in 9.6 s, near its 10 s timeout); a message that
+        comes shows the session's subscription in place, and the answer is then awaited
+        beside the reading. A new session's answer comes at once. Neither within the
+        client's timeout: the subscription failed.
+        """
+        arrived: asyncio.Future[Any] = asyncio.ensure_future(inbox.arrived.wait())
+        waiting: list[asyncio.Future[Any]] = [subscribing, arrived]
+        try:
+            await asyncio.wait(waiting, timeout=client.timeout,
+                               return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            arrived.cancel()
+        if subscribing.done():
+            exc = subscribing.exception()
+            if exc is not None:
+                raise _translate(self.config, "cannot subscribe", exc) from exc
+        elif not inbox.arrived.is_set():
+            raise _translate(self.config, "cannot subscribe",
+                             aiomqtt.MqttError("Operation timed out"))
 
     def __aiter__(self) -> MqttSource:
         return self
 
     async def __anext__(self) -> RawMessage:
-        assert self._inbox is not None and self._iterator is not None, "not entered"
+        while True:
+            raw = self._raw(await self._next())
+            if raw is not None:
+                return raw
+
+    async def batches(self) -> AsyncIterator[list[RawMessage]]:
+        """What has arrived, up to ``BATCH`` messages at a time (the daemon queues a list as
+        one entry and processes what is queued as one burst: docs/daemon.md, "Bursts").
+
+        aiomqtt reads one packet per event-loop turn: after the first message the source
+        gives the loop a turn per message while more arrive, so a backlog comes in lists of
+        up to ``BATCH``, and a message at a rig's rate on its own at once. What waits is
+        handed over before a lost connection is reported.
+        """
+        assert self._inbox is not None, "not entered"
         inbox = self._inbox
         while True:
-            if not inbox.empty():
-                # Fast path: aiomqtt's iterator creates a task per message even when one is
-                # already waiting, which costs more than all of our decoding. And after the
-                # connection dropped, what waits here is still handed out (its iterator would
-                # raise at once): the broker resends it unacknowledged on the next session,
-                # where it is recognised as a duplicate, but a broker without persistence that
-                # restarted would not, so processing it now loses nothing.
-                message: _Delivery = inbox.get_nowait()
-            elif self._lost is not None:
-                raise self._lost
-            else:
-                try:
-                    message = await self._iterator.__anext__()  # type: ignore[assignment]
-                except aiomqtt.MqttError as exc:
-                    self._lost = _translate(self.config, "connection lost", exc)
-                    self._lost.__cause__ = exc
-                    continue
-            topic = message.topic
-            ack = self._acker(message)
-            if topic.startswith(self.ignore_prefixes):
-                if ack is not None:
-                    ack()  # our own results coming back on the shared prefix: nothing to keep
-                continue
-            payload = message.payload
-            dup = message.dup
-            duplicate = dup and (topic, payload) in self.recent
-            if not duplicate:
-                self.recent.add(topic, payload)
-            return RawMessage("mqtt", topic, payload, message.receive_time, ack, dup, duplicate)
+            batch: list[RawMessage] = []
+            first = self._raw(await self._next())
+            if first is not None:
+                batch.append(first)
+            while len(batch) < BATCH:
+                while not inbox.empty() and len(batch) < BATCH:
+                    raw = self._raw(inbox.get_nowait())
+                    if raw is not None:
+                        batch.append(raw)
+                if len(batch) >= BATCH:
+                    break
+                await asyncio.sleep(0)  # a turn, in which aiomqtt reads a packet if one came
+                if inbox.empty():
+                    break
+            if batch:
+                yield batch
 
-    def _acker(self, message: _Delivery) -> Callable[[], None] | None:
-        """The acknowledgement of one QoS 1/2 message on the connection it came from.
+    async def _next(self) -> aiomqtt.Message:
+        """The next message: one waiting in the queue, else the next to arrive (raises
+        :class:`IngestError` when the connection is lost before one does)."""
+        assert self._inbox is not None and self._messages is not None, "not entered"
+        if not self._inbox.empty():
+            return self._inbox.get_nowait()
+        subscribing = self._subscribing
+        if subscribing is not None and subscribing.done():
+            exc = subscribing.exception()
+            if exc is not None:
+                raise _translate(self.config, "cannot subscribe", exc) from exc
+        try:
+            return await anext(self._messages)
+        except aiomqtt.MqttError as exc:
+            raise _translate(self.config, "connection lost", exc) from exc
 
-        After that connection is gone the call does nothing (paho has no socket to send on):
-        the broker resends the message on the next session, which is what at-least-once needs.
-        """
-        if message.qos == 0 or self._client is None:
+    def _raw(self, message: aiomqtt.Message) -> RawMessage | None:
+        """The RawMessage of one message (None: one of our own results, acknowledged)."""
+        assert self._acks is not None, "not entered"
+        topic = message.topic.value
+        ack = (None if message.qos == 0
+               else functools.partial(self._acks.ack, message.mid, message.qos))
+        if topic.startswith(self.ignore_prefixes):
+            if ack is not None:
+                ack()  # our own results coming back on the shared prefix: nothing to keep
             return None
-        if message.qos == 1 and self._acks is not None:
-            return functools.partial(self._acks.ack, message.mid)
-        paho, mid, qos = self._client._client, message.mid, message.qos
-
-        def ack() -> None:  # QoS 2: paho's own PUBCOMP
-            paho.ack(mid, qos)
-
-        return ack
+        payload = cast(bytes, message.payload)  # paho's bytes, as received
+        duplicate = self._resumed and (topic, payload) in self.recent
+        if not duplicate:
+            self.recent.add(topic, payload)
+        return RawMessage("mqtt", topic, payload, time.time(), ack, False, duplicate)
 
 
 async def _quiet_exit(client: aiomqtt.Client) -> None:
@@ -420,6 +402,20 @@ async def _quiet_exit(client: aiomqtt.Client) -> None:
         await client.__aexit__(None, None, None)
     except Exception as exc:  # already disconnected: nothing left to close
         log.debug("mqtt disconnect: %s", exc)
+
+
+async def disconnection(client: aiomqtt.Client) -> BaseException | None:
+    """Wait until ``client``'s connection ends; why it ended (None: we closed it).
+
+    aiomqtt's message iterator raises when the connection ends, with the reason as the
+    cause; a client that subscribes to nothing receives no message before that.
+    """
+    try:
+        async for _ in client.messages:
+            pass
+    except aiomqtt.MqttError as exc:
+        return exc.__cause__
+    return None
 
 
 class MqttPublisher(Sink):
@@ -491,60 +487,32 @@ class MqttPublisher(Sink):
         return _PublisherConnection(self.config, self.config.client_id + "-pub", self.base)
 
     async def pump(self, client: aiomqtt.Client) -> None:
-        """Publish queued messages until cancelled; a message is removed only once sent
-        (QoS 1/2: acknowledged; QoS 0: handed to paho, see :meth:`_publish_at_most_once`)."""
-        client.pending_calls_threshold = 1000
-        paho = client._client  # private: see _publish_at_most_once
+        """Publish queued messages in order until cancelled; a message is removed only once
+        sent (QoS 1/2: acknowledged by the broker; QoS 0: written to the socket).
+
+        Up to ``PUBLISH_BATCH`` are published at once: each ``publish`` hands its message to
+        paho before it waits, in the order the calls start, and the event loop writes them
+        together (one at a time, a result waits for its own write or acknowledgement first:
+        an event-loop turn or more per message, more than the daemon spends on a sample).
+        """
+        client.pending_calls_threshold = max(client.pending_calls_threshold, PUBLISH_BATCH)
+        queue = self._queue
         while True:
-            if not self._queue:
-                await self._written(paho)
-                if self._queue:
-                    continue
+            if not queue:
                 self._idle.set()
                 self._wake.clear()
                 await self._wake.wait()
                 continue
-            if self.qos == 0:
-                await self._publish_at_most_once(paho)
-                continue
-            topic, payload = self._queue[0]
-            try:
-                await client.publish(topic, payload, qos=self.qos)
-            except aiomqtt.MqttError as exc:
-                raise _translate(self.config, "publish failed", exc) from exc
-            self._queue.popleft()
-            self.published += 1
-
-    async def _publish_at_most_once(self, paho: mqtt.Client, batch: int = 64) -> None:
-        """Hand up to ``batch`` queued messages to paho at QoS 0, then wait until it has
-        written them.
-
-        aiomqtt's ``publish`` waits for each QoS 0 message to be written (an event, a timeout
-        and an event-loop turn per message: a tenth of the daemon's time at 8 000 samples/s);
-        paho queues them and the event loop writes them together when the socket is writable.
-        A message is removed from our queue once paho holds it: at most ``batch`` are lost if
-        the connection drops before the write, which QoS 0 allows.
-        """
-        queue = self._queue
-        for _ in range(min(batch, len(queue))):
-            topic, payload = queue[0]
-            info = paho.publish(topic, payload, 0)
-            if info.rc != mqtt.MQTT_ERR_SUCCESS:
-                raise _translate(self.config, "publish failed",
-                                 aiomqtt.MqttCodeError(info.rc, "Could not publish message"))
-            queue.popleft()
-            self.published += 1
-        await self._written(paho)
-
-    async def _written(self, paho: mqtt.Client) -> None:
-        """Wait until paho has written all it holds (the event loop writes when the socket is
-        writable; a broker that does not read keeps us here, and our queue bounded)."""
-        turns = 0
-        while paho.want_write():
-            if not paho.is_connected():  # what paho holds is lost with the connection
-                raise IngestError(f"{describe(self.config)}: publish failed: connection lost")
-            await asyncio.sleep(0 if turns < 4 else 0.001)
-            turns += 1
+            batch = list(islice(queue, PUBLISH_BATCH))
+            outcomes = await asyncio.gather(
+                *(client.publish(topic, payload, qos=self.qos) for topic, payload in batch),
+                return_exceptions=True)
+            for outcome in outcomes:
+                if isinstance(outcome, BaseException):
+                    # the rest go again on the next connection, in order
+                    raise _translate(self.config, "publish failed", outcome) from outcome
+                queue.popleft()
+                self.published += 1
 
     async def drain(self, timeout: float) -> bool:
         """Wait until everything queued is published (True) or ``timeout`` passes (False)."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import csv
-import json
 import time
 from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from contextlib import asynccontextmanager
@@ -19,13 +18,14 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import aiomqtt
+import orjson
 import zenoh
 
 from tdmon.channels import check_channel
 from tdmon.config.daemon import MqttConfig, ZenohConfig
 from tdmon.errors import IngestError
 from tdmon.ingest.mcap_source import iter_raw
-from tdmon.ingest.mqtt import connect_error, make_client
+from tdmon.ingest.mqtt import connect_error, disconnection, make_client
 from tdmon.ingest.zenoh_io import open_session
 from tdmon.units import parse_time
 
@@ -111,7 +111,9 @@ def csv_messages(
                 if seq:
                     counters[column.channel] += 1
                     body["seq"] = counters[column.channel]
-                yield t + shift, f"{prefix}/{column.channel}", json.dumps(body).encode()
+                # a cell of NaN or infinity goes as null (JSON has no word for either): the
+                # daemon rejects it, as it would the rig's
+                yield t + shift, f"{prefix}/{column.channel}", orjson.dumps(body)
 
 
 def _number_or_text(cell: str) -> float | str:
@@ -259,17 +261,16 @@ class MqttSender:
         while True:
             client = self._client
             assert client is not None
-            # aiomqtt resolves this private future when the broker closes the connection
-            gone: asyncio.Future[Any] = asyncio.ensure_future(
-                asyncio.shield(client._disconnected))  # private
+            gone: asyncio.Future[BaseException | None] = asyncio.ensure_future(
+                disconnection(client))
             broken: asyncio.Future[Any] = asyncio.ensure_future(self._broken.wait())
             await asyncio.wait([gone, broken], return_when=asyncio.FIRST_COMPLETED)
             for waiter in (gone, broken):
                 waiter.cancel()
             await asyncio.gather(gone, broken, return_exceptions=True)
             self._healthy.clear()
-            reason = self._error or (client._disconnected.exception()  # private, see above
-                                     if client._disconnected.done() else None)
+            reason = self._error or (gone.result() if gone.done() and not gone.cancelled()
+                                     else None)
             stranded = list(self._tasks)
             for task in stranded:
                 task.cancel()

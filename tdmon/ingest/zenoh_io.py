@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import time
 from collections import deque
 from collections.abc import AsyncGenerator
 from types import TracebackType
 from typing import Any
 
+import orjson
 import zenoh
 
 from tdmon.config.daemon import ZenohConfig
@@ -37,11 +37,11 @@ def zenoh_config(config: ZenohConfig) -> zenoh.Config:
     """A zenoh.Config from ours; scouting off means only the explicit endpoints are used."""
     conf = zenoh.Config()
     try:
-        conf.insert_json5("mode", json.dumps(config.mode))
-        conf.insert_json5("listen/endpoints", json.dumps(config.listen))
-        conf.insert_json5("connect/endpoints", json.dumps(config.connect))
-        conf.insert_json5("scouting/multicast/enabled", json.dumps(config.scouting))
-        conf.insert_json5("scouting/gossip/enabled", json.dumps(config.scouting))
+        for key, value in (("mode", config.mode), ("listen/endpoints", config.listen),
+                           ("connect/endpoints", config.connect),
+                           ("scouting/multicast/enabled", config.scouting),
+                           ("scouting/gossip/enabled", config.scouting)):
+            conf.insert_json5(key, orjson.dumps(value).decode())
     except zenoh.ZError as exc:
         raise IngestError(f"zenoh configuration rejected: {exc}") from exc
     return conf

@@ -1,4 +1,5 @@
-"""Reading a replay through its chunk index and record by record gives the same messages."""
+"""Reading a replay: the raw input of a recording, in file order, from any MCAP writer's file,
+finished or cut short; a recorded raw message read as the json module reads it."""
 
 from __future__ import annotations
 
@@ -7,17 +8,16 @@ import json
 import math
 from pathlib import Path
 
-import msgspec
+import orjson
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from tdmon.errors import IngestError
 from tdmon.ingest import mcap_source
-from tdmon.ingest.mcap_source import _all_in_indexed_chunks, iter_raw
+from tdmon.ingest.mcap_source import iter_raw
 from tdmon.ingest.types import RawMessage, raw_message
 
 T0 = 1_700_000_000_000_000_000
@@ -49,38 +49,27 @@ def _read(path: Path) -> list[tuple[int, RawMessage]]:
         return list(iter_raw(stream))
 
 
-def test_indexed_chunks_read_like_the_stream(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-                                             ) -> None:
-    chunked, flat = tmp_path / "chunked.mcap", tmp_path / "flat.mcap"
-    _write(chunked, chunking=True)
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4,
+                                         CompressionType.NONE])
+def test_raw_input_is_read_in_file_order_however_the_file_is_written(
+        tmp_path: Path, compression: CompressionType) -> None:
+    chunked, flat, unindexed = (tmp_path / "chunked.mcap", tmp_path / "flat.mcap",
+                                tmp_path / "unindexed.mcap")
+    _write(chunked, chunking=True, compression=compression)
     _write(flat, chunking=False)
+    _write(unindexed, chunking=True, index=False)
     with chunked.open("rb") as stream:
         summary = make_reader(stream).get_summary()
     assert summary is not None and len(summary.chunk_indexes) > 5
-    assert _all_in_indexed_chunks(summary)
 
     read = _read(chunked)
     assert len(read) == 300
-    # file order, not log-time order; each payload whole
+    # file order, not log-time order; each payload whole; only /tdmon/raw
     assert [json.loads(raw.payload)["value"] for _, raw in read] == [float(i) for i in
                                                                      range(300)]
     assert read[3][0] == T0 - 2 * 100_000_000  # message 3, received 0.5 s early
-    assert read == _read(flat)
-
-    # the same file read record by record, as a file without a summary is
-    monkeypatch.setattr(mcap_source, "_summary", lambda stream: None)
-    assert read == _read(chunked)
-
-
-def test_messages_outside_the_index_are_read_record_by_record(tmp_path: Path) -> None:
-    flat, unindexed = tmp_path / "flat.mcap", tmp_path / "unindexed.mcap"
-    _write(flat, chunking=False)
-    _write(unindexed, chunking=True, index=False)
-    for path in (flat, unindexed):
-        with path.open("rb") as stream:
-            summary = make_reader(stream).get_summary()
-        assert summary is not None and not _all_in_indexed_chunks(summary)
-        assert len(_read(path)) == 300
+    assert {raw.source for _, raw in read} == {"mqtt"}
+    assert read == _read(flat) == _read(unindexed)
 
 
 def test_a_file_cut_short_is_read_up_to_the_cut(tmp_path: Path) -> None:
@@ -93,68 +82,33 @@ def test_a_file_cut_short_is_read_up_to_the_cut(tmp_path: Path) -> None:
     assert read == _read(path)[: len(read)]
 
 
-def _library_messages(path: Path) -> list[tuple[int, int, bytes]]:
-    """(channel id, log time, data) of every message, in file order, by the mcap package."""
+def _library_raw(path: Path) -> list[tuple[int, RawMessage | None]]:
+    """Every /tdmon/raw message in file order as (log time, RawMessage), by the mcap
+    package's seeking reader (the summary's index: another way through the file)."""
     with path.open("rb") as stream:
-        return [(message.channel_id, message.log_time, message.data)
-                for _, _, message in make_reader(stream).iter_messages(log_time_order=False)]
+        return [(message.log_time, mcap_source.raw_from_record(
+                    mcap_source.RAW_TOPIC, message.data, message.log_time))
+                for _, _, message in make_reader(stream).iter_messages(
+                    topics=[mcap_source.RAW_TOPIC], log_time_order=False)]
 
 
-def _own_messages(path: Path) -> list[tuple[int, int, bytes]]:
-    with path.open("rb") as stream:
-        summary = make_reader(stream).get_summary()
-        assert summary is not None and _all_in_indexed_chunks(summary)
-        stream.seek(0)
-        return [item for item in mcap_source._indexed_messages(stream, summary)
-                if isinstance(item, tuple)]
-
-
-@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4,
-                                         CompressionType.NONE])
-def test_the_chunk_reader_gives_the_library_s_messages(tmp_path: Path,
-                                                       compression: CompressionType) -> None:
-    # the struct-based reading of zstd and uncompressed chunks, and lz4 through the package
-    path = tmp_path / "chunked.mcap"
-    _write(path, chunking=True, compression=compression)
-    own = _own_messages(path)
-    assert len(own) == 600
-    assert own == _library_messages(path)
-
-
-def test_the_chunk_reader_reads_the_recorder_s_files(tmp_path: Path) -> None:
+def test_the_recorder_s_files_and_the_bundled_replays_are_read_whole(tmp_path: Path) -> None:
     # foxglove-sdk's writer (the recorder's), and every bundled replay
     from tdmon.record.mcap_recorder import McapRecorder
 
     path = tmp_path / "recorded.mcap"
     with McapRecorder(path=path, recover=False) as recorder:
         for i in range(5000):
-            recorder.write("/tdmon/sample", T0 + i * 10**9,
-                           {"channel": "hookload", "t": T0 / 1e9 + i, "value": 1e6 + i,
-                            "unit": "N", "source": "mqtt", "topic": "rig/F4/hookload"})
-    assert len(_own_messages(path)) == 5000
-    assert _own_messages(path) == _library_messages(path)
+            raw = RawMessage("mqtt", "rig/F4/hookload", b'{"t": %d, "value": 1}' % i, 1e9 + i)
+            recorder.write(mcap_source.RAW_TOPIC, T0 + i * 10**9, raw_message(raw))
+    read = _read(path)
+    assert len(read) == 5000 and read == _library_raw(path)
+    # tdmon's own records: their bytes kept, to be recorded again as they are
+    assert all(raw.recorded is not None for _, raw in read)
     replays = sorted((Path(__file__).parents[2] / "replays").glob("*.mcap"))
     assert replays
     for replay in replays:
-        assert _own_messages(replay) == _library_messages(replay), replay
-
-
-def test_a_record_running_past_its_chunk_stops_the_reading_there() -> None:
-    good = mcap_source._RECORD.pack(5, 22 + 3) + mcap_source._MESSAGE.pack(7, 0, 11, 11) + b"abc"
-    # a second message whose length says more than the chunk holds
-    bad = mcap_source._RECORD.pack(5, 500) + mcap_source._MESSAGE.pack(7, 1, 12, 12) + b"x"
-    records = mcap_source._chunk_records(good + bad)
-    assert next(records) == (7, 11, b"abc")
-    with pytest.raises(McapError, match="past its end"):
-        next(records)
-    short = mcap_source._chunk_records(good + mcap_source._RECORD.pack(5, 4) + b"abcd")
-    assert next(short) == (7, 11, b"abc")
-    with pytest.raises(McapError, match="too short"):
-        next(short)
-    cut = mcap_source._chunk_records(good + bad[:5])  # not even a whole record header
-    assert next(cut) == (7, 11, b"abc")
-    with pytest.raises(McapError, match="cut short"):
-        next(cut)
+        assert _read(replay) == _library_raw(replay), replay
 
 
 @pytest.mark.parametrize(("record", "expected"), [
@@ -209,15 +163,15 @@ def test_a_recorded_raw_message_keeps_its_bytes_only_when_they_say_what_it_says(
         assert raw == RawMessage(raw.source, raw.topic, raw.payload, raw.receive_time)
 
 
-def _refuse_usual(data: bytes) -> object:
-    raise msgspec.DecodeError("refused")
+def _refuse(data: bytes) -> object:
+    raise orjson.JSONDecodeError("refused", "", 0)
 
 
-def _outcome(data: bytes, usual: bool) -> object:
-    """What raw_from_record makes of ``data``, with msgspec's quick path or without it."""
+def _outcome(data: bytes, by_orjson: bool) -> object:
+    """What raw_from_record makes of ``data``, read by orjson, or by the json module alone."""
     with pytest.MonkeyPatch.context() as patched:
-        if not usual:
-            patched.setattr(mcap_source, "_read_usual", _refuse_usual)
+        if not by_orjson:
+            patched.setattr(mcap_source.orjson, "loads", _refuse)
         try:
             return mcap_source.raw_from_record("/tdmon/raw", data, 3 * 10**9)
         except (IngestError, mcap_source._Truncated) as exc:
@@ -238,21 +192,21 @@ records = st.fixed_dictionaries(
 @given(record=records, drop=st.sets(st.sampled_from(
     ["source", "topic", "receive_time", "payload", "payload_encoding"]), max_size=2),
     ascii_only=st.booleans())
-def test_msgspec_s_quick_path_makes_the_general_path_s_raw_message(
+def test_a_recorded_raw_message_is_what_the_json_module_reads(
         record: dict[str, object], drop: set[str], ascii_only: bool) -> None:
     for key in drop:
         record.pop(key)
     data = json.dumps(record, ensure_ascii=ascii_only).encode("utf-8", "surrogatepass")
-    quick, general = _outcome(data, usual=True), _outcome(data, usual=False)
-    if isinstance(quick, RawMessage) and isinstance(general, RawMessage):
-        same_time = (quick.receive_time == general.receive_time
-                     or (math.isnan(quick.receive_time) and math.isnan(general.receive_time)))
-        assert (quick.source, quick.topic, quick.payload) == (
-            general.source, general.topic, general.payload) and same_time
-        if quick.recorded is not None:  # kept only when the bytes say what raw_message would
-            assert quick.recorded is data and json.loads(data) == raw_message(quick)
+    read, oracle = _outcome(data, by_orjson=True), _outcome(data, by_orjson=False)
+    if isinstance(read, RawMessage) and isinstance(oracle, RawMessage):
+        same_time = (read.receive_time == oracle.receive_time
+                     or (math.isnan(read.receive_time) and math.isnan(oracle.receive_time)))
+        assert (read.source, read.topic, read.payload) == (
+            oracle.source, oracle.topic, oracle.payload) and same_time
+        if read.recorded is not None:  # kept only when the bytes say what raw_message would
+            assert read.recorded is data and json.loads(data) == raw_message(read)
     else:
-        assert quick == general
+        assert read == oracle
 
 
 def test_a_recorded_raw_message_kept_in_part_or_damaged_is_refused() -> None:

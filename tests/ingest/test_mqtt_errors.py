@@ -1,4 +1,4 @@
-"""MQTT errors read by their reason code, and the source's own incoming queue (no broker)."""
+"""MQTT errors read by their reason code (no broker)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.reasoncodes import ReasonCode
 
 from tdmon.config.daemon import MqttConfig
-from tdmon.ingest.mqtt import _Inbox, _inbox_class, _translate, is_auth_failure, make_client
+from tdmon.ingest.mqtt import _translate, is_auth_failure
 
 
 def _connack(name: str) -> ReasonCode:
@@ -44,17 +44,3 @@ def test_auth_message_keeps_the_brokers_reason() -> None:
     assert str(_translate(MqttConfig(), "cannot connect", exc)) == (
         "mqtt 127.0.0.1:1883: cannot connect: [code:135] Not authorized "
         "(check username and password)")
-
-
-async def test_the_source_holds_the_queue_the_client_fills() -> None:
-    made: list[_Inbox] = []
-    client = make_client(MqttConfig(), "t", queue_type=_inbox_class(made))
-    assert len(made) == 1
-    inbox = made[0]
-    message = aiomqtt.Message("rig/T1/hookload", b"1", qos=1, retain=False, mid=1,
-                              properties=None)
-    inbox.put_nowait(message)
-    # the public view of the client's queue sees the same object
-    assert len(client.messages) == 1
-    assert inbox.get_nowait() is message
-    assert len(client.messages) == 0
