@@ -30,21 +30,27 @@ ODD_HANGS = 3
 PLAUSIBLE_RATIO = (0.5, 2.0)
 
 
-def block_weight_alarm(t: float, learnt: float, configured: float, tolerance: float
-                       ) -> Alarm | None:
-    """Alarm when the block weight learnt in slips differs from the configured one.
+def block_weight_alarm(t: float, learnt: float, learnt_std: float, configured: float,
+                       tolerance: float) -> Alarm | None:
+    """Alarm when the block weight the joint estimate learnt differs from the configured one
+    by more than ``tolerance`` and by more than twice its spread.
 
     Parameters
     ----------
     t : [s]
-    learnt : block weight from the in-slips samples [N]
-    configured : the well file's block weight [N] (0: none given, no alarm)
+    learnt : block weight as the sensor weighs it, its zero offset aside (the joint estimate,
+        :mod:`tdmon.calib.joint`) [N]
+    learnt_std : its standard deviation [N]
+    configured : the well file's block weight, as the sensor would weigh it [N] (0: none
+        given, no alarm)
     tolerance : relative deviation that is reported [-]
     """
-    if configured > 0 and abs(learnt - configured) > tolerance * configured:
+    difference = abs(learnt - configured)
+    if configured > 0 and difference > tolerance * configured and difference > 2 * learnt_std:
         return Alarm(t, AlarmKind.BLOCK_WEIGHT, Severity.INFO,
-                     f"block weight from in-slips periods {learnt / 1e3:.0f} kN differs from "
-                     f"the configured {configured / 1e3:.0f} kN", learnt, configured)
+                     f"block weight {learnt / 1e3:.0f} ± {learnt_std / 1e3:.0f} kN (learnt "
+                     f"with the sensor's zero offset and the string weight) differs from the "
+                     f"configured {configured / 1e3:.0f} kN", learnt, configured)
     return None
 
 
