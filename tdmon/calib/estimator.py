@@ -54,8 +54,10 @@ from tdmon.calib.estimator_state import (
 )
 from tdmon.calib.joint import (
     JointState,
+    for_rig,
     initial_joint,
     joint_fields,
+    mean_and_covariance,
     sensor_estimate,
     slips_measurement,
     update_joint,
@@ -64,7 +66,7 @@ from tdmon.calib.joint import (
 from tdmon.calib.measurement import Resolution, SensorEstimate, corrected_window, resolution
 from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
-from tdmon.calib.parameters import BLOCK_WEIGHT
+from tdmon.calib.parameters import BLOCK_WEIGHT, HOOKLOAD_OFFSET, JOINT_PARAMETERS
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.calib.scatter import Scatter, add_window, scatter_std
@@ -129,11 +131,18 @@ class FrictionEstimator:
     Parameters
     ----------
     model : the prepared well
-    settings : estimator settings
+    settings : estimator settings (a joint estimate left at the generic parameters is fitted
+        to the well's own hook-load sensor and block weight, `tdmon.calib.joint.for_rig`)
     """
 
     model: WellModel
     settings: CalibrationSettings = field(default_factory=CalibrationSettings)
+
+    def __post_init__(self) -> None:
+        joint = self.settings.joint
+        if joint.parameters is JOINT_PARAMETERS:
+            object.__setattr__(self, "settings", replace(
+                self.settings, joint=for_rig(joint, self.model.well)))
 
     @cached_property
     def shoe(self) -> float:
@@ -216,7 +225,7 @@ class FrictionEstimator:
         if detection.state == RigState.IN_SLIPS:
             slips = add_slips_sample(slips or SlipsRun(), sample, detection.steady)
         elif slips is not None:
-            state = self._slips_done(state, slips, sample.t)
+            state, outputs = self._slips_done(state, slips, sample.t)
             slips = None
         if (detection.state == RigState.IN_SLIPS and detection.steady
                 and sample.hookload is not None):
@@ -232,19 +241,24 @@ class FrictionEstimator:
         state, more = self.update(state, window)
         return state, outputs + more
 
-    def _slips_done(self, state: EstimatorState, run: SlipsRun, t: float) -> EstimatorState:
+    def _slips_done(self, state: EstimatorState, run: SlipsRun, t: float
+                    ) -> tuple[EstimatorState, tuple[Output, ...]]:
         """A connection ended: its in-slips readings to the joint estimate (the empty block's
-        weight and the zero offset; with the block moving, the sheave factor)."""
+        weight and the zero offset; with the block moving, the sheave factor), and the
+        block-weight alarm when they show the block off the well file's."""
         w = state.windows
         if w.joint is None:
-            return state
+            return state, ()
         readings = tuple(slips_measurement(r.mean, r.se, r.motion)
                          for r in close_run(run, self.settings.windows.noise_floor))
         joint = update_joint_slips(w.joint, self.model, readings, t, self._block_of(
             state.samples.block_weight), self.settings.joint, self.settings.method)
         if joint is w.joint:
-            return state
-        return EstimatorState(state.samples, replace(w, joint=joint))
+            return state, ()
+        out: list[Output] = []
+        alarmed = w.block_alarmed or self._block_alarm(joint, t, out)
+        return (EstimatorState(state.samples, replace(w, joint=joint, block_alarmed=alarmed)),
+                tuple(out))
 
     def _block_of(self, block: BlockWeightWindow) -> float:
         """The block weight where the joint estimate does not estimate it [N]: learnt in
@@ -259,13 +273,20 @@ class FrictionEstimator:
         return sensor_estimate(joint, self.settings.joint, self._block_of(block))
 
     def close(self, state: EstimatorState) -> tuple[EstimatorState, tuple[Output, ...]]:
-        """End of input: the window being built is closed and used."""
+        """End of input: the connection in slips and the window being built are closed and
+        used."""
+        outputs: tuple[Output, ...] = ()
+        if state.samples.slips is not None:
+            state, outputs = self._slips_done(state, state.samples.slips,
+                                              state.samples.slips.t)
         samples = state.samples
         accumulator, window = close(samples.accumulator, self.settings.windows)
-        state = EstimatorState(replace(samples, accumulator=accumulator), state.windows)
+        state = EstimatorState(replace(samples, accumulator=accumulator, slips=None),
+                               state.windows)
         if window is None:
-            return state, ()
-        return self.update(state, window)
+            return state, outputs
+        state, more = self.update(state, window)
+        return state, outputs + more
 
     # -- windows --------------------------------------------------------------------------
 
@@ -468,19 +489,32 @@ class FrictionEstimator:
             w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
             float(fields["weight_factor"]), float(fields["weight_factor_std"]),
             float(fields["mu_joint"]), bool(fields["identifiable"]),
-            tolerance=s.mismatch_tolerance, windows=s.mismatch_windows)
+            tolerance=s.mismatch_tolerance, windows=s.mismatch_windows,
+            block=(float(fields[BLOCK_WEIGHT.name]), float(fields[BLOCK_WEIGHT.std_field]))
+            if BLOCK_WEIGHT.name in fields else None)
         if alarm is not None:
             out.append(_alarm(alarm))
-        block_alarmed = w.block_alarmed
-        if not block_alarmed and BLOCK_WEIGHT.name in fields:
-            sensor_block = self.model.well.block_weight - s.sensor.above_sensor
-            alarm = block_weight_alarm(window.t_end, float(fields[BLOCK_WEIGHT.name]),
-                                       float(fields[BLOCK_WEIGHT.std_field]), sensor_block,
-                                       self.settings.block_weight_tolerance)
-            if alarm is not None:
-                block_alarmed = True
-                out.append(_alarm(alarm))
+        block_alarmed = w.block_alarmed or self._block_alarm(joint, window.t_end, out)
         return replace(w, joint=joint, mismatch=mismatch, block_alarmed=block_alarmed)
+
+    def _block_alarm(self, joint: JointState, t: float, out: list[Output]) -> bool:
+        """The block-weight alarm from the joint estimate (once): whether it was raised."""
+        s = self.settings.joint
+        b, o = s.position(BLOCK_WEIGHT.name), s.position(HOOKLOAD_OFFSET.name)
+        if b is None or o is None:
+            return False
+        mean, p = mean_and_covariance(joint, s)
+        empty = (float(mean[b] + mean[o]),
+                 math.sqrt(max(float(p[b, b] + p[o, o] + 2 * p[b, o]), 0.0)))
+        alarm = block_weight_alarm(
+            t, (float(mean[b]), math.sqrt(max(float(p[b, b]), 0.0))),
+            (float(mean[o]), math.sqrt(max(float(p[o, o]), 0.0))), empty,
+            self.model.well.block_weight - s.sensor.above_sensor,
+            self.settings.block_weight_tolerance)
+        if alarm is None:
+            return False
+        out.append(_alarm(alarm))
+        return True
 
     def _joint_resolution(self, window: Window, sensor: SensorEstimate, w: WindowState,
                           joint: JointState) -> Resolution | None:

@@ -57,11 +57,13 @@ from tdmon.calib.parameters import (
     WEIGHT_FACTOR,
     EstimatedParameters,
     join_words,
+    rig_parameters,
 )
 from tdmon.calib.windows import Window
 from tdmon.errors import ModelError
 from tdmon.model.hookload_sensor import HookloadSensor
 from tdmon.model.torque_drag import WellModel
+from tdmon.model.well import Well
 from tdmon.vocabulary import Operation, RigState
 
 __all__ = [
@@ -177,6 +179,18 @@ class JointState(KalmanState):
     bit_depth: float | None = None
     recent: tuple[tuple[float, float, str, float], ...] = ()
     gated: int = 0
+
+
+def for_rig(settings: JointSettings, well: Well) -> JointSettings:
+    """``settings`` for one rig: its hook-load sensor, and its parameters as that sensor calls
+    for them (the sheave efficiency for a deadline sensor only), the block weight's prior
+    centred on the well's block weight as the sensor weighs it (wide where the well gives none:
+    the first in-slips readings decide; :func:`tdmon.calib.parameters.rig_parameters`)."""
+    sensor = well.hookload_sensor
+    parameters = rig_parameters(reads_sheave_friction=sensor.reads_sheave_friction,
+                                block_weight=well.block_weight - sensor.above_sensor,
+                                efficiency=sensor.efficiency, parameters=settings.parameters)
+    return replace(settings, parameters=parameters, sensor=sensor)
 
 
 def initial_joint(settings: JointSettings) -> JointState:

@@ -213,7 +213,8 @@ def resolution(model: WellModel, state: str, bit_depth: float, estimate: SensorE
         raise ModelError(f"no friction resolution for rig state '{state}'")
     resolvable = signal >= 2.0 * sigma
     statement = "resolvable" if resolvable else (
-        f"friction not resolvable here: the {what} it causes, {drag / 1e3:.1f} {unit}, is "
-        f"below the sensor's {2.0 * sigma / 1e3:.1f} {unit} uncertainty (friction {low:g} and "
-        f"{high:g} differ by {signal / 1e3:.1f} {unit})")
+        f"friction not resolvable here: friction {low:g} and {high:g} change the {what} by "
+        f"{signal / 1e3:.1f} {unit}, less than the sensor's uncertainty of "
+        f"{2.0 * sigma / 1e3:.1f} {unit} (two standard deviations); the {what} at friction "
+        f"{mu:.2f} is {drag / 1e3:.1f} {unit}")
     return Resolution(resolvable, signal, drag, sigma, statement)

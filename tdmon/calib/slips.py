@@ -48,12 +48,14 @@ class SlipsRun:
     sums : per motion -1, 0, +1: (count, sum [N], sum of squares [N^2])
     block, block_time : the block position [m] and when it was sampled [s] (None: not yet)
     motion : the block's motion between its last two samples (None: not known yet)
+    t : time of the last sample [s]
     """
 
     sums: tuple[tuple[int, float, float], ...] = ((0, 0.0, 0.0),) * 3
     block: float | None = None
     block_time: float | None = None
     motion: int | None = None
+    t: float = 0.0
 
 
 def add_slips_sample(run: SlipsRun, sample: RigSample, steady: bool) -> SlipsRun:
@@ -79,7 +81,7 @@ def add_slips_sample(run: SlipsRun, sample: RigSample, steady: bool) -> SlipsRun
         count, total, squares = sums[k]
         sums = (*sums[:k], (count + 1, total + reading, squares + reading * reading),
                 *sums[k + 1:])
-    return SlipsRun(sums, block, block_time, motion)
+    return SlipsRun(sums, block, block_time, motion, sample.t)
 
 
 def close_run(run: SlipsRun, noise_floor: float) -> tuple[SlipsReading, ...]:

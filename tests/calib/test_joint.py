@@ -263,6 +263,16 @@ def test_mismatch_names_only_possible_causes() -> None:
     text = alarms[0].message
     assert "12.0 %" in text and "lighter" in text and "kg/m3" not in text
     assert f"empty down to about {level:.0f} m" in text
+    assert "or the hook-load sensor reading 12.0 % low (its calibration)?" in text
+    assert "block weight" not in text  # not estimated here
+    # a block weight known to 60 kN could hide a good part of the difference: named
+    memory, alarm = mismatch_alarm(Mismatch(), model, air, 0.0, 2400.0, 0.88, 0.01, 0.2,
+                                   True, tolerance=0.01, windows=1, block=(300e3, 60e3))
+    assert alarm is not None and "the block weight is known to 60 kN only (300 kN)" in \
+        alarm.message
+    memory, alarm = mismatch_alarm(Mismatch(), model, air, 0.0, 2400.0, 0.88, 0.01, 0.2,
+                                   True, tolerance=0.01, windows=1, block=(300e3, 3e3))
+    assert alarm is not None and "block weight" not in alarm.message
     # heavier, not identified: nothing; identified: mud lighter or heavier pipe
     memory, alarm = mismatch_alarm(Mismatch(), model, air, 0.0, 2400.0, 1.03, 0.005, 0.2,
                                    False, tolerance=0.01, windows=1)

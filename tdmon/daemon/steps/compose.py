@@ -44,19 +44,18 @@ def joint_settings(cal: CalibrationConfig, well: Well) -> JointSettings:
     """The joint estimate's settings for a rig: its parameters as the well file's hook-load
     sensor calls for them (the sheave efficiency for a deadline sensor), with the daemon
     file's priors (docs/hookload.md)."""
-    from tdmon.calib.joint import JointSettings
+    from tdmon.calib.joint import JointSettings, for_rig
     from tdmon.calib.parameters import (
         BLOCK_WEIGHT,
         HOOKLOAD_OFFSET,
         SHEAVE_EFFICIENCY,
         WEIGHT_FACTOR,
-        rig_parameters,
     )
 
-    sensor = well.hookload_sensor
-    parameters = rig_parameters(reads_sheave_friction=sensor.reads_sheave_friction,
-                                block_weight=well.block_weight - sensor.above_sensor,
-                                efficiency=sensor.efficiency)
+    base = for_rig(JointSettings(mismatch_tolerance=cal.weight_mismatch_tolerance,
+                                 hysteresis=cal.hookload_hysteresis,
+                                 torque_uncertainty=cal.torque_uncertainty), well)
+    parameters = base.parameters
     parameters = parameters.with_prior(WEIGHT_FACTOR.name, cal.weight_factor,
                                        cal.weight_factor_std)
     block = parameters.get(BLOCK_WEIGHT.name)
@@ -67,9 +66,7 @@ def joint_settings(cal: CalibrationConfig, well: Well) -> JointSettings:
     if SHEAVE_EFFICIENCY.name in parameters.names:
         sheave = parameters.get(SHEAVE_EFFICIENCY.name)
         parameters = parameters.with_prior(sheave.name, sheave.prior, cal.sheave_efficiency_std)
-    return JointSettings(parameters=parameters, mismatch_tolerance=cal.weight_mismatch_tolerance,
-                         sensor=sensor, hysteresis=cal.hookload_hysteresis,
-                         torque_uncertainty=cal.torque_uncertainty)
+    return replace(base, parameters=parameters)
 
 
 def calibration_steps_for(config: DaemonConfig, well: Any = None,
