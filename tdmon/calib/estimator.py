@@ -333,7 +333,7 @@ class FrictionEstimator:
             out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                     f"{window.state} window rejected: {exc}")))
             return replace(w, rejected=count(w.rejected, "not_bracketed")), out
-        resolved = self._resolution(window, sensor, estimate.mu)
+        resolved = self._resolution(window, sensor)
         out.append(Output("estimate", self._window_message(
             corrected, estimate, block, self._scatter_of(w, window), resolved)))
         if window.state in REAMING_AXIAL_OPERATION:
@@ -350,14 +350,14 @@ class FrictionEstimator:
         w = self._feed_mu_t(w, corrected, estimate, out)
         return w, out
 
-    def _resolution(self, window: Window, sensor: SensorEstimate, mu: float
-                    ) -> Resolution | None:
+    def _resolution(self, window: Window, sensor: SensorEstimate) -> Resolution | None:
         """Whether the window's load can show friction above the sensor's uncertainty (None:
-        not judged, for reaming and back-reaming)."""
+        not judged, for reaming and back-reaming); the drag it names is the prior friction's."""
         if window.state in REAMING_AXIAL_OPERATION:
             return None
         try:
-            return resolution(self.model, window.state, window.bit_depth, sensor, mu=mu,
+            return resolution(self.model, window.state, window.bit_depth, sensor,
+                              mu=self.settings.prior_mu,
                               hookload_se=window.hookload_se, torque_se=window.torque_se or 0.0,
                               torque_uncertainty=self.settings.joint.torque_uncertainty,
                               method=self.settings.method)
@@ -472,7 +472,7 @@ class FrictionEstimator:
                              self.settings.method, last_motion=w.last_motion)
         if joint is w.joint:
             return w
-        resolved = self._joint_resolution(window, sensor, w, joint)
+        resolved = self._joint_resolution(window, sensor)
         fields = joint_fields(joint, s, resolved)
         try:
             difference = weight_difference(self.model, window.bit_depth,
@@ -516,14 +516,13 @@ class FrictionEstimator:
         out.append(_alarm(alarm))
         return True
 
-    def _joint_resolution(self, window: Window, sensor: SensorEstimate, w: WindowState,
-                          joint: JointState) -> Resolution | None:
+    def _joint_resolution(self, window: Window, sensor: SensorEstimate) -> Resolution | None:
         """Whether the pick-up/slack-off split at the window's depth can show friction above
         the sensor's uncertainty (the joint estimate's evidence for friction)."""
         se = window.hookload_se if math.isfinite(window.hookload_se) else 0.0
         try:
             return resolution(self.model, RigState.PICK_UP, window.bit_depth, sensor,
-                              mu=float(np.clip(joint.mean[0], 0.0, 1.0)), hookload_se=se,
+                              mu=self.settings.prior_mu, hookload_se=se,
                               torque_uncertainty=self.settings.joint.torque_uncertainty,
                               method=self.settings.method, paired=True)
         except ModelError:

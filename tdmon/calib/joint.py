@@ -559,7 +559,7 @@ def identifiability(state: JointState, settings: JointSettings,
     identifiable = resolvable and not open_ and bool(kinds)
     note = _pair_note(state, settings, ratios)
     if identifiable:
-        statement = "identifiable" + (f" ({note})" if note else "")
+        statement = "identifiable" + (f"; {note}" if note else "")
     else:
         statement = "; ".join(dict.fromkeys(parts))
     return Identifiability(identifiable, statement, MappingProxyType(ratios), frozen,
