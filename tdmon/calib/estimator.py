@@ -53,6 +53,7 @@ from tdmon.calib.estimator_state import (
     put,
 )
 from tdmon.calib.joint import (
+    PAIR_CORRELATION,
     JointState,
     for_rig,
     initial_joint,
@@ -66,7 +67,7 @@ from tdmon.calib.joint import (
 from tdmon.calib.measurement import Resolution, SensorEstimate, corrected_window, resolution
 from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
-from tdmon.calib.parameters import BLOCK_WEIGHT, HOOKLOAD_OFFSET, JOINT_PARAMETERS
+from tdmon.calib.parameters import BLOCK_WEIGHT, FRICTION_AND_WEIGHT, HOOKLOAD_OFFSET
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.calib.scatter import Scatter, add_window, scatter_std
@@ -131,7 +132,7 @@ class FrictionEstimator:
     Parameters
     ----------
     model : the prepared well
-    settings : estimator settings (a joint estimate left at the generic parameters is fitted
+    settings : estimator settings (a joint estimate left at its default parameters is fitted
         to the well's own hook-load sensor and block weight, `tdmon.calib.joint.for_rig`)
     """
 
@@ -140,7 +141,7 @@ class FrictionEstimator:
 
     def __post_init__(self) -> None:
         joint = self.settings.joint
-        if joint.parameters is JOINT_PARAMETERS:
+        if joint.parameters is FRICTION_AND_WEIGHT:
             object.__setattr__(self, "settings", replace(
                 self.settings, joint=for_rig(joint, self.model.well)))
 
@@ -506,11 +507,13 @@ class FrictionEstimator:
         mean, p = mean_and_covariance(joint, s)
         empty = (float(mean[b] + mean[o]),
                  math.sqrt(max(float(p[b, b] + p[o, o] + 2 * p[b, o]), 0.0)))
+        std_b, std_o = (math.sqrt(max(float(p[k, k]), 0.0)) for k in (b, o))
+        # strongly anti-correlated: only their sum is known (identifiability's pair note)
+        separated = std_b * std_o > 0 and p[b, o] / (std_b * std_o) > -PAIR_CORRELATION
         alarm = block_weight_alarm(
-            t, (float(mean[b]), math.sqrt(max(float(p[b, b]), 0.0))),
-            (float(mean[o]), math.sqrt(max(float(p[o, o]), 0.0))), empty,
+            t, (float(mean[b]), std_b), (float(mean[o]), std_o), empty,
             self.model.well.block_weight - s.sensor.above_sensor,
-            self.settings.block_weight_tolerance)
+            self.settings.block_weight_tolerance, separated=bool(separated))
         if alarm is None:
             return False
         out.append(_alarm(alarm))

@@ -51,6 +51,7 @@ from tdmon.calib.kalman import KalmanState, Linearisation, iterated_update, pred
 from tdmon.calib.measurement import MOTION_OF_STATE, Resolution, SensorEstimate, factor_slope
 from tdmon.calib.parameters import (
     BLOCK_WEIGHT,
+    FRICTION_AND_WEIGHT,
     HOOKLOAD_OFFSET,
     JOINT_PARAMETERS,
     SHEAVE_EFFICIENCY,
@@ -68,6 +69,7 @@ from tdmon.vocabulary import Operation, RigState
 
 __all__ = [
     "IN_SLIPS",
+    "PAIR_CORRELATION",
     "JointSettings",
     "JointState",
     "Measurement",
@@ -90,9 +92,10 @@ class JointSettings:
 
     Attributes
     ----------
-    parameters : what is estimated, with each parameter's prior, drift and bounds
-        (:data:`tdmon.calib.parameters.JOINT_PARAMETERS`: the friction factor and the weight
-        factor, whose prior is 1 +/- 0.05: the model is right)
+    parameters : what is estimated, with each parameter's prior, drift and bounds (by
+        default the friction factor and the weight factor, whose prior is 1 +/- 0.05: the
+        model is right; :func:`for_rig` adds the hook-load measurement's parameters of
+        :data:`tdmon.calib.parameters.JOINT_PARAMETERS` that a rig's sensor calls for)
     scatter_prior : between-window friction scatter until it is estimated [-]
     scatter_windows : recent windows per operation the scatter is estimated from [-]
     weight_model_std : model error of the string weight per window, relative [-]
@@ -119,7 +122,7 @@ class JointSettings:
     torque_uncertainty : the torque sensor's zero and scale uncertainty [N m]
     """
 
-    parameters: EstimatedParameters = JOINT_PARAMETERS
+    parameters: EstimatedParameters = FRICTION_AND_WEIGHT
     scatter_prior: float = 0.02
     scatter_windows: int = 30
     weight_model_std: float = 0.002
@@ -173,23 +176,27 @@ class JointState(KalmanState):
     recent : ``(t, bit depth, kind, residual)`` of the measurements used within the horizon,
         the residual being measured minus predicted before the update [N or N m]
     gated : measurements left out by the gate [-]
+    slips : in-slips readings used [-] (before the first, nothing has weighed the empty block:
+        :func:`sensor_estimate` gives the priors' values)
     """
 
     t: float | None = None
     bit_depth: float | None = None
     recent: tuple[tuple[float, float, str, float], ...] = ()
     gated: int = 0
+    slips: int = 0
 
 
 def for_rig(settings: JointSettings, well: Well) -> JointSettings:
-    """``settings`` for one rig: its hook-load sensor, and its parameters as that sensor calls
-    for them (the sheave efficiency for a deadline sensor only), the block weight's prior
-    centred on the well's block weight as the sensor weighs it (wide where the well gives none:
-    the first in-slips readings decide; :func:`tdmon.calib.parameters.rig_parameters`)."""
+    """``settings`` for one rig: its hook-load sensor, and the parameters of
+    :data:`~tdmon.calib.parameters.JOINT_PARAMETERS` as that sensor calls for them (the
+    sheave efficiency for a deadline sensor only), the block weight's prior centred on the
+    well's block weight as the sensor weighs it (wide where the well gives none: the first
+    in-slips readings decide; :func:`tdmon.calib.parameters.rig_parameters`)."""
     sensor = well.hookload_sensor
     parameters = rig_parameters(reads_sheave_friction=sensor.reads_sheave_friction,
                                 block_weight=well.block_weight - sensor.above_sensor,
-                                efficiency=sensor.efficiency, parameters=settings.parameters)
+                                efficiency=sensor.efficiency, parameters=JOINT_PARAMETERS)
     return replace(settings, parameters=parameters, sensor=sensor)
 
 
@@ -211,13 +218,22 @@ def sensor_estimate(state: JointState, settings: JointSettings, block_weight: fl
                     ) -> SensorEstimate:
     """What the joint state knows of the hook-load measurement now (the block weight
     ``block_weight`` [N], the sensor's efficiency and a zero offset of 0 where a parameter is
-    not estimated)."""
+    not estimated).
+
+    Until an in-slips reading has weighed the empty block, the values are the priors' (with
+    the state's spreads): what pick-ups, slack-offs and hangs alone say of the block weight,
+    the offset and the sheave efficiency is mixed with friction and the string weight, and a
+    window read through it would be read through its own echo."""
     mean, covariance = mean_and_covariance(state, settings)
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    weighed = state.slips > 0
 
     def value(name: str, default: float) -> tuple[float, float]:
         k = settings.position(name)
-        return (default, 0.0) if k is None else (float(mean[k]), float(std[k]))
+        if k is None:
+            return default, 0.0
+        centre = float(mean[k]) if weighed else settings.parameters.get(name).prior
+        return centre, float(std[k])
 
     block = value(BLOCK_WEIGHT.name, block_weight)
     offset = value(HOOKLOAD_OFFSET.name, 0.0)
@@ -459,7 +475,8 @@ def update_joint_slips(state: JointState, model: WellModel, readings: tuple[Meas
         return state
     depth = state.bit_depth if state.bit_depth is not None else 0.0
     updated = _apply(state, readings, model, depth, t, block, {}, settings, method)
-    return replace(updated, bit_depth=state.bit_depth)
+    return replace(updated, bit_depth=state.bit_depth,
+                   slips=state.slips + (updated.updates - state.updates))
 
 
 @dataclass(frozen=True)
@@ -566,6 +583,10 @@ def identifiability(state: JointState, settings: JointSettings,
                            tuple(p.name for p in open_), resolvable)
 
 
+#: |correlation| of the block weight and the offset beyond which only their sum is known [-].
+PAIR_CORRELATION = 0.9
+
+
 def _pair_note(state: JointState, settings: JointSettings, ratios: Mapping[str, float]
                ) -> str | None:
     """``block weight and hook-load offset: only their sum is known`` when the two are not
@@ -576,7 +597,7 @@ def _pair_note(state: JointState, settings: JointSettings, ratios: Mapping[str, 
     p = state.covariance
     denominator = math.sqrt(max(float(p[b, b] * p[o, o]), 0.0))
     correlation = float(p[b, o]) / denominator if denominator > 0 else 0.0
-    if correlation > -0.9 or min(ratios[BLOCK_WEIGHT.name],
+    if correlation > -PAIR_CORRELATION or min(ratios[BLOCK_WEIGHT.name],
                                  ratios[HOOKLOAD_OFFSET.name]) < settings.identified_ratio:
         return None
     read = (float(state.mean[b]) * settings.scales[b]

@@ -40,6 +40,7 @@ from typing import Final, Literal, NamedTuple, get_args, overload
 __all__ = [
     "BLOCK_WEIGHT",
     "FRICTION",
+    "FRICTION_AND_WEIGHT",
     "HOOKLOAD_OFFSET",
     "JOINT_PARAMETERS",
     "SHEAVE_EFFICIENCY",
@@ -414,8 +415,13 @@ UNKNOWN_BLOCK_STD: Final = 1e6
 
 JOINT_PARAMETERS: Final = EstimatedParameters((FRICTION, WEIGHT_FACTOR, BLOCK_WEIGHT,
                                                HOOKLOAD_OFFSET, SHEAVE_EFFICIENCY))
-"""Every parameter the joint estimate may have, in the order of its state vector; a rig's
-estimate takes those its hook-load sensor calls for (:func:`rig_parameters`)."""
+"""Every parameter the joint estimate may have, in the order of its state vector (what its
+message, schema, views and expectations know); a rig's estimate takes those its hook-load sensor
+calls for (:func:`rig_parameters`)."""
+
+FRICTION_AND_WEIGHT: Final = EstimatedParameters((FRICTION, WEIGHT_FACTOR))
+"""The joint estimate without the hook-load measurement (the sensor taken as configured): the
+settings' default until they are fitted to a rig (:func:`tdmon.calib.joint.for_rig`)."""
 
 
 def rig_parameters(*, reads_sheave_friction: bool, block_weight: float,

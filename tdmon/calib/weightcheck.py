@@ -31,8 +31,8 @@ PLAUSIBLE_RATIO = (0.5, 2.0)
 
 
 def block_weight_alarm(t: float, block: tuple[float, float], offset: tuple[float, float],
-                       empty: tuple[float, float], configured: float, tolerance: float
-                       ) -> Alarm | None:
+                       empty: tuple[float, float], configured: float, tolerance: float,
+                       separated: bool = True) -> Alarm | None:
     """Alarm when what the joint estimate learnt of the travelling equipment differs from the
     well file's block weight by more than ``tolerance`` and by more than twice its spread.
 
@@ -47,6 +47,9 @@ def block_weight_alarm(t: float, block: tuple[float, float], offset: tuple[float
     configured : the well file's block weight, as the sensor would weigh it [N] (0: none
         given, no alarm)
     tolerance : relative deviation that is reported [-]
+    separated : whether the data tell the block weight from the offset (a moving block in
+        slips, a string weight known from elsewhere); if not, only what the empty block reads
+        is judged
 
     Returns
     -------
@@ -61,7 +64,7 @@ def block_weight_alarm(t: float, block: tuple[float, float], offset: tuple[float
     def stands_out(value: float, std: float, reference: float) -> bool:
         return abs(value - reference) > limit and abs(value - reference) > 2 * std
 
-    if stands_out(*block, configured):
+    if separated and stands_out(*block, configured):
         return Alarm(t, AlarmKind.BLOCK_WEIGHT, Severity.INFO,
                      f"block weight {block[0] / 1e3:.0f} ± {block[1] / 1e3:.0f} kN (learnt with "
                      f"the sensor's zero offset and the string weight) differs from the "

@@ -301,9 +301,14 @@ def joint_verdict(estimates: Sequence[dict[str, Any]],
     last estimate that did (else the last one, with why they could not be separated). Each
     parameter's value and standard deviation under its name, its words from its declaration
     (:mod:`tdmon.calib.parameters`)."""
+    joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
+    # the parameters the recording's rig estimated (its hook-load sensor's), friction and
+    # the string weight when there is no estimate at all
+    parameters = EstimatedParameters(tuple(
+        p for k, p in enumerate(parameters)
+        if k < 2 or (joint and p.name in joint[-1])))
     friction, nouns = parameters.friction, parameters.nouns()
     together = join_words([friction.noun, *(p.noun for p in parameters.others)])
-    joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
     if not joint:
         return {"status": "none", "estimates": 0,
                 "words": f"No joint estimate of {together} in this recording "
