@@ -52,12 +52,26 @@ from tdmon.calib.estimator_state import (
     count,
     put,
 )
-from tdmon.calib.joint import initial_joint, joint_fields, update_joint
+from tdmon.calib.joint import (
+    PAIR_CORRELATION,
+    JointState,
+    for_rig,
+    initial_joint,
+    joint_fields,
+    mean_and_covariance,
+    sensor_estimate,
+    slips_measurement,
+    update_joint,
+    update_joint_slips,
+)
+from tdmon.calib.measurement import Resolution, SensorEstimate, corrected_window, resolution
 from tdmon.calib.mismatch import mismatch_alarm, weight_difference
 from tdmon.calib.mu_calibration import MuTCalibrator
+from tdmon.calib.parameters import BLOCK_WEIGHT, FRICTION_AND_WEIGHT, HOOKLOAD_OFFSET
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.calib.scatter import Scatter, add_window, scatter_std
+from tdmon.calib.slips import SlipsRun, add_slips_sample, close_run
 from tdmon.calib.weightcheck import block_weight_alarm, weight_check
 from tdmon.calib.windows import Window, add_sample, close
 from tdmon.errors import FitError, ModelError
@@ -118,11 +132,18 @@ class FrictionEstimator:
     Parameters
     ----------
     model : the prepared well
-    settings : estimator settings
+    settings : estimator settings (a joint estimate left at its default parameters is fitted
+        to the well's own hook-load sensor and block weight, `tdmon.calib.joint.for_rig`)
     """
 
     model: WellModel
     settings: CalibrationSettings = field(default_factory=CalibrationSettings)
+
+    def __post_init__(self) -> None:
+        joint = self.settings.joint
+        if joint.parameters is FRICTION_AND_WEIGHT:
+            object.__setattr__(self, "settings", replace(
+                self.settings, joint=for_rig(joint, self.model.well)))
 
     @cached_property
     def shoe(self) -> float:
@@ -199,36 +220,74 @@ class FrictionEstimator:
         (EstimatorState, outputs)
         """
         samples = state.samples
-        block, alarmed = samples.block_weight, samples.block_alarmed
+        block = samples.block_weight
         outputs: tuple[Output, ...] = ()
+        slips = samples.slips
+        if detection.state == RigState.IN_SLIPS:
+            slips = add_slips_sample(slips or SlipsRun(), sample, detection.steady)
+        elif slips is not None:
+            state, outputs = self._slips_done(state, slips, sample.t)
+            slips = None
         if (detection.state == RigState.IN_SLIPS and detection.steady
                 and sample.hookload is not None):
             block = add_block_weight(block, sample.hookload)
-            learnt = self._learnt(block)
-            if learnt is not None and not alarmed:
-                alarm = block_weight_alarm(sample.t, learnt, self.model.well.block_weight,
-                                           self.settings.block_weight_tolerance)
-                if alarm is not None:
-                    alarmed, outputs = True, (_alarm(alarm),)
         accumulator, window = add_sample(samples.accumulator, sample, detection,
                                          self.settings.windows)
         if (accumulator is samples.accumulator and block is samples.block_weight
-                and window is None):
+                and window is None and slips is samples.slips):
             return state, outputs
-        state = EstimatorState(SampleState(accumulator, block, alarmed), state.windows)
+        state = EstimatorState(SampleState(accumulator, block, slips), state.windows)
         if window is None:
             return state, outputs
         state, more = self.update(state, window)
         return state, outputs + more
 
+    def _slips_done(self, state: EstimatorState, run: SlipsRun, t: float
+                    ) -> tuple[EstimatorState, tuple[Output, ...]]:
+        """A connection ended: its in-slips readings to the joint estimate (the empty block's
+        weight and the zero offset; with the block moving, the sheave factor), and the
+        block-weight alarm when they show the block off the well file's."""
+        w = state.windows
+        if w.joint is None:
+            return state, ()
+        readings = tuple(slips_measurement(r.mean, r.se, r.motion)
+                         for r in close_run(run, self.settings.windows.noise_floor))
+        joint = update_joint_slips(w.joint, self.model, readings, t, self._block_of(
+            state.samples.block_weight), self.settings.joint, self.settings.method)
+        if joint is w.joint:
+            return state, ()
+        out: list[Output] = []
+        alarmed = w.block_alarmed or self._block_alarm(joint, t, out)
+        return (EstimatorState(state.samples, replace(w, joint=joint, block_alarmed=alarmed)),
+                tuple(out))
+
+    def _block_of(self, block: BlockWeightWindow) -> float:
+        """The block weight where the joint estimate does not estimate it [N]: learnt in
+        slips, else the well file's."""
+        return block.estimate.value if block.estimate is not None else \
+            self.model.well.block_weight
+
+    def sensor(self, w: WindowState, block: BlockWeightWindow) -> SensorEstimate:
+        """What is known now of the hook-load measurement (the joint estimate's block weight,
+        offset and sheave efficiency; the prior's before it starts)."""
+        joint = w.joint if w.joint is not None else initial_joint(self.settings.joint)
+        return sensor_estimate(joint, self.settings.joint, self._block_of(block))
+
     def close(self, state: EstimatorState) -> tuple[EstimatorState, tuple[Output, ...]]:
-        """End of input: the window being built is closed and used."""
+        """End of input: the connection in slips and the window being built are closed and
+        used."""
+        outputs: tuple[Output, ...] = ()
+        if state.samples.slips is not None:
+            state, outputs = self._slips_done(state, state.samples.slips,
+                                              state.samples.slips.t)
         samples = state.samples
         accumulator, window = close(samples.accumulator, self.settings.windows)
-        state = EstimatorState(replace(samples, accumulator=accumulator), state.windows)
+        state = EstimatorState(replace(samples, accumulator=accumulator, slips=None),
+                               state.windows)
         if window is None:
-            return state, ()
-        return self.update(state, window)
+            return state, outputs
+        state, more = self.update(state, window)
+        return state, outputs + more
 
     # -- windows --------------------------------------------------------------------------
 
@@ -261,28 +320,50 @@ class FrictionEstimator:
                 out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                         f"{window.state} window rejected: {window.rejected}")))
             return w, out
+        # the window as the model's own hook load: read through what is known of the sensor
+        # (the joint estimate takes the reading itself, with the measurement in its model)
+        sensor = self.sensor(w, block)
+        corrected = corrected_window(window, sensor, self.model.well.block_weight)
         if window.state in WEIGHT_CHECK_STATES:
-            w = self._weight_check(w, block, window, out)
+            w = self._weight_check(w, corrected, out)
         if window.state not in ESTIMATED_STATES:
-            return self._joint(w, block, window, out), out
+            return self._joint(w, block, window, sensor, out), out
         try:
-            estimate = self._solve(window, w.mu_cased(window.state))
+            estimate = self._solve(corrected, w.mu_cased(window.state))
         except FitError as exc:
             out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
                                     f"{window.state} window rejected: {exc}")))
             return replace(w, rejected=count(w.rejected, "not_bracketed")), out
-        out.append(Output("estimate", self._window_message(window, estimate, block,
-                                                           self._scatter_of(w, window))))
+        resolved = self._resolution(window, sensor)
+        out.append(Output("estimate", self._window_message(
+            corrected, estimate, block, self._scatter_of(w, window), resolved)))
         if window.state in REAMING_AXIAL_OPERATION:
             return w, out  # combined motion: not a reference for the cased value, profile or mu(T)
+        w = self._joint(w, block, window, sensor, out)
+        if resolved is not None and not resolved.resolvable:
+            # no friction published: nothing to average, alarm on or learn from
+            return replace(w, rejected=count(w.rejected, "not_resolvable")), out
         w = self._add_scatter(w, window, estimate)
-        w = self._joint(w, block, window, out)
-        w = self._cased_or_pending(w, block, window, estimate, out)
+        w = self._cased_or_pending(w, block, corrected, estimate, out)
         w = self._jump(w, window, estimate, out)
         w = self._limits(w, window, estimate, out)
-        w = self._feed_profile(w, window, out)
-        w = self._feed_mu_t(w, window, estimate, out)
+        w = self._feed_profile(w, corrected, out)
+        w = self._feed_mu_t(w, corrected, estimate, out)
         return w, out
+
+    def _resolution(self, window: Window, sensor: SensorEstimate) -> Resolution | None:
+        """Whether the window's load can show friction above the sensor's uncertainty (None:
+        not judged, for reaming and back-reaming); the drag it names is the prior friction's."""
+        if window.state in REAMING_AXIAL_OPERATION:
+            return None
+        try:
+            return resolution(self.model, window.state, window.bit_depth, sensor,
+                              mu=self.settings.prior_mu,
+                              hookload_se=window.hookload_se, torque_se=window.torque_se or 0.0,
+                              torque_uncertainty=self.settings.joint.torque_uncertainty,
+                              method=self.settings.method)
+        except ModelError:
+            return None
 
     def _solve(self, window: Window, mu_cased: float | None) -> FrictionEstimate:
         s = self.settings
@@ -328,14 +409,19 @@ class FrictionEstimator:
         return w
 
     def _window_message(self, window: Window, estimate: FrictionEstimate,
-                        block: BlockWeightWindow, scatter: float) -> dict[str, Any]:
-        """The window's estimate; its ``mu_std`` is the measurement's and the between-window
-        scatter's together (the spread of the window's friction about the trip's)."""
+                        block: BlockWeightWindow, scatter: float,
+                        resolved: Resolution | None = None) -> dict[str, Any]:
+        """The window's estimate; its ``mu_std`` is the measurement's (the sensor's
+        uncertainty included) and the between-window scatter's together (the spread of the
+        window's friction about the trip's). Where the window cannot resolve friction
+        (``resolved``), ``mu`` and ``mu_std`` are None and ``resolution`` says why."""
         operation = (window.state if window.state in REAMING_AXIAL_OPERATION
                      else estimate.operation)
+        unresolved = resolved is not None and not resolved.resolvable
         message: dict[str, Any] = {
             "t": window.t_end, "kind": EstimateKind.WINDOW, "operation": operation,
-            "mu": estimate.mu, "mu_std": math.hypot(estimate.mu_std, scatter),
+            "mu": None if unresolved else estimate.mu,
+            "mu_std": None if unresolved else math.hypot(estimate.mu_std, scatter),
             "bit_depth_m": window.bit_depth,
             "section": estimate.section, "samples": window.n, "t_start": window.t_start,
             "low_confidence": bool(window.low_confidence), "flags": list(window.flags),
@@ -345,6 +431,10 @@ class FrictionEstimator:
         }
         if block.estimate is not None:
             message["block_weight_N"] = block.estimate.value
+        if resolved is not None:
+            message["resolvable"] = resolved.resolvable
+            if unresolved:
+                message["resolution"] = resolved.statement
         return message
 
     # -- friction and weight together ----------------------------------------------------
@@ -371,20 +461,20 @@ class FrictionEstimator:
         return replace(w, scatter=put(w.scatter, kind, scatter))
 
     def _joint(self, w: WindowState, block: BlockWeightWindow, window: Window,
-               out: list[Output]) -> WindowState:
-        """Friction and weight factor from the recent windows; the weight-mismatch alarm."""
+               sensor: SensorEstimate, out: list[Output]) -> WindowState:
+        """Friction, weight factor and the hook-load measurement from the recent windows; the
+        weight-mismatch alarm."""
         if w.joint is None:
             return w
         s = self.settings.joint
-        block_weight = (block.estimate.value if block.estimate is not None
-                        else self.model.well.block_weight)
         taus = {kind: scatter_std(w.scatter.get(kind), s.scatter_prior)
                 for kind in _SCATTER_KIND.values()}
-        joint = update_joint(w.joint, self.model, window, block_weight, taus, s,
+        joint = update_joint(w.joint, self.model, window, self._block_of(block), taus, s,
                              self.settings.method, last_motion=w.last_motion)
         if joint is w.joint:
             return w
-        fields = joint_fields(joint, s)
+        resolved = self._joint_resolution(window, sensor)
+        fields = joint_fields(joint, s, resolved)
         try:
             difference = weight_difference(self.model, window.bit_depth,
                                            fields["weight_factor"])
@@ -398,12 +488,48 @@ class FrictionEstimator:
             scatter=taus, mu_single=self._single_frictions(w))))
         mismatch, alarm = mismatch_alarm(
             w.mismatch, self.model, self.air_model, window.t_end, window.bit_depth,
-            float(joint.mean[1]), float(fields["weight_factor_std"]), float(joint.mean[0]),
-            bool(fields["identifiable"]), tolerance=s.mismatch_tolerance,
-            windows=s.mismatch_windows)
+            float(fields["weight_factor"]), float(fields["weight_factor_std"]),
+            float(fields["mu_joint"]), bool(fields["identifiable"]),
+            tolerance=s.mismatch_tolerance, windows=s.mismatch_windows,
+            block=(float(fields[BLOCK_WEIGHT.name]), float(fields[BLOCK_WEIGHT.std_field]))
+            if BLOCK_WEIGHT.name in fields else None)
         if alarm is not None:
             out.append(_alarm(alarm))
-        return replace(w, joint=joint, mismatch=mismatch)
+        block_alarmed = w.block_alarmed or self._block_alarm(joint, window.t_end, out)
+        return replace(w, joint=joint, mismatch=mismatch, block_alarmed=block_alarmed)
+
+    def _block_alarm(self, joint: JointState, t: float, out: list[Output]) -> bool:
+        """The block-weight alarm from the joint estimate (once): whether it was raised."""
+        s = self.settings.joint
+        b, o = s.position(BLOCK_WEIGHT.name), s.position(HOOKLOAD_OFFSET.name)
+        if b is None or o is None:
+            return False
+        mean, p = mean_and_covariance(joint, s)
+        empty = (float(mean[b] + mean[o]),
+                 math.sqrt(max(float(p[b, b] + p[o, o] + 2 * p[b, o]), 0.0)))
+        std_b, std_o = (math.sqrt(max(float(p[k, k]), 0.0)) for k in (b, o))
+        # strongly anti-correlated: only their sum is known (identifiability's pair note)
+        separated = std_b * std_o > 0 and p[b, o] / (std_b * std_o) > -PAIR_CORRELATION
+        alarm = block_weight_alarm(
+            t, (float(mean[b]), std_b), (float(mean[o]), std_o), empty,
+            self.model.well.block_weight - s.sensor.above_sensor,
+            self.settings.block_weight_tolerance, separated=bool(separated))
+        if alarm is None:
+            return False
+        out.append(_alarm(alarm))
+        return True
+
+    def _joint_resolution(self, window: Window, sensor: SensorEstimate) -> Resolution | None:
+        """Whether the pick-up/slack-off split at the window's depth can show friction above
+        the sensor's uncertainty (the joint estimate's evidence for friction)."""
+        se = window.hookload_se if math.isfinite(window.hookload_se) else 0.0
+        try:
+            return resolution(self.model, RigState.PICK_UP, window.bit_depth, sensor,
+                              mu=self.settings.prior_mu, hookload_se=se,
+                              torque_uncertainty=self.settings.joint.torque_uncertainty,
+                              method=self.settings.method, paired=True)
+        except ModelError:
+            return None
 
     # -- alarms ---------------------------------------------------------------------------
 
@@ -443,15 +569,14 @@ class FrictionEstimator:
                             else estimate.mu)
         return np.full(self.model.n_elements, estimate.mu)
 
-    def _weight_check(self, w: WindowState, block: BlockWeightWindow, window: Window,
-                      out: list[Output]) -> WindowState:
+    def _weight_check(self, w: WindowState, window: Window, out: list[Output]) -> WindowState:
+        """The string's weight in a hang (``window`` as the model's own hook load: read through
+        the sensor's estimate, with the model's block weight)."""
         air_model = self.air_model
         if air_model is None:
             return w
-        block_weight = (block.estimate.value if block.estimate is not None
-                        else self.model.well.block_weight)
-        checked = weight_check(self.model, air_model, window, block_weight, w.weight_off,
-                               self.settings.block_weight_tolerance)
+        checked = weight_check(self.model, air_model, window, self.model.well.block_weight,
+                               w.weight_off, self.settings.block_weight_tolerance)
         if checked is None:
             return w
         check, weight_off, alarm = checked

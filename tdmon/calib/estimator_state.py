@@ -20,6 +20,7 @@ from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
 from tdmon.calib.scatter import Scatter
+from tdmon.calib.slips import SlipsRun
 from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings
 
 __all__ = [
@@ -93,13 +94,15 @@ class SampleState:
     Attributes
     ----------
     accumulator : the window being built
-    block_weight : the last steady in-slips hook loads and their block weight
-    block_alarmed : the block-weight alarm has been raised (it is raised once)
+    block_weight : the last steady in-slips hook loads and their block weight (the rig-state
+        detector's threshold)
+    slips : the connection in slips going on: its readings by the block's motion (None: the
+        string is on the hook)
     """
 
     accumulator: WindowAccumulator = _NO_WINDOW
     block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT
-    block_alarmed: bool = False
+    slips: SlipsRun | None = None
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,7 @@ class WindowState:
     mismatch : the weight-mismatch alarm's memory
     last_motion : ``pick_up``, ``slack_off`` (whose drag a hang keeps in part) or ``rotating``
         (off bottom: the drag released), the last motion (None: none yet)
+    block_alarmed : the block-weight alarm has been raised (it is raised once)
     """
 
     profile: FrictionProfile
@@ -141,6 +145,7 @@ class WindowState:
     scatter: Mapping[str, Scatter] = field(default_factory=_empty)
     mismatch: Mismatch = field(default_factory=Mismatch)
     last_motion: str | None = None
+    block_alarmed: bool = False
 
     def mu_cased(self, state: str) -> float | None:
         """Cased-hole friction of ``state`` found so far [-] (None: not yet)."""

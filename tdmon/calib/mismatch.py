@@ -8,7 +8,10 @@ bit depth and in %, and which physical errors could give it, each in its own uni
 - lighter: the pipe not filled (the empty length from surface whose missing inside fluid weighs
   the difference), mud heavier than configured (the density that buoys the steel in the hole
   that much more), or a lighter pipe (mass per metre);
-- heavier: mud lighter than configured, or a heavier pipe (mass per metre, tool joints).
+- heavier: mud lighter than configured, or a heavier pipe (mass per metre, tool joints);
+- either way, the hook-load measurement: a sensor whose scale is off by that fraction reads the
+  string that much lighter or heavier (docs/hookload.md), and a block weight the estimate knows
+  only loosely trades against the string weight (its value and spread are given).
 
 A cause is named only with a value it can physically have: a fill level inside the string, a
 density change of at most :data:`MAX_DENSITY_CHANGE`. Never an impossible density.
@@ -117,22 +120,35 @@ def mud_density_for(model: WellModel, air_model: WellModel | None, bit_depth: fl
 
 
 def _causes(model: WellModel, air_model: WellModel | None, bit_depth: float,
-            difference: float) -> str:
+            difference: float, off: float, block: tuple[float, float] | None) -> str:
     density = mud_density_for(model, air_model, bit_depth, difference)
     mud = ("" if density is None else
            f"mud {density:.0f} kg/m3 rather than {model.well.fluid.density:.0f}?, ")
+    word = "low" if difference < 0.0 else "high"
+    sensor = (f"or the hook-load sensor reading {100 * off:.1f} % {word} (its calibration)?")
+    if block is not None:
+        sensor += (f"; the block weight is known to {block[1] / 1e3:.0f} kN only "
+                   f"({block[0] / 1e3:.0f} kN)")
     if difference < 0.0:
         level = empty_length(model, bit_depth, -difference)
         fill = ("fluid inside the pipe" if level is None
                 else f"pipe not filled (empty down to about {level:.0f} m)?")
-        return f"{fill}, {mud}or mass per metre?"
-    return f"{mud}or heavier pipe (mass per metre, tool joints)?"
+        return f"{fill}, {mud}mass per metre, {sensor}"
+    return f"{mud}heavier pipe (mass per metre, tool joints), {sensor}"
+
+
+def _loose(block: tuple[float, float] | None, difference: float
+           ) -> tuple[float, float] | None:
+    """The block weight when it is known too loosely to rule it out as a cause."""
+    if block is None or block[1] < abs(difference) / 3.0:
+        return None
+    return block
 
 
 def mismatch_alarm(memory: Mismatch, model: WellModel, air_model: WellModel | None, t: float,
                    bit_depth: float, weight_factor: float, weight_factor_std: float, mu: float,
-                   identifiable: bool, *, tolerance: float, windows: int
-                   ) -> tuple[Mismatch, Alarm | None]:
+                   identifiable: bool, *, tolerance: float, windows: int,
+                   block: tuple[float, float] | None = None) -> tuple[Mismatch, Alarm | None]:
     """Update the alarm's memory with one joint estimate; the alarm when it is due.
 
     Parameters
@@ -146,6 +162,8 @@ def mismatch_alarm(memory: Mismatch, model: WellModel, air_model: WellModel | No
     identifiable : friction and weight are separated (otherwise the count restarts)
     tolerance : relative weight difference that counts [-]
     windows : estimates in a row beyond it that raise the alarm [-]
+    block : the estimated block weight and its standard deviation [N], named among the causes
+        when its spread is at least a third of the difference (None: not estimated)
 
     Returns
     -------
@@ -167,6 +185,6 @@ def mismatch_alarm(memory: Mismatch, model: WellModel, air_model: WellModel | No
     text = (f"string {abs(difference) / 1e3:.0f} kN ({100 * off:.1f} %) {word} than modelled at "
             f"{bit_depth:.0f} m (weight factor {weight_factor:.3f} +/- "
             f"{weight_factor_std:.3f}, friction {mu:.2f}): "
-            f"{_causes(model, air_model, bit_depth, difference)}")
+            f"{_causes(model, air_model, bit_depth, difference, off, _loose(block, difference))}")
     return Mismatch(count, True), Alarm(t, AlarmKind.WEIGHT_MISMATCH, Severity.WARNING, text,
                                         weight_factor, 1.0)

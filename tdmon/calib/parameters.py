@@ -38,14 +38,19 @@ from functools import cached_property
 from typing import Final, Literal, NamedTuple, get_args, overload
 
 __all__ = [
+    "BLOCK_WEIGHT",
     "FRICTION",
+    "FRICTION_AND_WEIGHT",
+    "HOOKLOAD_OFFSET",
     "JOINT_PARAMETERS",
+    "SHEAVE_EFFICIENCY",
     "WEIGHT_FACTOR",
     "EstimatedParameter",
     "EstimatedParameters",
     "MessageField",
     "Shown",
     "join_words",
+    "rig_parameters",
 ]
 
 Shown = Literal["factor", "percent", "force"]
@@ -259,8 +264,13 @@ class EstimatedParameters(Sequence[EstimatedParameter]):
 
     def with_prior(self, name: str, prior: float, prior_std: float) -> EstimatedParameters:
         """The list with parameter ``name``'s prior replaced (ValueError: unknown name)."""
+        return self.replaced(name, prior=prior, prior_std=prior_std)
+
+    def replaced(self, name: str, **changes: float) -> EstimatedParameters:
+        """The list with attributes of parameter ``name`` replaced, e.g. its prior or drift
+        (ValueError: unknown name; the parameter's own checks apply)."""
         k = self.index(name)
-        changed = self.parameters[k].with_prior(prior, prior_std)
+        changed = replace(self.parameters[k], **changes)  # type: ignore[arg-type]
         return EstimatedParameters((*self.parameters[:k], changed, *self.parameters[k + 1:]))
 
     # -- the message's fields -------------------------------------------------------------
@@ -360,5 +370,76 @@ WEIGHT_FACTOR: Final = EstimatedParameter(
 fixed fraction of the string's weight at any depth, so its prior carries from well to well
 (docs/back-calculation.md, "Friction and weight together")."""
 
-JOINT_PARAMETERS: Final = EstimatedParameters((FRICTION, WEIGHT_FACTOR))
-"""The joint estimate's parameters, in the order of its state vector."""
+BLOCK_WEIGHT: Final = EstimatedParameter(
+    name="block_weight", key="block", unit="N",
+    prior=0.0, prior_std=20e3, drift_per_hour=0.0, drift_per_100m=0.0, bounds=(0.0, 5e6),
+    label="block weight", noun="block weight",
+    words="the travelling equipment as the hook-load sensor weighs it at rest, its zero "
+          "offset aside (the well file's block weight, less what sits above a load pin)",
+    shown="force", reference=None, reading=None,
+    truth=("/truth/sensor", "block_weight_N"),
+)
+"""The travelling equipment's weight the sensor reads (its prior: the well file's block weight
+with the daemon file's ``block_weight_std``). With the hook load's zero offset it makes what
+a still, empty block reads; only their sum shows in slips, the sheave factor of a moving block
+and the string's weight in the hangs tell them apart (docs/hookload.md)."""
+
+HOOKLOAD_OFFSET: Final = EstimatedParameter(
+    name="hookload_offset", key="offset", unit="N",
+    prior=0.0, prior_std=20e3, drift_per_hour=20e3, drift_per_100m=0.0,
+    bounds=(-500e3, 500e3),
+    label="hook-load offset", noun="hook-load zero",
+    words="what the hook-load sensor reads with nothing on it (its zero drift), 0 = true zero",
+    shown="force", reference=0.0,
+    reading=("the sensor reads {} low", "the sensor reads {} high"),
+    truth=("/truth/sensor", "offset_N"),
+)
+"""The hook-load sensor's zero offset, drifting as a random walk (load cells drift by several
+tonnes with temperature over a trip)."""
+
+SHEAVE_EFFICIENCY: Final = EstimatedParameter(
+    name="sheave_efficiency", key="sheave", unit="1",
+    prior=0.9615, prior_std=0.02, drift_per_hour=0.001, drift_per_100m=0.0,
+    bounds=(0.85, 1.0),
+    label="sheave efficiency", noun="sheave friction",
+    words="efficiency per turning sheave of the block and tackle a deadline sensor reads "
+          "through (API RP 9B's design value 1/1.04 = 0.9615; 1 = no sheave friction)",
+    shown="factor", reference=None, reading=None,
+    truth=("/truth/sensor", "efficiency"),
+)
+"""Estimated only for a deadline sensor (the well file's ``[hookload_sensor]``): hoisting reads
+low and lowering high by the sheave factor (:mod:`tdmon.model.hookload_sensor`)."""
+
+#: Prior standard deviation of a block weight the well file does not give [N].
+UNKNOWN_BLOCK_STD: Final = 1e6
+
+JOINT_PARAMETERS: Final = EstimatedParameters((FRICTION, WEIGHT_FACTOR, BLOCK_WEIGHT,
+                                               HOOKLOAD_OFFSET, SHEAVE_EFFICIENCY))
+"""Every parameter the joint estimate may have, in the order of its state vector (what its
+message, schema, views and expectations know); a rig's estimate takes those its hook-load sensor
+calls for (:func:`rig_parameters`)."""
+
+FRICTION_AND_WEIGHT: Final = EstimatedParameters((FRICTION, WEIGHT_FACTOR))
+"""The joint estimate without the hook-load measurement (the sensor taken as configured): the
+settings' default until they are fitted to a rig (:func:`tdmon.calib.joint.for_rig`)."""
+
+
+def rig_parameters(*, reads_sheave_friction: bool, block_weight: float,
+                   efficiency: float, parameters: EstimatedParameters = JOINT_PARAMETERS
+                   ) -> EstimatedParameters:
+    """The parameters of one rig's joint estimate: the sheave efficiency only for a sensor that
+    reads the sheave friction (a deadline sensor), the block weight centred on ``block_weight``
+    [N] (as the sensor weighs it), the sheave efficiency on ``efficiency`` (the well file's,
+    below 1; API RP 9B's design value when the file gives 1)."""
+    chosen = [p for p in parameters
+              if p.name != SHEAVE_EFFICIENCY.name or reads_sheave_friction]
+    out = EstimatedParameters(tuple(chosen))
+    if BLOCK_WEIGHT.name in out.names:
+        block = out.get(BLOCK_WEIGHT.name)
+        # no block weight in the well file: the first in-slips readings give it
+        out = out.with_prior(block.name, max(block_weight, 0.0),
+                             block.prior_std if block_weight > 0.0 else UNKNOWN_BLOCK_STD)
+    if SHEAVE_EFFICIENCY.name in out.names and efficiency < 1.0:
+        sheave = out.get(SHEAVE_EFFICIENCY.name)
+        out = out.with_prior(sheave.name, efficiency, sheave.prior_std)
+    return out

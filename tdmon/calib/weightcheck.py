@@ -30,21 +30,52 @@ ODD_HANGS = 3
 PLAUSIBLE_RATIO = (0.5, 2.0)
 
 
-def block_weight_alarm(t: float, learnt: float, configured: float, tolerance: float
-                       ) -> Alarm | None:
-    """Alarm when the block weight learnt in slips differs from the configured one.
+def block_weight_alarm(t: float, block: tuple[float, float], offset: tuple[float, float],
+                       empty: tuple[float, float], configured: float, tolerance: float,
+                       separated: bool = True) -> Alarm | None:
+    """Alarm when what the joint estimate learnt of the travelling equipment differs from the
+    well file's block weight by more than ``tolerance`` and by more than twice its spread.
 
     Parameters
     ----------
     t : [s]
-    learnt : block weight from the in-slips samples [N]
-    configured : the well file's block weight [N] (0: none given, no alarm)
+    block : block weight as the sensor weighs it, its zero offset aside, and its standard
+        deviation [N] (the joint estimate, :mod:`tdmon.calib.joint`)
+    offset : the sensor's zero offset and its standard deviation [N]
+    empty : what an empty, still block reads (block weight plus offset) and its standard
+        deviation [N]: in-slips readings pin it down even when they cannot tell the two apart
+    configured : the well file's block weight, as the sensor would weigh it [N] (0: none
+        given, no alarm)
     tolerance : relative deviation that is reported [-]
+    separated : whether the data tell the block weight from the offset (a moving block in
+        slips, a string weight known from elsewhere); if not, only what the empty block reads
+        is judged
+
+    Returns
+    -------
+    The alarm naming the block weight when the block weight alone stands out; naming both
+    causes when only what the empty block reads does (the block weight or the sensor's zero
+    is off, and the data cannot say which).
     """
-    if configured > 0 and abs(learnt - configured) > tolerance * configured:
+    if configured <= 0:
+        return None
+    limit = tolerance * configured
+
+    def stands_out(value: float, std: float, reference: float) -> bool:
+        return abs(value - reference) > limit and abs(value - reference) > 2 * std
+
+    if separated and stands_out(*block, configured):
         return Alarm(t, AlarmKind.BLOCK_WEIGHT, Severity.INFO,
-                     f"block weight from in-slips periods {learnt / 1e3:.0f} kN differs from "
-                     f"the configured {configured / 1e3:.0f} kN", learnt, configured)
+                     f"block weight {block[0] / 1e3:.0f} ± {block[1] / 1e3:.0f} kN (learnt with "
+                     f"the sensor's zero offset and the string weight) differs from the "
+                     f"configured {configured / 1e3:.0f} kN", block[0], configured)
+    if stands_out(*empty, configured):
+        return Alarm(t, AlarmKind.BLOCK_WEIGHT, Severity.INFO,
+                     f"an empty block reads {empty[0] / 1e3:.0f} kN, the configured block "
+                     f"weight is {configured / 1e3:.0f} kN: the block weight or the hook-load "
+                     f"sensor's zero is off by {(empty[0] - configured) / 1e3:+.0f} kN (the "
+                     f"zero offset is estimated at {offset[0] / 1e3:+.0f} ± "
+                     f"{offset[1] / 1e3:.0f} kN)", empty[0], configured)
     return None
 
 

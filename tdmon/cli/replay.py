@@ -262,6 +262,8 @@ def _print_summary(s: dict[str, Any]) -> None:
     if s.get("well", {}).get("name"):
         print(f"  well: {s['well']['name']}")
     friction = ", ".join(
+        f"{r['operation']} {r['section_words']} not resolvable ({r['unresolved']} windows)"
+        if r["mu_median"] is None else
         f"{r['operation']} {r['section_words']} {r['mu_median']:.3f}"
         + (f" (sd {r['mu_sd']:.3f}, {r['windows']} windows)" if r["mu_sd"] is not None
            else f" ({r['windows']} window)")

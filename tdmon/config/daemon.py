@@ -53,6 +53,7 @@ def _quantity(target: str) -> BeforeValidator:
 Seconds = Annotated[float, _quantity("s")]
 Meters = Annotated[float, _quantity("m")]
 Newtons = Annotated[float, _quantity("N")]
+NewtonMetres = Annotated[float, _quantity("N*m")]
 MetersPerSecond = Annotated[float, _quantity("m/s")]
 RadPerSecond = Annotated[float, _quantity("rad/s")]
 CubicMetersPerSecond = Annotated[float, _quantity("m**3/s")]
@@ -556,6 +557,18 @@ class CalibrationConfig(_Model):
     weight_factor: float = Field(default=1.0, gt=0.5, lt=1.5)
     weight_factor_std: float = Field(default=0.05, gt=0, le=0.5)
     weight_mismatch_tolerance: float = Field(default=0.01, gt=0, lt=0.5)
+    # the hook-load measurement in the joint estimate (docs/hookload.md; the sensor's place
+    # and rigging are the well file's [hookload_sensor]): how well the block weight of the well
+    # file is known, the sensor's zero offset (prior spread and drift per hour), the sheave
+    # efficiency's prior spread (deadline sensors; its centre is the well file's efficiency),
+    # the unmodelled hoisting/lowering hysteresis relative to the load, and the torque
+    # sensor's zero and scale uncertainty
+    block_weight_std: Newtons = Field(default=20e3, gt=0, le=1e6)
+    hookload_offset_std: Newtons = Field(default=20e3, gt=0, le=1e6)
+    hookload_offset_drift: Newtons = Field(default=20e3, ge=0, le=1e6)
+    sheave_efficiency_std: float = Field(default=0.02, gt=0, le=0.1)
+    hookload_hysteresis: float = Field(default=0.01, ge=0, le=0.2)
+    torque_uncertainty: NewtonMetres = Field(default=300.0, ge=0, le=1e5)
 
     @model_validator(mode="after")
     def _scale_needs_lab_fit(self) -> CalibrationConfig:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 from pydantic import Field, create_model, model_validator
 
 from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameters
-from tdmon.config.common import Length, StrictModel, load_model, quantity
+from tdmon.config.common import Force, Length, StrictModel, load_model, quantity
 from tdmon.vocabulary import RigState
 
 __all__ = [
@@ -62,12 +62,20 @@ class FrictionExpectation(StrictModel):
     # at least this share of the windows lies within 2 of its mu_std of the windows' median
     # (the published uncertainty is honest about the scatter)
     within_2_std: float | None = Field(default=None, gt=0, le=1)
+    # false: no window publishes a friction (each says why it cannot resolve it); true: every
+    # window does (docs/hookload.md, "Can the data resolve friction?")
+    resolvable: bool | None = None
 
     @model_validator(mode="after")
     def _something(self) -> FrictionExpectation:
         if (self.min is None and self.max is None and self.truth_abs is None
-                and self.within_2_std is None):
-            raise ValueError("give min, max, truth_abs or within_2_std")
+                and self.within_2_std is None and self.resolvable is None):
+            raise ValueError("give min, max, truth_abs, within_2_std or resolvable")
+        if self.resolvable is False and not (self.min is None and self.max is None
+                                             and self.truth_abs is None
+                                             and self.within_2_std is None):
+            raise ValueError("resolvable = false claims that no friction is published: give "
+                             "no range or truth with it")
         return self
 
 
@@ -88,11 +96,12 @@ def _parameter_keys(parameters: EstimatedParameters) -> dict[str, Any]:
     median absolute or relative difference from it)."""
     keys: dict[str, Any] = {}
     for parameter in parameters:
-        keys[parameter.name] = (tuple[float, float] | None, None)
+        # a force is written with its unit ("20 kN"), a factor as a number
+        value: Any = Force if parameter.unit == "N" else float
+        keys[parameter.name] = (tuple[value, value] | None, None)
         if parameter.truth is not None:
-            for kind in ("abs", "rel"):
-                keys[f"{parameter.key}_truth_{kind}"] = (float | None,
-                                                         Field(default=None, gt=0))
+            keys[f"{parameter.key}_truth_abs"] = (value | None, Field(default=None, gt=0))
+            keys[f"{parameter.key}_truth_rel"] = (float | None, Field(default=None, gt=0))
     return keys
 
 

@@ -100,11 +100,40 @@ def rig_steps(config: DaemonConfig, well_file: WellFile | None, model: LoadModel
         extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well),
                                         calibration=calibration))
     steps = default_steps(config, model, rig_state) + extra_steps
+    _read_through_the_sensor(steps, well_file)
     if well_file is not None:
         from tdmon.daemon.steps.coverage import coverage_step
 
         steps.insert(0, coverage_step(config, well_file, steps, own_model=own_model))
     return steps
+
+
+def _read_through_the_sensor(steps: Sequence[Step], well_file: WellFile | None) -> None:
+    """The monitor shows its hook loads as the rig's sensor reads them: through the
+    calibration's estimate of the measurement where it runs, else through the well file's
+    sensor as configured (nothing for a sensor that reads the load on the hook)."""
+    from tdmon.daemon.steps.calibrate import CalibrationStep
+    from tdmon.daemon.steps.monitor import MonitorStep
+
+    monitor = next((s for s in steps if isinstance(s, MonitorStep)), None)
+    if monitor is None:
+        return
+    calibration = next((s for s in steps if isinstance(s, CalibrationStep)), None)
+    if calibration is not None:
+        monitor.sensor = calibration.sensor_reading
+        return
+    if well_file is None:
+        return
+    well = well_file.well
+    sensor = well.hookload_sensor
+    if not (sensor.reads_sheave_friction and sensor.efficiency < 1.0) and \
+            sensor.above_sensor == 0.0:
+        return
+    from tdmon.calib.measurement import SensorEstimate
+
+    fixed = (SensorEstimate(sensor, well.block_weight - sensor.above_sensor, 0.0,
+                            efficiency=sensor.efficiency), well.block_weight)
+    monitor.sensor = lambda: fixed
 
 
 @contextlib.asynccontextmanager

@@ -158,32 +158,40 @@ def friction_rows(estimates: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     ``mu_median`` is the median of the windows' friction factors, ``mu_sd`` their spread
     (sample standard deviation between windows; None for one window), ``mu_window_sd`` the
     median of the windows' own standard deviations (the measurement's uncertainty), and the
-    bit-depth range the windows cover.
+    bit-depth range the windows cover. ``unresolved`` counts the windows that could not
+    resolve friction above the sensor's uncertainty (they publish none: docs/hookload.md) and
+    ``resolution`` gives the last one's reason; a group of such windows alone has no friction.
     """
     windows = [e for e in estimates if e.get("kind") == EstimateKind.WINDOW
-               and math.isfinite(_num(e.get("mu")))]
+               and (math.isfinite(_num(e.get("mu"))) or e.get("resolvable") is False)]
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for window in windows:
         key = (str(window.get("operation")), str(window.get("section", "all")))
         groups.setdefault(key, []).append(window)
     rows = []
-    for (operation, section), chosen in sorted(groups.items()):
+    for (operation, section), group in sorted(groups.items()):
+        chosen = [e for e in group if math.isfinite(_num(e.get("mu")))]
+        unresolved = [e for e in group if not math.isfinite(_num(e.get("mu")))]
         mu = np.array([_num(e["mu"]) for e in chosen])
         own = np.array([_num(e.get("mu_std")) for e in chosen])
-        depth = np.array([_num(e.get("bit_depth_m")) for e in chosen])
+        depth = np.array([_num(e.get("bit_depth_m")) for e in group])
         own, depth = own[np.isfinite(own)], depth[np.isfinite(depth)]
+        some = mu.size > 0
         rows.append({
             "operation": operation, "section": section,
             "section_words": _SECTION_WORDS.get(section, section),
             "windows": int(mu.size),
-            "mu_median": _rounded(float(np.median(mu))),
-            "mu_mean": _rounded(float(mu.mean())),
+            "mu_median": _rounded(float(np.median(mu))) if some else None,
+            "mu_mean": _rounded(float(mu.mean())) if some else None,
             "mu_sd": _rounded(float(mu.std(ddof=1))) if mu.size > 1 else None,
             "mu_window_sd": _rounded(float(np.median(own))) if own.size else None,
-            "mu_min": _rounded(float(mu.min())), "mu_max": _rounded(float(mu.max())),
+            "mu_min": _rounded(float(mu.min())) if some else None,
+            "mu_max": _rounded(float(mu.max())) if some else None,
             "bit_depth_min_m": _rounded(float(depth.min()), 1) if depth.size else None,
             "bit_depth_max_m": _rounded(float(depth.max()), 1) if depth.size else None,
             "low_confidence": int(sum(bool(e.get("low_confidence")) for e in chosen)),
+            "unresolved": len(unresolved),
+            "resolution": unresolved[-1].get("resolution") if unresolved else None,
         })
     return rows
 
@@ -198,13 +206,21 @@ def friction_words(row: dict[str, Any]) -> str:
                  row["bit_depth_min_m"] == row["bit_depth_max_m"] else
                  f", bit from {row['bit_depth_min_m']:.0f} to {row['bit_depth_max_m']:.0f} m MD")
     n = row["windows"]
+    unresolved = row.get("unresolved") or 0
+    if n == 0:
+        return (f"{operation.capitalize()}, {where}: no friction published "
+                f"({unresolved} window{'s' if unresolved != 1 else ''}{depth}): "
+                f"{row.get('resolution') or 'not resolvable'}.")
     spread = ("" if row["mu_sd"] is None else
               f"; the windows scatter by {row['mu_sd']:.3f} (1 sd) between "
               f"{row['mu_min']:.3f} and {row['mu_max']:.3f}")
     own = ("" if row["mu_window_sd"] is None else
            f"; a single window is uncertain by about {row['mu_window_sd']:.4f} (1 sd)")
+    left = ("" if not unresolved else
+            f"; {unresolved} more window{'s' if unresolved != 1 else ''} could not resolve "
+            "friction above the sensor's uncertainty")
     return (f"{operation.capitalize()}, {where}: friction factor {row['mu_median']:.3f} "
-            f"(median of {n} window{'s' if n != 1 else ''}{depth}){spread}{own}.")
+            f"(median of {n} window{'s' if n != 1 else ''}{depth}){spread}{own}{left}.")
 
 
 def alarm_rows(alarms: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -285,9 +301,14 @@ def joint_verdict(estimates: Sequence[dict[str, Any]],
     last estimate that did (else the last one, with why they could not be separated). Each
     parameter's value and standard deviation under its name, its words from its declaration
     (:mod:`tdmon.calib.parameters`)."""
+    joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
+    # the parameters the recording's rig estimated (its hook-load sensor's), friction and
+    # the string weight when there is no estimate at all
+    parameters = EstimatedParameters(tuple(
+        p for k, p in enumerate(parameters)
+        if k < 2 or (joint and p.name in joint[-1])))
     friction, nouns = parameters.friction, parameters.nouns()
     together = join_words([friction.noun, *(p.noun for p in parameters.others)])
-    joint = [e for e in estimates if e.get("kind") == EstimateKind.JOINT]
     if not joint:
         return {"status": "none", "estimates": 0,
                 "words": f"No joint estimate of {together} in this recording "

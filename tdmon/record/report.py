@@ -545,9 +545,10 @@ def _friction_section(facts: dict[str, Any]) -> list[str]:
         return "-" if value is None else f"{value:.{digits}f}"
 
     parts.append(_table(
-        ("operation", "hole section", "windows", "median mu", "sd between windows",
-         "typical window sd", "range", "bit depth [m MD]"),
-        [(r["operation"], r["section_words"], r["windows"], text(r["mu_median"], 3),
+        ("operation", "hole section", "windows", "not resolvable", "median mu",
+         "sd between windows", "typical window sd", "range", "bit depth [m MD]"),
+        [(r["operation"], r["section_words"], r["windows"], r.get("unresolved", 0),
+          text(r["mu_median"], 3),
           text(r["mu_sd"], 3), text(r["mu_window_sd"], 4),
           f"{text(r['mu_min'], 3)} - {text(r['mu_max'], 3)}",
           f"{text(r['bit_depth_min_m'], 0)} - {text(r['bit_depth_max_m'], 0)}") for r in rows]))

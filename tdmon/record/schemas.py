@@ -184,9 +184,19 @@ ESTIMATE: Final = _object(
         "t": _TIME,
         "kind": {"enum": list(ESTIMATE_KINDS)},
         "operation": _TEXT,
-        "mu": _NUMBER,
+        # null where the data cannot resolve friction ("resolvable": false, "resolution" says
+        # why: docs/hookload.md)
+        "mu": _OPTIONAL_NUMBER,
         # One sample has no spread.
         "mu_std": _OPTIONAL_NUMBER,
+        "resolvable": {"type": "boolean",
+                       "description": "window, joint: the load can show friction above the "
+                                      "sensor's uncertainty at this depth"},
+        "resolution": {**_TEXT, "description": "window: why friction is not resolvable"},
+        "friction_signal": {**_NUMBER, "description": "joint: change of the pick-up/slack-off "
+                                                      "split between friction 0.1 and 0.3 [N]"},
+        "sensor_uncertainty": {**_NUMBER, "description": "joint: one standard deviation of "
+                                                         "that split from the sensor [N]"},
         # Kind-specific fields read by the views and the report (all optional, see
         # docs/recording.md): where a window was taken, the profile arrays, the mu(T) fit.
         "bit_depth_m": _NUMBER,

@@ -270,6 +270,17 @@ def _state_agreement(spec: StatesExpectation, data: _Recorded) -> list[Check]:
     return checks
 
 
+def _resolvable(name: str, expected: bool, windows: list[dict[str, Any]],
+                unresolved: list[dict[str, Any]]) -> Check:
+    """Whether the windows publish a friction (``expected`` true) or none does (false)."""
+    measured = f"{len(windows) - len(unresolved)} of {len(windows)} windows resolved friction"
+    if unresolved:
+        measured += f" (e.g. '{unresolved[0].get('resolution', '')}')"
+    passed = not unresolved if expected else len(unresolved) == len(windows)
+    return Check(name, passed, measured, "every window resolves friction" if expected
+                 else "no window publishes a friction")
+
+
 def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:  # noqa: C901  (complex today; simplify when next touched)
     windows = [e for e in data.estimates
                if e.get("kind") == EstimateKind.WINDOW and e.get("operation") == spec.operation
@@ -281,6 +292,15 @@ def _friction(spec: FrictionExpectation, data: _Recorded) -> Check:  # noqa: C90
     name = f"friction {spec.operation}{where}"
     if len(windows) < spec.min_windows:
         return Check(name, False, f"{len(windows)} windows", f">= {spec.min_windows} windows")
+    unresolved = [e for e in windows if e.get("mu") is None]
+    if spec.resolvable is not None:
+        check = _resolvable(name, spec.resolvable, windows, unresolved)
+        if not check.passed or spec.resolvable is False:
+            return check
+    windows = [e for e in windows if e.get("mu") is not None]
+    if not windows:
+        return Check(name, False, f"{len(unresolved)} windows, none resolved friction",
+                     "a friction published")
     mus = [float(e["mu"]) for e in windows]
     median = statistics.median(mus)
     parts: list[str] = []
@@ -342,11 +362,14 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:  # noqa: C901  (co
     name = "joint estimate" + (f" after {spec.after:.0f} s" if spec.after else "")
     if len(estimates) < spec.min_estimates:
         return Check(name, False, f"{len(estimates)} estimates", f">= {spec.min_estimates}")
-    medians = {p.name: statistics.median(float(e[p.name]) for e in estimates)
-               for p in JOINT_PARAMETERS}
+    # the parameters this rig estimates (the sheave efficiency only for a deadline sensor),
+    # each over the estimates that publish it (no friction where it is not resolvable)
+    present = [p for p in JOINT_PARAMETERS if p.name in estimates[-1]]
+    medians = {p.name: statistics.median(values) for p in present
+               if (values := [float(e[p.name]) for e in estimates if e.get(p.name) is not None])}
     last = estimates[-1]
-    measured = [", ".join(_median_text(p, medians[p.name]) for p in JOINT_PARAMETERS)
-                + f" (median of {len(estimates)})"]
+    measured = [", ".join(_median_text(p, medians[p.name]) for p in present
+                          if p.name in medians) + f" (median of {len(estimates)})"]
     expected: list[str] = []
     problems: list[str] = []
 
@@ -357,8 +380,13 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:  # noqa: C901  (co
 
     for parameter in JOINT_PARAMETERS:  # the median in a range: ``<name> = [low, high]``
         bounds = getattr(spec, parameter.name)
-        if bounds is not None:
-            within(_label(parameter), medians[parameter.name], bounds)
+        if bounds is None:
+            continue
+        if parameter.name not in medians:
+            expected.append(f"{_label(parameter)} in [{bounds[0]:g}, {bounds[1]:g}]")
+            problems.append(f"no {_label(parameter)} published")
+            continue
+        within(_label(parameter), medians[parameter.name], bounds)
     if spec.weight_difference_kN is not None:
         differences = [float(e["weight_difference_N"]) / 1e3 for e in estimates
                        if e.get("weight_difference_N") is not None]
@@ -378,16 +406,19 @@ def _joint(spec: JointExpectation, data: _Recorded) -> Check:  # noqa: C901  (co
             errors = []
             for e in estimates:
                 truth = _truth_at(series, float(e["t"]))
-                if truth is not None:
+                if truth is not None and e.get(parameter.name) is not None:
                     value = float(e[parameter.name])
                     errors.append(abs(value / truth - 1.0) if relative else abs(value - truth))
             what = (f"median |{parameter.name} / truth - 1|" if relative
                     else f"median |{parameter.name} - truth|")
-            expected.append(f"{what} <= {tolerance}")
+            force = parameter.shown == "force" and not relative
+            expected.append(f"{what} <= {tolerance / 1e3:g} kN" if force
+                            else f"{what} <= {tolerance}")
             if not errors:
                 problems.append(f"no {parameter.noun} truth")
                 continue
-            measured.append(f"{what} {statistics.median(errors):.4f}")
+            measured.append(f"{what} {statistics.median(errors) / 1e3:.2f} kN" if force
+                            else f"{what} {statistics.median(errors):.4f}")
             if statistics.median(errors) > tolerance:
                 problems.append(f"{parameter.noun} off the truth")
     if spec.identifiable is not None:

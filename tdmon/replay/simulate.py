@@ -91,7 +91,8 @@ TRUTH_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
         "the load for that motion, its zero offset and its noise-free reading (only in "
         "sessions whose hook-load sensor does not read the load on the hook)",
         {"t": _TIME, "state": _STATES, "block_motion": {"type": "integer"},
-         "factor": _NUMBER, "offset_N": _NUMBER, "hookload_N": _NUMBER, "reading_N": _NUMBER},
+         "factor": _NUMBER, "offset_N": _NUMBER, "hookload_N": _NUMBER, "reading_N": _NUMBER,
+         "efficiency": _NUMBER, "block_weight_N": _NUMBER},
         ("t", "block_motion", "factor", "offset_N", "hookload_N", "reading_N")),
     "/truth/friction": _schema(
         "truth.friction",
@@ -207,12 +208,17 @@ def _truth_sample_records(session: Session) -> list[MessageRecord]:
             "hookload_N": float(truth["hookload"][k]), "torque_Nm": float(truth["torque"][k])}))
         if "hookload_reading" in truth:
             motion = int(truth["block_motion"][k])
+            sensor = scenario.measurement.sensor
             records.append((_ns(t), "/truth/sensor", {
                 "t": t, "state": state, "block_motion": motion,
-                "factor": scenario.measurement.sensor.factor(motion),
+                "factor": sensor.factor(motion),
                 "offset_N": float(truth["hookload_offset"][k]),
                 "hookload_N": float(truth["hookload"][k]),
-                "reading_N": float(truth["hookload_reading"][k])}))
+                "reading_N": float(truth["hookload_reading"][k]),
+                # the joint estimate's parameters: the sheave efficiency and the travelling
+                # equipment as the sensor weighs it
+                "efficiency": sensor.efficiency,
+                "block_weight_N": scenario.well.block_weight - sensor.above_sensor}))
         if state == RigState.IN_SLIPS:
             continue
         records.append((_ns(t), "/truth/friction", {

@@ -12,9 +12,16 @@ import numpy as np
 import pytest
 
 from tdmon.calib.estimator import FrictionEstimator
-from tdmon.calib.joint import JointSettings, initial_joint, joint_fields, update_joint
+from tdmon.calib.joint import (
+    JointSettings,
+    initial_joint,
+    joint_fields,
+    mean_and_covariance,
+    update_joint,
+)
 from tdmon.calib.parameters import (
     FRICTION,
+    FRICTION_AND_WEIGHT,
     JOINT_PARAMETERS,
     WEIGHT_FACTOR,
     EstimatedParameter,
@@ -30,15 +37,18 @@ RECORDED_FIELDS = [
     "t", "kind", "operation", "mu", "mu_std", "bit_depth_m", "weight_factor",
     "weight_factor_std", "correlation", "identifiable", "identifiability", "mu_joint",
     "mu_joint_std", "mu_at_prior_weight", "mu_at_prior_weight_std", "weight_variance_ratio",
-    "windows", "residuals", "gated", "weight_difference_N", "scatter", "mu_single",
+    "windows", "residuals", "gated", "resolvable", "friction_signal", "sensor_uncertainty",
+    "weight_difference_N", "scatter", "mu_single",
 ]
+# (resolvable, friction_signal, sensor_uncertainty: whether the well can resolve friction
+# above the sensor's uncertainty, added with the hook-load measurement model)
 
-#: A hook-load offset as issue 28 may add it: a force, shown in kN (its measurement model is
-#: not written yet, so the windows leave it at its prior).
+#: A spare offset, as a next parameter may be added: a force, shown in kN (its measurement
+#: model is not written, so the windows leave it at its prior).
 OFFSET = EstimatedParameter(
-    name="hookload_offset", key="offset", unit="N", prior=0.0, prior_std=20e3,
-    drift_per_hour=2e3, drift_per_100m=0.0, bounds=(-2e5, 2e5), label="hook-load offset",
-    noun="hook-load offset", words="what the hook-load sensor reads with nothing on the hook",
+    name="spare_offset", key="spare", unit="N", prior=0.0, prior_std=20e3,
+    drift_per_hour=2e3, drift_per_100m=0.0, bounds=(-2e5, 2e5), label="spare offset",
+    noun="spare offset", words="what the hook-load sensor reads with nothing on the hook",
     shown="force", reference=0.0,
     reading=("the hook load reads {} low", "the hook load reads {} high"), truth=None)
 
@@ -53,8 +63,11 @@ def _joint_messages(model: WellModel, settings: JointSettings | None = None
     trip-out's figures: one friction with a lighter string explains both)."""
     from tdmon.calib.estimator import CalibrationSettings
 
+    # friction and weight alone unless told (a new tuple: the estimator would otherwise fit
+    # the rig's hook-load measurement parameters in, tdmon.calib.joint.for_rig)
     estimator = FrictionEstimator(model, CalibrationSettings(
-        joint=settings or JointSettings()))
+        joint=settings or JointSettings(parameters=EstimatedParameters(
+            tuple(FRICTION_AND_WEIGHT)))))
     state = estimator.initial_state()
     joint = []
     for k in range(6):
@@ -73,7 +86,7 @@ def volve() -> WellModel:
 
 
 def test_the_message_keeps_its_recorded_fields_and_order(volve: WellModel) -> None:
-    assert [f.name for f in JOINT_PARAMETERS.message_fields()] == RECORDED_FIELDS[6:16]
+    assert [f.name for f in FRICTION_AND_WEIGHT.message_fields()] == RECORDED_FIELDS[6:16]
     joint = _joint_messages(volve)
     assert joint and all(list(m) == RECORDED_FIELDS for m in joint)
     assert type(joint[0]["kind"]) is str and joint[0]["kind"] == "joint"
@@ -122,8 +135,8 @@ def test_a_declaration_says_everything_and_says_it_once() -> None:
         EstimatedParameters((FRICTION, WEIGHT_FACTOR, replace(OFFSET, key="weight")))
     with pytest.raises(ValueError, match="first parameter is the friction factor"):
         EstimatedParameters((WEIGHT_FACTOR, FRICTION))
-    with pytest.raises(ValueError, match="unknown estimated parameter 'offset'"):
-        JOINT_PARAMETERS.index("offset")
+    with pytest.raises(ValueError, match="unknown estimated parameter 'spare'"):
+        JOINT_PARAMETERS.index("spare")
     with pytest.raises(ValueError, match="unknown estimated parameter 'weight_factor'"):
         JointSettings(parameters=EstimatedParameters((FRICTION, OFFSET)))  # the model needs w
 
@@ -132,7 +145,7 @@ def test_values_in_words() -> None:
     assert WEIGHT_FACTOR.text(1.0234, 0.0041) == "weight factor 1.023 ± 0.004"
     assert WEIGHT_FACTOR.read(1.0234) == "the string 2.3 % heavier than modelled"
     assert WEIGHT_FACTOR.read(0.9) == "the string 10.0 % lighter than modelled"
-    assert OFFSET.text(-12_340.0, 2_000.0) == "hook-load offset -12.3 ± 2.0 kN"
+    assert OFFSET.text(-12_340.0, 2_000.0) == "spare offset -12.3 ± 2.0 kN"
     assert OFFSET.read(-12_340.0) == "the hook load reads 12.3 kN low"
     efficiency = replace(OFFSET, name="sheave_efficiency", key="sheave", unit="1", prior=0.97,
                          prior_std=0.02, bounds=(0.5, 1.0), label="sheave efficiency",
@@ -144,44 +157,47 @@ def test_values_in_words() -> None:
 
 
 def test_a_third_parameter_is_estimated_beside_and_published(volve: WellModel) -> None:
-    three = EstimatedParameters((*JOINT_PARAMETERS, OFFSET))
+    three = EstimatedParameters((*FRICTION_AND_WEIGHT, OFFSET))
     settings = JointSettings(parameters=three)
     assert [f.name for f in three.message_fields()] == [
-        "weight_factor", "weight_factor_std", "hookload_offset", "hookload_offset_std",
-        "correlation", "correlation_mu_offset", "correlation_weight_offset", "identifiable",
+        "weight_factor", "weight_factor_std", "spare_offset", "spare_offset_std",
+        "correlation", "correlation_mu_spare", "correlation_weight_spare", "identifiable",
         "identifiability", "mu_joint", "mu_joint_std", "mu_at_prior_weight",
-        "mu_at_prior_weight_std", "mu_at_prior_offset", "mu_at_prior_offset_std",
-        "weight_variance_ratio", "offset_variance_ratio"]
+        "mu_at_prior_weight_std", "mu_at_prior_spare", "mu_at_prior_spare_std",
+        "weight_variance_ratio", "spare_variance_ratio"]
     two, joint = _joint_messages(volve), _joint_messages(volve, settings)
     assert len(two) == len(joint)
     last, before = joint[-1], two[-1]
-    assert list(last) == [*RECORDED_FIELDS[:8], "hookload_offset", "hookload_offset_std",
-                          "correlation", "correlation_mu_offset", "correlation_weight_offset",
-                          *RECORDED_FIELDS[9:15], "mu_at_prior_offset",
-                          "mu_at_prior_offset_std", "weight_variance_ratio",
-                          "offset_variance_ratio", *RECORDED_FIELDS[16:]]
+    assert list(last) == [*RECORDED_FIELDS[:8], "spare_offset", "spare_offset_std",
+                          "correlation", "correlation_mu_spare", "correlation_weight_spare",
+                          *RECORDED_FIELDS[9:15], "mu_at_prior_spare",
+                          "mu_at_prior_spare_std", "weight_variance_ratio",
+                          "spare_variance_ratio", *RECORDED_FIELDS[16:]]
     # no window sees the offset yet: its prior, grown by the declared drift over the 11 min
     # between the first and the last window; uncorrelated with the others
     hours = (last["t"] - joint[0]["t"]) / 3600.0
-    assert last["hookload_offset"] == 0.0
-    assert last["hookload_offset_std"] == pytest.approx(math.sqrt(20e3**2 + 2e3**2 * hours),
+    assert last["spare_offset"] == 0.0
+    assert last["spare_offset_std"] == pytest.approx(math.sqrt(20e3**2 + 2e3**2 * hours),
                                                         rel=1e-12)
-    assert last["correlation_mu_offset"] == last["correlation_weight_offset"] == 0.0
-    assert last["offset_variance_ratio"] == pytest.approx(1.0 + (2e3 / 20e3) ** 2 * hours)
+    assert last["correlation_mu_spare"] == last["correlation_weight_spare"] == 0.0
+    assert last["spare_variance_ratio"] == pytest.approx(1.0 + (2e3 / 20e3) ** 2 * hours)
     # so friction and weight are the two-parameter filter's, and the friction published is
     # the one at the offset's prior (not identified), which is the joint one
     for name in ("mu_joint", "weight_factor", "weight_factor_std", "correlation",
                  "mu_at_prior_weight"):
         assert last[name] == pytest.approx(before[name], rel=1e-12), name
     assert not last["identifiable"] and before["identifiable"]
-    assert last["identifiability"] == ("weakly identifiable: the hook-load offset rests mostly "
+    assert last["identifiability"] == ("weakly identifiable: the spare offset rests mostly "
                                        f"on its prior (variance "
-                                       f"{100 * last['offset_variance_ratio']:.0f} % of the "
+                                       f"{100 * last['spare_variance_ratio']:.0f} % of the "
                                        "prior's)")
-    assert last["mu"] == last["mu_at_prior_offset"] == pytest.approx(last["mu_joint"],
+    assert last["mu"] == last["mu_at_prior_spare"] == pytest.approx(last["mu_joint"],
                                                                     rel=1e-12)
     state = initial_joint(settings)
     fields = joint_fields(state, settings)
-    assert fields["identifiability"] == ("no window yet: friction, weight factor and hook-load "
+    assert fields["identifiability"] == ("no window yet: friction, weight factor and spare "
                                          "offset are the prior")
-    assert np.diag(state.covariance).tolist() == [0.1**2, 0.05**2, 20e3**2]
+    # (the filter keeps forces in kN; in SI the declared priors)
+    assert np.diag(state.covariance).tolist() == pytest.approx([0.1**2, 0.05**2, 20.0**2])
+    assert np.diag(mean_and_covariance(state, settings)[1]).tolist() == pytest.approx(
+        [0.1**2, 0.05**2, 20e3**2])

@@ -1,6 +1,7 @@
 """A parameter added to the joint estimate's declaration reaches every output unedited.
 
-A fresh interpreter adds a hook-load offset to ``tdmon.calib.parameters.JOINT_PARAMETERS``
+A fresh interpreter adds a spare offset (a parameter with no measurement model yet) to
+``tdmon.calib.parameters.JOINT_PARAMETERS``
 before anything else of tdmon is imported, as a new row in that file would, and then runs the
 real code: the estimator on pick-up and slack-off windows, the JSON Schema, an MCAP recording
 and the report written from it, the Rerun views read back from their ``.rrd`` file, the
@@ -19,18 +20,19 @@ from pathlib import Path
 from tdmon.calib import parameters as declared
 
 OFFSET = declared.EstimatedParameter(
-    name="hookload_offset", key="offset", unit="N", prior=0.0, prior_std=20e3,
-    drift_per_hour=2e3, drift_per_100m=0.0, bounds=(-2e5, 2e5), label="hook-load offset",
-    noun="hook-load offset", words="what the hook-load sensor reads with nothing on the hook",
+    name="spare_offset", key="spare", unit="N", prior=0.0, prior_std=20e3,
+    drift_per_hour=2e3, drift_per_100m=0.0, bounds=(-2e5, 2e5), label="spare offset",
+    noun="spare offset", words="what the hook-load sensor reads with nothing on the hook",
     shown="force", reference=0.0,
     reading=("the hook load reads {} low", "the hook load reads {} high"),
-    truth=("/truth/offset", "offset_N"))
+    truth=("/truth/spare", "spare_N"))
 declared.JOINT_PARAMETERS = declared.EstimatedParameters((*declared.JOINT_PARAMETERS, OFFSET))
 
 import jsonschema
 from rerun.chunk import RrdReader
 
-from tdmon.calib.estimator import FrictionEstimator
+from tdmon.calib.estimator import CalibrationSettings, FrictionEstimator
+from tdmon.calib.joint import JointSettings
 from tdmon.calib.windows import Window
 from tdmon.config.expectations import JointExpectation
 from tdmon.config.well import load_well_model
@@ -43,7 +45,8 @@ from tdmon.record.schemas import TOPIC_SCHEMAS
 
 out = Path(sys.argv[1])
 model = WellModel(load_well_model("config/wells/volve-f4.toml"))
-estimator = FrictionEstimator(model)
+three = declared.EstimatedParameters((declared.FRICTION, declared.WEIGHT_FACTOR, OFFSET))
+estimator = FrictionEstimator(model, CalibrationSettings(joint=JointSettings(parameters=three)))
 state = estimator.initial_state()
 joint, recorded = [], []
 for k in range(6):
@@ -86,12 +89,12 @@ print(json.dumps({
                                                        "mu_single")},
     "fields": list(last),
     "schema": {k: schema["properties"].get(k) for k in (
-        "hookload_offset", "hookload_offset_std", "correlation_weight_offset",
-        "mu_at_prior_offset", "offset_variance_ratio")},
+        "spare_offset", "spare_offset_std", "correlation_weight_spare",
+        "mu_at_prior_spare", "spare_variance_ratio")},
     "summary": summary["joint"],
     "page": (out / "report" / "report.html").read_text(),
     "rows": rows, "views": sorted(views),
-    "layout": layout()["configById"].get("Plot!joint_hookload_offset"),
+    "layout": layout()["configById"].get("Plot!joint_spare_offset"),
     "expectation_keys": sorted(JointExpectation.model_fields),
 }))
 """
@@ -104,37 +107,37 @@ def test_a_declared_parameter_reaches_every_output(
     # the message: the offset's fields beside the weight factor's, in the declaration's order,
     # valid against the schema (checked in the child) whose properties describe them
     fields = result["fields"]
-    assert fields[6:13] == ["weight_factor", "weight_factor_std", "hookload_offset",
-                            "hookload_offset_std", "correlation", "correlation_mu_offset",
-                            "correlation_weight_offset"]
-    assert {"mu_at_prior_offset", "mu_at_prior_offset_std",
-            "offset_variance_ratio"} <= set(fields)
-    assert message["hookload_offset"] == 0.0 and message["hookload_offset_std"] > 20e3
+    assert fields[6:13] == ["weight_factor", "weight_factor_std", "spare_offset",
+                            "spare_offset_std", "correlation", "correlation_mu_spare",
+                            "correlation_weight_spare"]
+    assert {"mu_at_prior_spare", "mu_at_prior_spare_std",
+            "spare_variance_ratio"} <= set(fields)
+    assert message["spare_offset"] == 0.0 and message["spare_offset_std"] > 20e3
     assert not message["identifiable"]
-    assert message["identifiability"].startswith("weakly identifiable: the hook-load offset")
+    assert message["identifiability"].startswith("weakly identifiable: the spare offset")
     schema = result["schema"]
-    assert schema["hookload_offset"] == {
+    assert schema["spare_offset"] == {
         "type": "number",
-        "description": "joint: hook-load offset: what the hook-load sensor reads with nothing "
+        "description": "joint: spare offset: what the hook-load sensor reads with nothing "
                        "on the hook [N]"}
     assert all(s is not None and s["type"] == "number" for s in schema.values())
     # the report and its summary: the offset's numbers, in its words
     summary = result["summary"]
-    assert summary["hookload_offset"] == 0.0
-    assert summary["hookload_offset_std"] == round(message["hookload_offset_std"], 4)
-    assert summary["correlation_weight_offset"] == 0.0
-    assert summary["words"].startswith("Friction, string weight and hook-load offset could not "
+    assert summary["spare_offset"] == 0.0
+    assert summary["spare_offset_std"] == round(message["spare_offset_std"], 4)
+    assert summary["correlation_weight_spare"] == 0.0
+    assert summary["words"].startswith("Friction, string weight and spare offset could not "
                                        "be separated (12 updates): weakly identifiable: the "
-                                       "hook-load offset rests mostly on its prior")
-    assert summary["words"].endswith("assume the modelled string weight and hook-load offset.")
+                                       "spare offset rests mostly on its prior")
+    assert summary["words"].endswith("assume the modelled string weight and spare offset.")
     assert summary["words"] in result["page"].replace("&#x27;", "'")
     # the Rerun views: its own entity in kN and its own view
     rows = result["rows"]
-    assert rows["/hookload_offset_kN"] == [0.0] * 12
+    assert rows["/spare_offset_kN"] == [0.0] * 12
     assert len(rows["/friction/joint"]) == len(rows["/weight_factor"]) == 12
-    assert any(v.startswith("Hook-load offset [kN] (joint estimate") for v in result["views"])
+    assert any(v.startswith("Spare offset [kN] (joint estimate") for v in result["views"])
     # the Foxglove layout plots it; the replay expectations take its keys
     assert result["layout"]["paths"][0]["value"] == (
-        '/tdmon/estimate{kind=="joint"}.hookload_offset')
-    assert {"hookload_offset", "offset_truth_abs", "offset_truth_rel"} <= set(
+        '/tdmon/estimate{kind=="joint"}.spare_offset')
+    assert {"spare_offset", "spare_truth_abs", "spare_truth_rel"} <= set(
         result["expectation_keys"])

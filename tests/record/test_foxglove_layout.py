@@ -50,8 +50,9 @@ def _resolve(path: str, messages: list[RecordedMessage]) -> list[Any]:
 
 
 def _joint_estimate() -> RecordedMessage:
-    """A joint estimate as the estimator makes it (its prior state)."""
-    settings = JointSettings()
+    """A joint estimate as the estimator makes it (its prior state), with every declared
+    parameter (a deadline sensor's rig)."""
+    settings = JointSettings(parameters=JOINT_PARAMETERS)
     fields = joint_fields(initial_joint(settings), settings)
     message = estimate_message(1.7e9, EstimateKind.JOINT, Operation.PICK_UP, fields.pop("mu"),
                                fields.pop("mu_std"), bit_depth_m=2400.0, **fields)

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from tdmon.calib.blockweight import BlockWeightWindow, BuoyancyCheck
 from tdmon.calib.estimator import CalibrationSettings, EstimatorState, FrictionEstimator, Output
 from tdmon.calib.joint import initial_joint
+from tdmon.calib.measurement import SensorEstimate
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
@@ -63,6 +64,17 @@ class CalibrationStep:
         self.state: EstimatorState = self.estimator.initial_state(
             temperature=temperature, friction_law=friction_law, mu_t_mask=mu_t_mask,
             mu_t_base=mu_t_base, mu_t_prior_std=mu_t_prior_std)
+        self._sensor: tuple[object, tuple[SensorEstimate, float]] | None = None
+
+    def sensor_reading(self) -> tuple[SensorEstimate, float]:
+        """What is known now of the hook-load measurement, with the model's block weight [N]
+        (the monitor shows its curves as the sensor reads them); worked out again only when
+        the joint estimate moved."""
+        joint = self.state.windows.joint
+        if self._sensor is None or self._sensor[0] is not joint:
+            estimate = self.estimator.sensor(self.state.windows, self.state.samples.block_weight)
+            self._sensor = (joint, (estimate, self.estimator.model.well.block_weight))
+        return self._sensor[1]
 
     def on_frame(self, frame: Frame, emit: Emit) -> None:
         sample, detection = self.rig_state.last_sample, self.rig_state.last_detection

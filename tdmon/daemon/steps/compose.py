@@ -20,12 +20,14 @@ from tdmon.daemon.steps.rig_state import (
 from tdmon.errors import FitError
 
 if TYPE_CHECKING:
-    from tdmon.config.daemon import DaemonConfig
+    from tdmon.calib.joint import JointSettings
+    from tdmon.config.daemon import CalibrationConfig, DaemonConfig
     from tdmon.config.well_file import WellFile
+    from tdmon.model.well import Well
 
 log = logging.getLogger(__name__)
 
-__all__ = ["calibration_steps_for", "default_steps"]
+__all__ = ["calibration_steps_for", "default_steps", "joint_settings"]
 
 
 def default_steps(config: DaemonConfig, model: LoadModel | None,
@@ -38,6 +40,35 @@ def default_steps(config: DaemonConfig, model: LoadModel | None,
     return steps
 
 
+def joint_settings(cal: CalibrationConfig, well: Well) -> JointSettings:
+    """The joint estimate's settings for a rig: its parameters as the well file's hook-load
+    sensor calls for them (the sheave efficiency for a deadline sensor), with the daemon
+    file's priors (docs/hookload.md)."""
+    from tdmon.calib.joint import JointSettings, for_rig
+    from tdmon.calib.parameters import (
+        BLOCK_WEIGHT,
+        HOOKLOAD_OFFSET,
+        SHEAVE_EFFICIENCY,
+        WEIGHT_FACTOR,
+    )
+
+    base = for_rig(JointSettings(mismatch_tolerance=cal.weight_mismatch_tolerance,
+                                 hysteresis=cal.hookload_hysteresis,
+                                 torque_uncertainty=cal.torque_uncertainty), well)
+    parameters = base.parameters
+    parameters = parameters.with_prior(WEIGHT_FACTOR.name, cal.weight_factor,
+                                       cal.weight_factor_std)
+    block = parameters.get(BLOCK_WEIGHT.name)
+    if well.block_weight > 0.0:
+        parameters = parameters.with_prior(block.name, block.prior, cal.block_weight_std)
+    parameters = parameters.replaced(HOOKLOAD_OFFSET.name, prior_std=cal.hookload_offset_std,
+                                     drift_per_hour=cal.hookload_offset_drift)
+    if SHEAVE_EFFICIENCY.name in parameters.names:
+        sheave = parameters.get(SHEAVE_EFFICIENCY.name)
+        parameters = parameters.with_prior(sheave.name, sheave.prior, cal.sheave_efficiency_std)
+    return replace(base, parameters=parameters)
+
+
 def calibration_steps_for(config: DaemonConfig, well: Any = None,
                           well_file: WellFile | None = None) -> tuple[Step, list[Step]]:
     """The back-calculation's rig-state step and the steps after the monitor
@@ -45,7 +76,6 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     well file has a temperature model, and the well/profile step last."""
     # imported here: a daemon without the calibration does not load the estimator's modules
     from tdmon.calib.estimator import CalibrationSettings
-    from tdmon.calib.joint import JointSettings
     from tdmon.daemon.steps.alarms import AlarmStep
     from tdmon.daemon.steps.calibrate import CalibrationStep
     from tdmon.daemon.steps.mu_t import mu_t_setup
@@ -63,10 +93,8 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     rig_state = RigStateStep(calibration_thresholds(config, well.block_weight))
     model = WellModel(well)
     setup = mu_t_setup(config, well_file, model.grid)
-    cal = config.calibration
-    settings = CalibrationSettings(mu_t_mode=setup.mode, joint=JointSettings(
-        mismatch_tolerance=cal.weight_mismatch_tolerance).with_prior(
-        "weight_factor", cal.weight_factor, cal.weight_factor_std))
+    settings = CalibrationSettings(mu_t_mode=setup.mode,
+                                   joint=joint_settings(config.calibration, well))
     try:
         calibration = CalibrationStep(
             model, rig_state, settings, temperature=setup.temperature if setup.law else None,

@@ -19,6 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.calib.measurement import SensorEstimate
 from tdmon.daemon.pipeline import Emit, Frame
 from tdmon.vocabulary import CURVE_FOR_STATE, ROTATING_STATES, Operation
 
@@ -115,13 +116,40 @@ class GridLoadModel:
         return loads
 
 
+#: What the hook-load sensor reads of the model's loads: the calibration's current estimate of
+#: the measurement (:class:`tdmon.calib.measurement.SensorEstimate`) with the model's own block
+#: weight [N], or None where the sensor reads the load on the hook as modelled.
+SensorReading = Callable[[], "tuple[SensorEstimate, float] | None"]
+
+
+def as_read(loads: ModelledLoads, estimate: SensorEstimate, model_block_weight: float
+            ) -> ModelledLoads:
+    """``loads`` as the rig's hook-load sensor reads them (docs/hookload.md): pick-up curves
+    hoisting, slack-off curves lowering, the rotating load with the block still, each
+    ``f(motion) (B + F) + o`` with ``F`` the modelled string load (the model's hook load less
+    its block weight ``model_block_weight`` [N]); the torque as it is."""
+
+    def read(load: float, motion: int) -> float:
+        return estimate.reading(load - model_block_weight, motion)
+
+    return ModelledLoads(loads.bit_depth, read(loads.pick_up, 1), read(loads.slack_off, -1),
+                         read(loads.rotating, 0), loads.torque_rotating, loads.band_mu,
+                         tuple(read(v, 1) for v in loads.band_pick_up),
+                         tuple(read(v, -1) for v in loads.band_slack_off))
+
+
 class MonitorStep:
-    """Step: emit ``model`` for every frame with a fresh bit depth inside the model's reach."""
+    """Step: emit ``model`` for every frame with a fresh bit depth inside the model's reach.
+
+    ``sensor`` (None: the hook-load channel is the load on the hook) gives what is known of
+    the hook-load measurement now; the modelled hook loads are then shown as that sensor
+    reads them, so that the residual is the measured reading against the modelled one."""
 
     name = "monitor"
 
-    def __init__(self, model: LoadModel) -> None:
+    def __init__(self, model: LoadModel, sensor: SensorReading | None = None) -> None:
         self.model = model
+        self.sensor = sensor
         self.skipped_no_depth = 0
         self.skipped_out_of_range = 0
 
@@ -134,6 +162,9 @@ class MonitorStep:
         if loads is None:
             self.skipped_out_of_range += 1
             return
+        reading = self.sensor() if self.sensor is not None else None
+        if reading is not None:
+            loads = as_read(loads, *reading)
         emit("model", model_message(frame, loads))
 
     def close(self, emit: Emit) -> None:
