@@ -6,8 +6,10 @@ that each window stays local in bit depth for the friction profile). On closing 
 spikes are dropped (median absolute deviation), a stuck hook load (every sample identical)
 rejects it, a bit depth that does not follow the block flags it low-confidence, and so does a
 torque that never changes in a rotating window (a window without rotation does not use it).
-The standard error of its mean hook load carries a floor from the sensor's noise, so a
-one-sample window at 15 s sampling still has an honest uncertainty.
+A window any of whose samples rested on a channel the rig-state detector judged frozen carries
+that channel in ``suspect`` (`tdmon.calib.rigstate.Detection.suspect`): the estimator feeds
+it to no estimate. The standard error of its mean hook load carries a floor from the sensor's
+noise, so a one-sample window at 15 s sampling still has an honest uncertainty.
 """
 
 from __future__ import annotations
@@ -74,6 +76,8 @@ class Window:
     velocity : mean axial velocity [m/s] (> 0 deeper; None when unknown)
     flags : quality remarks, e.g. ``"spikes_removed:2"``, ``"depth_not_following_block"``
     rejected : why the window must not be used (None when usable)
+    suspect : channels judged frozen that its samples' state rested on (sorted; the window
+        is then fed to no estimate)
     """
 
     state: RigState
@@ -91,6 +95,7 @@ class Window:
     velocity: float | None = None
     flags: tuple[str, ...] = ()
     rejected: str | None = None
+    suspect: tuple[str, ...] = ()
 
     @property
     def low_confidence(self) -> bool:
@@ -105,6 +110,7 @@ class WindowAccumulator:
     state: RigState = RigState.UNKNOWN  # of the samples; none yet: unknown is never steady
     samples: tuple[RigSample, ...] = ()
     velocities: tuple[float | None, ...] = ()
+    suspect: frozenset[str] = frozenset()  # the frozen channels its samples rested on
 
 
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
@@ -137,7 +143,8 @@ def _mean(values: list[float] | np.ndarray) -> float:
 
 
 def summarise(state: RigState, samples: tuple[RigSample, ...],
-              velocities: tuple[float | None, ...], settings: WindowSettings) -> Window | None:
+              velocities: tuple[float | None, ...], settings: WindowSettings,
+              suspect: frozenset[str] = frozenset()) -> Window | None:
     """Check and summarise the samples of one window (None when there are none usable).
 
     Parameters
@@ -146,6 +153,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
     samples : the steady samples, in time order
     velocities : the detector's axial velocity of each sample [m/s]
     settings : window settings
+    suspect : frozen channels the samples rested on
 
     Returns
     -------
@@ -204,7 +212,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
         bit_depth_end=float(depth[-1]) if depth.size else 0.0,
         hookload=mean if hookload.size else 0.0, hookload_se=se if hookload.size else 0.0,
         torque=torque, torque_se=torque_se, rpm=rpm, velocity=velocity, flags=tuple(flags),
-        rejected=rejected,
+        rejected=rejected, suspect=tuple(sorted(suspect)),
     )
 
 
@@ -213,7 +221,8 @@ def close(acc: WindowAccumulator, settings: WindowSettings
     """Close the window being built (end of input, or forced)."""
     if not acc.samples:
         return WindowAccumulator(), None
-    return WindowAccumulator(), summarise(acc.state, acc.samples, acc.velocities, settings)
+    return WindowAccumulator(), summarise(acc.state, acc.samples, acc.velocities, settings,
+                                          acc.suspect)
 
 
 def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
@@ -235,8 +244,10 @@ def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
             acc, closed = close(acc, settings)
     if not detection.steady:
         return acc, closed
+    suspect = detection.suspect
     acc = WindowAccumulator(detection.state, (*acc.samples, sample),
-                            (*acc.velocities, detection.velocity))
+                            (*acc.velocities, detection.velocity),
+                            acc.suspect | suspect if suspect else acc.suspect)
     if len(acc.samples) >= settings.max_samples:
         acc, full = close(acc, settings)
         return acc, full if closed is None else closed
