@@ -399,7 +399,8 @@ def frozen_alarm(t: float, frozen: FrozenChannel) -> Alarm:
     which channel, the value it repeats, for how long, why (its neighbours) and what the
     daemon does without it."""
     channel = frozen.channel
-    return Alarm(t, FROZEN_ALARM_KINDS[channel], Severity.WARNING,
+    kind = FROZEN_ALARM_KINDS[channel]
+    return Alarm(t, kind, Severity.WARNING,
                  f"{channel} reads {shown(channel, frozen.value)} unchanged for "
                  f"{t - frozen.since:.0f} s {frozen.reason}; {WITHOUT_CHANNEL[channel]}",
                  frozen.value, None)
