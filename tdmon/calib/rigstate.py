@@ -266,15 +266,17 @@ class Detection:
 #: The states whose samples rest on each channel: a frozen channel makes the samples of these
 #: states suspect. The hook load and the bit depth feed every window; the block position only
 #: the moving states' velocity; the RPM and the torque the rotating states (their friction
-#: comes from the torque, the reaming angle from the RPM, and their rotation from both). Flow,
-#: standpipe pressure and weight on bit feed no estimate (circulating and static hangs are
-#: checked alike; drilling is not estimated).
+#: comes from the torque, the reaming angle from the RPM, and their rotation from both); the
+#: weight on bit whether a rotating string is on bottom (drilling, not estimated) or off it.
+#: Flow and standpipe pressure feed no estimate (circulating and static hangs are checked
+#: alike).
 RESTING_ON: Final[Mapping[str, frozenset[RigState]]] = MappingProxyType({
     "hookload": frozenset(RigState),
     "bit_depth": frozenset(RigState),
     "block_position": MOVING_STATES,
     "rpm": ROTATING_STATES,
     "torque": ROTATING_STATES,
+    "wob": ROTATING_STATES,
 })
 
 WITHOUT_CHANNEL: Final[Mapping[str, str]] = MappingProxyType({
@@ -289,7 +291,8 @@ WITHOUT_CHANNEL: Final[Mapping[str, str]] = MappingProxyType({
                        "left out of the estimates"),
     "flow_in": "circulation is read from the standpipe pressure",
     "spp": "circulation is read from the flow in",
-    "wob": "the bit's contact with bottom is read from the depths",
+    "wob": ("the bit's contact with bottom is read from the depths and rotating windows are "
+            "left out of the estimates"),
 })
 """What the detector does without each channel once it is judged frozen, in the alarm's
 words (a frozen channel is not used until its value changes)."""

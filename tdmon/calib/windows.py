@@ -7,20 +7,22 @@ spikes are dropped (median absolute deviation), a stuck hook load (every sample 
 rejects it, a bit depth that does not follow the block flags it low-confidence, and so does a
 torque that never changes in a rotating window (a window without rotation does not use it).
 A window any of whose samples rested on a channel the rig-state detector judged frozen carries
-that channel in ``suspect`` (`tdmon.calib.rigstate.Detection.suspect`): the estimator feeds
-it to no estimate. The standard error of its mean hook load carries a floor from the sensor's
-noise, so a one-sample window at 15 s sampling still has an honest uncertainty.
+that channel in ``suspect`` (`tdmon.calib.rigstate.Detection.suspect`; and the window being
+built when a channel its state rests on is judged frozen, for the run began before the
+judgement): the estimator feeds it to no estimate. The standard error of its mean hook load
+carries a floor from the sensor's noise, so a one-sample window at 15 s sampling still has an
+honest uncertainty.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from statistics import median
 
 import numpy as np
 
-from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.calib.rigstate import RESTING_ON, Detection, RigSample
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
 #: states whose windows are estimated from their surface torque (the rotating ones): only they
@@ -233,6 +235,13 @@ def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
     a gap, closes it and starts a new one; a full window closes after taking the sample.
     """
     closed: Window | None = None
+    if detection.frozen and acc.samples:
+        # a channel judged frozen now was frozen during the window being built: its samples
+        # rested on it too
+        rested = frozenset(f.channel for f in detection.frozen
+                           if acc.state in RESTING_ON.get(f.channel, ()))
+        if not rested <= acc.suspect:
+            acc = replace(acc, suspect=acc.suspect | rested)
     if acc.samples:
         last = acc.samples[-1]
         gap = sample.t - last.t
