@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from tdmon.calib.rigstate import (
 from tdmon.calib.windows import Window, WindowAccumulator, WindowSettings, add_sample, close
 from tdmon.model.torque_drag import WellModel
 
+ROOT = Path(__file__).resolve().parents[2]
 TH = RigStateThresholds(block_weight=400e3)
 RPM_100 = 100 * math.pi / 30
 KNM = 1e3
@@ -217,3 +219,31 @@ def test_suspect_windows_carry_their_channel_and_reach_no_estimate(model_open: W
     assert dict(flagged.windows.rejected) == {"suspect_channel": 1}
     np.testing.assert_array_equal(flagged.windows.profile.state.mu,
                                   state.windows.profile.state.mu)
+
+
+def test_the_daemon_file_keys_reach_the_detector() -> None:
+    from tdmon.config.daemon import CalibrationConfig, RigStateConfig, load_daemon_config
+    from tdmon.daemon.steps.rig_state import calibration_thresholds, rig_state_thresholds
+
+    rs = RigStateConfig(rotating_torque="0.2 kN*m", torque_average="10 s", frozen_time="1 min",
+                        frozen_samples=6, frozen_resolution={"hookload": "1 kN",
+                                                             "flow_in": "60 L/min"})
+    th = rig_state_thresholds(rs)
+    assert (th.rotating_torque, th.torque_average, th.frozen_time, th.frozen_samples) == (
+        pytest.approx(200.0), 10.0, 60.0, 6)
+    # the given resolutions over the defaults of the others
+    assert th.frozen_resolution["hookload"] == pytest.approx(1e3)
+    assert th.frozen_resolution["flow_in"] == pytest.approx(1e-3)
+    assert th.frozen_resolution["torque"] == 10.0
+    config = load_daemon_config(ROOT / "config" / "daemon" / "replay-sim-shallow.toml")
+    calibration = CalibrationConfig(in_slips_fraction=0.4, in_slips_min_margin="30 kN")
+    config = config.model_copy(update={"calibration": calibration,
+                                       "rig_state": RigStateConfig(frozen_time="45 s")})
+    cal = calibration_thresholds(config, 300e3)
+    assert (cal.in_slips_fraction, cal.in_slips_min_margin, cal.frozen_time) == (
+        0.4, pytest.approx(30e3), 45.0)
+    assert in_slips_limit(100e3, cal) == pytest.approx(340e3)
+    assert in_slips_limit(50e3, cal) == pytest.approx(330e3)  # at least the minimum
+    for bad in ({"hookload": 1000.0}, {"hook_load": "1 kN"}, {"rpm": "-1 rpm"}):
+        with pytest.raises(ValueError):
+            RigStateConfig(frozen_resolution=bad)
