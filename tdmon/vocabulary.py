@@ -22,6 +22,7 @@ __all__ = [
     "ALARM_WORDS",
     "CALIBRATING_STATES",
     "CURVE_FOR_STATE",
+    "FROZEN_ALARM_KINDS",
     "MOVING_STATES",
     "OPERATION_FOR_STATE",
     "REAMING_AXIAL_OPERATION",
@@ -152,6 +153,12 @@ class AlarmKind(StrEnum):
     SENSOR_BIT_BELOW_HOLE = "sensor_bit_below_hole"
     SENSOR_HOOKLOAD_FROZEN = "sensor_hookload_frozen"
     SENSOR_TORQUE_FROZEN = "sensor_torque_frozen"
+    SENSOR_RPM_FROZEN = "sensor_rpm_frozen"
+    SENSOR_BIT_DEPTH_FROZEN = "sensor_bit_depth_frozen"
+    SENSOR_BLOCK_POSITION_FROZEN = "sensor_block_position_frozen"
+    SENSOR_FLOW_IN_FROZEN = "sensor_flow_in_frozen"
+    SENSOR_SPP_FROZEN = "sensor_spp_frozen"
+    SENSOR_WOB_FROZEN = "sensor_wob_frozen"
     WINDOW_REJECTED = "window_rejected"
     BLOCK_WEIGHT = "block_weight"
     WEIGHT_CHECK = "weight_check"
@@ -176,6 +183,18 @@ ALARM_WORDS: Final[Mapping[AlarmKind, str]] = MappingProxyType({
     AlarmKind.SENSOR_BIT_BELOW_HOLE: "bit depth reading below the hole's total depth",
     AlarmKind.SENSOR_HOOKLOAD_FROZEN: "hook load reading frozen (unchanged while moving)",
     AlarmKind.SENSOR_TORQUE_FROZEN: "torque reading frozen while rotating",
+    AlarmKind.SENSOR_RPM_FROZEN: "rotary speed reading frozen (unchanged while the torque says "
+                                 "the string stopped)",
+    AlarmKind.SENSOR_BIT_DEPTH_FROZEN: "bit depth reading frozen while the block moves the "
+                                       "string",
+    AlarmKind.SENSOR_BLOCK_POSITION_FROZEN: "block position reading frozen while the bit depth "
+                                            "moves with the string on the hook",
+    AlarmKind.SENSOR_FLOW_IN_FROZEN: "flow-in reading frozen while the standpipe pressure says "
+                                     "the pumps started or stopped",
+    AlarmKind.SENSOR_SPP_FROZEN: "standpipe pressure reading frozen while the flow says the "
+                                 "pumps started or stopped",
+    AlarmKind.SENSOR_WOB_FROZEN: "weight-on-bit reading frozen while the hook load changes on "
+                                 "bottom",
     AlarmKind.WINDOW_REJECTED: "a measurement window could not give a friction factor",
     AlarmKind.BLOCK_WEIGHT: "block weight estimate disagrees with the configured one",
     AlarmKind.WEIGHT_CHECK: "string weight in slips-off hangs disagrees with the well file",
@@ -191,4 +210,18 @@ ALARM_WORDS: Final[Mapping[AlarmKind, str]] = MappingProxyType({
 })
 """What each alarm kind means, in a drilling engineer's words (the report's and the summary's
 ``meaning``). Every kind has its words: ``tests/test_vocabulary.py`` fails on a kind without."""
+
+FROZEN_ALARM_KINDS: Final[Mapping[str, AlarmKind]] = MappingProxyType({
+    "hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
+    "torque": AlarmKind.SENSOR_TORQUE_FROZEN,
+    "rpm": AlarmKind.SENSOR_RPM_FROZEN,
+    "bit_depth": AlarmKind.SENSOR_BIT_DEPTH_FROZEN,
+    "block_position": AlarmKind.SENSOR_BLOCK_POSITION_FROZEN,
+    "flow_in": AlarmKind.SENSOR_FLOW_IN_FROZEN,
+    "spp": AlarmKind.SENSOR_SPP_FROZEN,
+    "wob": AlarmKind.SENSOR_WOB_FROZEN,
+})
+"""The alarm a frozen channel raises, per channel the frozen-channel check follows
+(`tdmon.calib.frozen`): ``sensor_<channel>_frozen``, as the simulator's expected alarms name
+them (docs/replays.md). ``tests/test_vocabulary.py`` holds the two lists together."""
 

@@ -33,6 +33,7 @@ from tdmon.calib.alarms import (
     sensor_alarms,
     update_band_trend,
 )
+from tdmon.calib.frozen import FROZEN_CHANNELS, FrozenChannel
 from tdmon.config.well import load_well_model
 from tdmon.messages import alarm_message, estimate_message, status_message
 from tdmon.model.torque_drag import Operation as ModelOperation
@@ -40,6 +41,7 @@ from tdmon.model.torque_drag import WellModel
 from tdmon.record import schemas
 from tdmon.record.digest import alarm_rows
 from tdmon.vocabulary import (
+    FROZEN_ALARM_KINDS,
     AlarmKind,
     ConnectionState,
     EstimateKind,
@@ -54,6 +56,7 @@ ROOT = Path(__file__).resolve().parents[1]
 VARIABLE_KIND_FUNCTIONS = frozenset({
     ("tdmon/calib/alarms.py", "limit_alarms"),
     ("tdmon/calib/alarms.py", "sensor_alarms"),
+    ("tdmon/calib/alarms.py", "frozen_alarm"),
     ("tdmon/calib/alarms.py", "to_message"),  # Alarm.to_message: its kind is already a member
 })
 
@@ -69,7 +72,7 @@ def test_schema_enums_are_the_vocabulary() -> None:
                                                                         "critical"]
     alarm_kinds = topics["/tdmon/alarm"]["properties"]["kind"]["enum"]
     assert alarm_kinds == [k.value for k in AlarmKind]
-    assert len(alarm_kinds) == len(set(alarm_kinds)) == 21
+    assert len(alarm_kinds) == len(set(alarm_kinds)) == 27
     # plain strings: the schema is serialised into every MCAP file
     assert all(type(k) is str for k in alarm_kinds)
     assert schemas.RIG_STATES == ("in_slips", "pick_up", "slack_off", "rotating_off_bottom",
@@ -180,15 +183,24 @@ def _limit_kinds() -> list[Alarm]:
 
 
 def _sensor_kinds() -> list[Alarm]:
-    settings = SensorSettings(frozen_samples=3, persist_time=2.0)
+    settings = SensorSettings(persist_time=2.0)
     state, raised = SensorState(), []
-    frames = [({"hookload": -1.0}, ("torque",)),
+    frozen = tuple(FrozenChannel(channel, 1.0, 0.0, "while its neighbours move")
+                   for channel in FROZEN_ALARM_KINDS)
+    frames = [({"hookload": -1.0}, ("torque",), ()),
               *[({"hookload": 1e6, "torque": 5e3, "rpm": 10.0, "bit_depth": 3010.0,
-                  "hole_depth": 3000.0}, ()) for _ in range(6)]]
-    for k, (values, stale) in enumerate(frames):
-        state, alarms = sensor_alarms(state, float(k), values, stale, True, settings)
+                  "hole_depth": 3000.0}, (), frozen) for _ in range(6)]]
+    for k, (values, stale, now) in enumerate(frames):
+        state, alarms = sensor_alarms(state, float(k), values, stale, now, settings)
         raised += alarms
     return raised
+
+
+def test_each_frozen_channel_has_its_alarm_kind_and_each_frozen_kind_its_channel() -> None:
+    frozen_kinds = {kind for kind in AlarmKind if kind.endswith("_frozen")}
+    assert set(FROZEN_ALARM_KINDS.values()) == frozen_kinds
+    assert all(kind == f"sensor_{channel}_frozen" for channel, kind in FROZEN_ALARM_KINDS.items())
+    assert tuple(FROZEN_ALARM_KINDS) == FROZEN_CHANNELS
 
 
 def test_dynamic_alarm_kinds_are_members() -> None:
@@ -211,8 +223,8 @@ def test_dynamic_alarm_kinds_are_members() -> None:
         AlarmKind.LIMIT_TENSILE, AlarmKind.LIMIT_SINUSOIDAL_BUCKLING,
         AlarmKind.LIMIT_HELICAL_BUCKLING, AlarmKind.LIMIT_MAKEUP_TORQUE,
         AlarmKind.SENSOR_STALE, AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE,
-        AlarmKind.SENSOR_BIT_BELOW_HOLE, AlarmKind.SENSOR_HOOKLOAD_FROZEN,
-        AlarmKind.SENSOR_TORQUE_FROZEN, AlarmKind.BAND, AlarmKind.FRICTION_JUMP}
+        AlarmKind.SENSOR_BIT_BELOW_HOLE, *FROZEN_ALARM_KINDS.values(), AlarmKind.BAND,
+        AlarmKind.FRICTION_JUMP}
     for alarm in raised:
         assert alarm.to_message()["kind"] in schemas.ALARM_KINDS
 

@@ -17,7 +17,8 @@ Each detector is a pure function, with a small frozen state where it needs memor
   stretch of the friction profile along MD stands above the rest (a local anomaly the bit has
   passed).
 * ``sensor``: a channel gone stale, a hook load that is negative or above a plausible maximum,
-  a bit below the hole depth, a channel frozen at one value while the string moves.
+  a bit below the hole depth, a channel the rig-state detector judged frozen (constant while
+  its neighbours say it must move: `tdmon.calib.frozen`), named with why.
 """
 
 from __future__ import annotations
@@ -30,11 +31,13 @@ from typing import Any
 
 import numpy as np
 
+from tdmon.calib.frozen import FrozenChannel, shown
+from tdmon.calib.rigstate import WITHOUT_CHANNEL
 from tdmon.messages import alarm_message
 from tdmon.model.limits import operating_window
 from tdmon.model.torque_drag import Loads
 from tdmon.model.well import HoleGrid, Well
-from tdmon.vocabulary import AlarmKind, Operation, Severity
+from tdmon.vocabulary import FROZEN_ALARM_KINDS, AlarmKind, Operation, Severity
 
 __all__ = [
     "Alarm",
@@ -44,6 +47,7 @@ __all__ = [
     "SensorSettings",
     "SensorState",
     "friction_jump",
+    "frozen_alarm",
     "limit_alarms",
     "profile_anomaly",
     "sensor_alarms",
@@ -338,22 +342,14 @@ def _candidates(mu: np.ndarray, touched: np.ndarray, starts: list[int], width: i
 
 @dataclass(frozen=True)
 class SensorSettings:
-    """Plausibility settings: hook-load range [N], depth tolerance [m], frozen run [-], how
-    long a depth inconsistency must last (hole-depth channels are coarse and noisy) [s], and the
-    rotary speed above which a constant torque is suspicious [rad/s]."""
+    """Plausibility settings: hook-load range [N], depth tolerance [m], and how long a depth
+    inconsistency must last (hole-depth channels are coarse and noisy) [s]. Frozen channels
+    are judged by the rig-state detector (`tdmon.calib.rigstate`, `tdmon.calib.frozen`), which
+    knows the neighbours that say a channel must move."""
 
     max_hookload: float = 10e6
     depth_tolerance: float = 5.0
-    frozen_samples: int = 30
     persist_time: float = 60.0
-    rotating_speed: float = 0.5
-
-
-# Channels whose repeated values are counted, and the alarm each raises when frozen (the bit
-# depth's run is kept but raises none, see sensor_alarms).
-_FROZEN_CHANNELS = ("hookload", "torque", "bit_depth")
-_FROZEN_KIND = {"hookload": AlarmKind.SENSOR_HOOKLOAD_FROZEN,
-                "torque": AlarmKind.SENSOR_TORQUE_FROZEN}
 
 
 _NONE: frozenset[str] = frozenset()
@@ -362,14 +358,12 @@ _NO_CONDITIONS: frozenset[AlarmKind] = frozenset()
 
 @dataclass(frozen=True, slots=True)
 class SensorState:
-    """Channels reported stale, those named by a gap's alarm and not heard from since, the last
-    values and their run lengths, and the sensor alarm kinds whose condition holds (an alarm is
-    raised when its condition starts)."""
+    """Channels reported stale, those named by a gap's alarm and not heard from since, the
+    sensor alarm kinds whose condition holds (an alarm is raised when its condition starts),
+    and since when the bit has been below the hole depth."""
 
     stale: frozenset[str] = _NONE
     announced: frozenset[str] = _NONE
-    last: tuple[tuple[str, float], ...] = ()
-    runs: tuple[tuple[str, int], ...] = ()
     active: frozenset[AlarmKind] = _NO_CONDITIONS
     below_since: float | None = None
 
@@ -400,10 +394,22 @@ def stale_gap_alarm(gap: tuple[tuple[str, float], ...], resumed: float | None = 
     return Alarm(since, AlarmKind.SENSOR_STALE, Severity.WARNING, text, resumed - since)
 
 
+def frozen_alarm(t: float, frozen: FrozenChannel) -> Alarm:
+    """The ``sensor_<channel>_frozen`` alarm of a channel the rig-state detector judged frozen:
+    which channel, the value it repeats, for how long, why (its neighbours) and what the
+    daemon does without it."""
+    channel = frozen.channel
+    kind = FROZEN_ALARM_KINDS[channel]
+    return Alarm(t, kind, Severity.WARNING,
+                 f"{channel} reads {shown(channel, frozen.value)} unchanged for "
+                 f"{t - frozen.since:.0f} s {frozen.reason}; {WITHOUT_CHANNEL[channel]}",
+                 frozen.value, None)
+
+
 def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
-                  stale: tuple[str, ...], moving: bool, settings: SensorSettings,
-                  gap: tuple[tuple[str, float], ...] = (), gap_reported: bool = False
-                  ) -> tuple[SensorState, list[Alarm]]:
+                  stale: tuple[str, ...], frozen: tuple[FrozenChannel, ...],
+                  settings: SensorSettings, gap: tuple[tuple[str, float], ...] = (),
+                  gap_reported: bool = False) -> tuple[SensorState, list[Alarm]]:
     """Stale, implausible and frozen channels; one alarm when a condition starts.
 
     Parameters
@@ -412,7 +418,9 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
     t : [s]
     values : channel values of this frame (SI)
     stale : channels the aligner reports as too old
-    moving : the string is moving (a frozen hook load or depth is then suspicious)
+    frozen : channels the rig-state detector judges frozen on this frame
+        (`tdmon.calib.rigstate.Detection.frozen`): each raises its ``sensor_<channel>_frozen``
+        alarm once, until it moves again
     settings : thresholds
     gap : channels that went stale in a silence of the whole stream ending at this frame, and
         when each did [s] (the aligner's ``Frame.gap``): one alarm names them all, stamped when
@@ -447,51 +455,29 @@ def sensor_alarms(state: SensorState, t: float, values: dict[str, float],
                                  or hookload > settings.max_hookload):
         conditions.add(AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE)
     bit, hole = values.get("bit_depth"), values.get("hole_depth")
-    last = dict(state.last)
-    runs = dict(state.runs)
     below = (bit is not None and hole is not None and math.isfinite(bit) and math.isfinite(hole)
              and bit > hole + settings.depth_tolerance)
     below_since = (state.below_since if state.below_since is not None else t) if below else None
     if below_since is not None and t - below_since >= settings.persist_time:
         conditions.add(AlarmKind.SENSOR_BIT_BELOW_HOLE)
-    # bit depth legitimately stands still; a frozen load while moving is suspicious, but
-    # surface torque rests at its zero offset whenever the string does not rotate (Volve
-    # F-4 trips: a constant 5.2 N m), so a constant torque counts only while rotating
-    rotating = values.get("rpm", 0.0) > settings.rotating_speed
-    for channel in _FROZEN_CHANNELS:
-        value = values.get(channel)
-        if value is None:
-            continue
-        run = runs.get(channel, 0) + 1 if last.get(channel) == value else 0
-        runs[channel] = run
-        last[channel] = value
-        frozen_kind = _FROZEN_KIND.get(channel)
-        if frozen_kind is not None and moving and run >= settings.frozen_samples \
-                and value != 0.0 and (channel != "torque" or rotating):
-            conditions.add(frozen_kind)
+    records = {FROZEN_ALARM_KINDS[f.channel]: f for f in frozen}
+    if records:
+        conditions.update(records)
     # once per frame: no set arithmetic and no new frozenset while no condition holds
     active = frozenset(conditions) if conditions else _NO_CONDITIONS
     new_conditions = active - state.active if active else _NO_CONDITIONS
-    if new_conditions:
-        texts = {
-            AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE: (
-                Severity.CRITICAL, "hook load is negative or implausibly large", hookload,
-                settings.max_hookload),
-            AlarmKind.SENSOR_BIT_BELOW_HOLE: (
-                Severity.WARNING, "bit depth is below the hole depth", bit, hole),
-            AlarmKind.SENSOR_HOOKLOAD_FROZEN: (
-                Severity.WARNING, "hook load has not changed while the string moves", hookload,
-                None),
-            AlarmKind.SENSOR_TORQUE_FROZEN: (
-                Severity.WARNING, "torque has not changed while the string rotates",
-                values.get("torque"), None),
-        }
-        # sorted by name: the order the alarms of one frame are raised in
-        for condition in sorted(new_conditions):
-            severity, text, value, limit = texts[condition]
-            alarms.append(Alarm(t, condition, severity, text, value, limit))
+    # sorted by name: the order the alarms of one frame are raised in
+    for condition in sorted(new_conditions):
+        if condition in records:
+            alarms.append(frozen_alarm(t, records[condition]))
+        elif condition == AlarmKind.SENSOR_HOOKLOAD_IMPLAUSIBLE:
+            alarms.append(Alarm(t, condition, Severity.CRITICAL,
+                                "hook load is negative or implausibly large", hookload,
+                                settings.max_hookload))
+        else:
+            alarms.append(Alarm(t, condition, Severity.WARNING,
+                                "bit depth is below the hole depth", bit, hole))
     # built directly, positionally in the order of the fields: dataclasses.replace on every
     # frame cost more than the checks, and the keywords a third of the construction
-    new_state = SensorState(new_stale, announced, tuple(last.items()), tuple(runs.items()),
-                            active, below_since)
+    new_state = SensorState(new_stale, announced, active, below_since)
     return new_state, alarms

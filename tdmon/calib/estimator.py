@@ -9,7 +9,8 @@ Two updates, each ``(state, input) -> (state, outputs)``, as filterpy's ``update
 - :meth:`FrictionEstimator.add_sample`, per detected sample: the block weight learnt from steady
   in-slips samples (and its alarm), and the window being built; a window that closes goes
   through `update` at once.
-- :meth:`FrictionEstimator.update`, per window: rejected windows, the weight check of static
+- :meth:`FrictionEstimator.update`, per window: rejected windows and those resting on a channel
+  judged frozen (`Window.suspect`: fed to no estimate), the weight check of static
   hangs (:mod:`tdmon.calib.weightcheck`), the friction of the window (`back_calculate_window`
   with the cased friction found so far), the cased friction's inverse-variance weighted mean
   and the deep windows solved again once it is known (:mod:`tdmon.calib.cased`), the
@@ -305,7 +306,7 @@ class FrictionEstimator:
         (EstimatorState, outputs)
         """
         windows, outputs = self._update(state.windows, state.samples.block_weight, window)
-        if window.rejected is None and window.state in _MOTION:
+        if window.rejected is None and not window.suspect and window.state in _MOTION:
             motion = _MOTION[window.state]
             if motion != windows.last_motion:
                 windows = replace(windows, last_motion=motion)
@@ -314,6 +315,10 @@ class FrictionEstimator:
     def _update(self, w: WindowState, block: BlockWeightWindow, window: Window
                 ) -> tuple[WindowState, list[Output]]:
         out: list[Output] = []
+        if window.suspect:
+            # resting on a channel judged frozen (its alarm says which and why): fed to no
+            # estimate, counted only
+            return replace(w, rejected=count(w.rejected, "suspect_channel")), out
         if window.rejected is not None:
             w = replace(w, rejected=count(w.rejected, window.rejected.split(":")[0]))
             if not window.rejected.startswith("too_few"):

@@ -12,6 +12,25 @@ rotating off bottom) must moreover have held its hook load within a tolerance of
 mean for the settling time, so that a hang being set in the slips (a fall of a few per cent per
 sample, each step within the sample-to-sample limit) is never taken as a static hang.
 
+Two rules guard against sensors that lie (issue 28):
+
+* *In slips* means the hook load lies below the block weight plus a margin that scales with the
+  modelled buoyed weight of the string hanging at the bit depth (`RigSample.string_weight`):
+  ``in_slips_fraction`` of it, at least ``in_slips_min_margin``, at most ``in_slips_margin``. A
+  light string in a shallow well hanging on the hook is then not "in slips".
+* *Rotation* needs torque evidence whenever a torque channel is there: the torque above its
+  still-string zero offset by a margin (`tdmon.calib.rotation`) as well as the RPM above the
+  rotating speed; the RPM decides alone only without a torque channel. A sample whose RPM says
+  the string turns while a live torque says it does not is not steady (its windows would rest
+  on a contradiction).
+
+Every channel is followed for freezing (`tdmon.calib.frozen`): constant within its resolution
+while its neighbours say it must move. A frozen channel is then not used (the RPM: rotation
+from the torque alone; the block or the bit depth: the velocity from the other; the flow: the
+standpipe pressure), the detection names it (``Detection.frozen``, for the alarm) and lists it
+in ``Detection.suspect`` where the sample's state rests on it, so that its windows are not fed
+to the estimates.
+
 Pure functions on a frozen :class:`DetectorState`; :func:`detect_series` runs them over arrays.
 State names are those of the daemon's ``state`` message (docs/architecture.md).
 """
@@ -19,17 +38,31 @@ State names are those of the daemon's ``state`` message (docs/architecture.md).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tdmon.vocabulary import MOVING_STATES, RigState
+from tdmon.calib.frozen import (
+    FROZEN_RESOLUTION,
+    ChannelRun,
+    FrozenChannel,
+    changing,
+    follow,
+    shown,
+)
+from tdmon.calib.rotation import TorqueZero, torque_turning
+from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
 __all__ = [
     "HANGING_STATES",
     "MOVING_STATES",
+    "RESTING_ON",
     "STATES",
+    "WITHOUT_CHANNEL",
     "Detection",
     "DetectorState",
     "RigSample",
@@ -37,6 +70,7 @@ __all__ = [
     "classify",
     "detect",
     "detect_series",
+    "in_slips_limit",
 ]
 
 STATES: tuple[RigState, ...] = tuple(RigState)
@@ -52,7 +86,15 @@ class RigStateThresholds:
     Attributes
     ----------
     block_weight : travelling-equipment weight the hook load includes [N]
-    in_slips_margin : hook load up to ``block_weight + in_slips_margin`` means in slips [N]
+    in_slips_margin : hook load up to ``block_weight + in_slips_margin`` means in slips [N];
+        with the string's modelled weight at the bit depth (``RigSample.string_weight``) the
+        largest margin (see :func:`in_slips_limit`)
+    in_slips_fraction : with the string's modelled weight W, the margin is
+        ``in_slips_fraction * W`` within [``in_slips_min_margin``, ``in_slips_margin``] [-]
+        (one half: midway between the hook carrying the block alone and carrying the whole
+        string, as far from a slack-off's drag as from an in-slips load's noise and drift)
+    in_slips_min_margin : smallest margin [N] (a string of a few stands: the load cell's noise
+        and zero drift must not make the slips look open)
     moving_speed : axial speed above which the string moves [m/s]
     rotating_speed : surface rotation above which the string rotates [rad/s]
         (Volve reports a 0.23 rev/min offset on a still string)
@@ -82,6 +124,20 @@ class RigStateThresholds:
     hang_tolerance_fraction : see above [-] (4 %: twice the 2 % noise of the noisy synthetic
         replays; the first sample of a hang being set in the slips on the Volve F-4 trip out,
         1408 -> 1346 kN, lies 4.4 % below the hang's mean)
+    rotating_torque : with a torque channel, rotation needs the torque level this far at least
+        above its still-string zero offset [N m] (`tdmon.calib.rotation`)
+    torque_sigmas : ... and this many standard deviations of the level's noise [-]
+    torque_average : the torque level is the mean of its samples of the last this many
+        seconds [s]
+    torque_fraction : before any still-string torque is known, the level must exceed this
+        share of its peak since the string was last known still [-]
+    frozen_time : a channel unchanged within its resolution while its neighbours say it must
+        move, for this long in all, is frozen [s] (`tdmon.calib.frozen`)
+    frozen_samples : ... over at least this many of its own samples [-]
+    frozen_resolution : per channel, changes smaller than this do not count [SI]
+    wob_follow : on bottom, a fall of the hook load (weight set on the bit) the weight on bit
+        must follow [N] (50 kN: several deviations of a hook load's noise above its on-bottom
+        highest, below the weight a bit drills with)
     """
 
     block_weight: float = 0.0
@@ -103,6 +159,17 @@ class RigStateThresholds:
     settle_samples: int = 1
     hang_tolerance: float = 20e3
     hang_tolerance_fraction: float = 0.04
+    in_slips_fraction: float = 0.5
+    in_slips_min_margin: float = 20e3
+    rotating_torque: float = 100.0
+    torque_sigmas: float = 4.0
+    torque_average: float = 5.0
+    torque_fraction: float = 0.2
+    frozen_time: float = 30.0
+    frozen_samples: int = 4
+    frozen_resolution: Mapping[str, float] = field(
+        default_factory=lambda: dict(FROZEN_RESOLUTION))
+    wob_follow: float = 50e3
 
 
 HANGING_STATES: frozenset[RigState] = frozenset(
@@ -131,6 +198,10 @@ class RigSample:
     block_time, bit_time : when the block position and the bit depth were sampled [s]
         (None: at ``t``); an aligner repeats a channel's last value on frames between its
         samples, and a velocity must use the channel's own times
+    string_weight : the modelled buoyed weight of the string hanging at this bit depth [N]
+        (static hook load less the block weight; None: not known, the fixed in-slips margin)
+    ages : how old each channel's value is [s] (the aligner's ``Frame.ages``; None: every
+        value sampled at ``t``), so that a repeated frame is not a new sample of a channel
     """
 
     t: float
@@ -145,6 +216,12 @@ class RigSample:
     wob: float | None = None
     block_time: float | None = None
     bit_time: float | None = None
+    string_weight: float | None = None
+    ages: Mapping[str, float] | None = None
+
+
+_NO_CHANNELS: Final[frozenset[str]] = frozenset()
+_NO_TORQUE: Final = TorqueZero()
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,23 +242,100 @@ class DetectorState:
     hang_load: float | None = None  # mean hook load of the current hang [N]
     hang_since: float = -math.inf
     hang_run: int = 0
+    # each channel's run of unchanged readings
+    # (a dict never changed once in a state: a state is pickled with the daemon's)
+    runs: Mapping[str, ChannelRun] = field(default_factory=dict)
+    frozen: frozenset[str] = _NO_CHANNELS  # the channels frozen now
+    frozen_channels: tuple[FrozenChannel, ...] = ()  # and what the alarm says of them
+    torque: TorqueZero = _NO_TORQUE  # the torque's zero offset and rotation evidence
 
 
 @dataclass(frozen=True, slots=True)
 class Detection:
-    """Result for one sample: ``state``, ``steady``, axial ``velocity`` [m/s] (> 0 deeper)."""
+    """Result for one sample: ``state``, ``steady``, axial ``velocity`` [m/s] (> 0 deeper);
+    ``suspect``, the frozen channels this sample's state rests on (its window is not fed to
+    the estimates); ``frozen``, every channel frozen now, for the alarm."""
 
     state: RigState
     steady: bool
     velocity: float | None
+    suspect: frozenset[str] = _NO_CHANNELS
+    frozen: tuple[FrozenChannel, ...] = ()
+
+
+#: The states whose samples rest on each channel: a frozen channel makes the samples of these
+#: states suspect. The hook load and the bit depth feed every window; the block position only
+#: the moving states' velocity; the RPM and the torque the rotating states (their friction
+#: comes from the torque, the reaming angle from the RPM, and their rotation from both); the
+#: weight on bit whether a rotating string is on bottom (drilling, not estimated) or off it.
+#: Flow and standpipe pressure feed no estimate (circulating and static hangs are checked
+#: alike).
+RESTING_ON: Final[Mapping[str, frozenset[RigState]]] = MappingProxyType({
+    "hookload": frozenset(RigState),
+    "bit_depth": frozenset(RigState),
+    "block_position": MOVING_STATES,
+    "rpm": ROTATING_STATES,
+    "torque": ROTATING_STATES,
+    "wob": ROTATING_STATES,
+})
+
+WITHOUT_CHANNEL: Final[Mapping[str, str]] = MappingProxyType({
+    "hookload": "the windows resting on it are left out of the estimates",
+    "torque": ("rotation is read from the rpm alone and rotating windows are left out of the "
+               "estimates"),
+    "rpm": ("rotation is read from the torque alone and rotating windows are left out of the "
+            "estimates"),
+    "bit_depth": ("the string's velocity comes from the block and the windows are left out of "
+                  "the estimates"),
+    "block_position": ("the string's velocity comes from the bit depth and moving windows are "
+                       "left out of the estimates"),
+    "flow_in": "circulation is read from the standpipe pressure",
+    "spp": "circulation is read from the flow in",
+    "wob": ("the bit's contact with bottom is read from the depths and rotating windows are "
+            "left out of the estimates"),
+})
+"""What the detector does without each channel once it is judged frozen, in the alarm's
+words (a frozen channel is not used until its value changes)."""
 
 
 def _finite(value: float | None) -> float | None:
     return value if value is not None and math.isfinite(value) else None
 
 
+def in_slips_limit(string_weight: float | None, thresholds: RigStateThresholds) -> float:
+    """Hook load below which the string is in slips [N].
+
+    Parameters
+    ----------
+    string_weight : the modelled buoyed weight of the string hanging at the bit depth [N]
+        (None: unknown)
+    thresholds : ``block_weight``, ``in_slips_margin``, ``in_slips_fraction``,
+        ``in_slips_min_margin``
+
+    Returns
+    -------
+    ``block_weight + margin``, the margin ``in_slips_fraction * string_weight`` bounded by
+    ``[in_slips_min_margin, in_slips_margin]`` (``in_slips_margin`` without a string weight)
+
+    Notes
+    -----
+    In slips the hook carries the travelling equipment alone; hanging free, that plus the
+    string's weight (more on a pull, less on a run by the drag). Half the string's weight is
+    the threshold furthest from both: a fixed margin of 150-200 kN, sized for deep wells, put a
+    light string of 50-330 kN hanging on the hook "in slips" (issue 28), and the block weight
+    learnt from those samples drifted. Heavy strings keep the configured margin (the Volve F-4
+    tubing weighs 800-900 kN, the margin stays 200 kN).
+    """
+    margin = thresholds.in_slips_margin
+    if string_weight is not None and math.isfinite(string_weight):
+        margin = min(margin, max(thresholds.in_slips_min_margin,
+                                 thresholds.in_slips_fraction * string_weight))
+    return thresholds.block_weight + margin
+
+
 def classify(hookload: float | None, velocity: float | None, rpm: float | None,
-             circulating: bool, on_bottom: bool, thresholds: RigStateThresholds) -> RigState:
+             circulating: bool, on_bottom: bool, thresholds: RigStateThresholds, *,
+             rotating: bool | None = None, in_slips_below: float | None = None) -> RigState:
     """Rig state of one sample.
 
     Parameters
@@ -192,6 +346,10 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
     circulating : mud is being pumped
     on_bottom : the bit is on bottom (see `detect`)
     thresholds : the detector's settings
+    rotating : the string turns (`detect` decides it from the RPM and the torque); None: the
+        RPM alone, above ``rotating_speed``
+    in_slips_below : hook load below which the string is in slips [N] (None: the block weight
+        plus ``in_slips_margin``; `detect` passes :func:`in_slips_limit`)
 
     Returns
     -------
@@ -205,11 +363,14 @@ def classify(hookload: float | None, velocity: float | None, rpm: float | None,
     """
     if hookload is None:
         return RigState.UNKNOWN
-    if hookload < thresholds.block_weight + thresholds.in_slips_margin:
+    limit = (thresholds.block_weight + thresholds.in_slips_margin if in_slips_below is None
+             else in_slips_below)
+    if hookload < limit:
         return RigState.IN_SLIPS
     moving_down = velocity is not None and velocity > thresholds.moving_speed
     moving_up = velocity is not None and velocity < -thresholds.moving_speed
-    rotating = rpm is not None and rpm > thresholds.rotating_speed
+    if rotating is None:
+        rotating = rpm is not None and rpm > thresholds.rotating_speed
     if rotating:
         if on_bottom:
             return RigState.DRILLING
@@ -238,9 +399,10 @@ def _channel_velocity(value: float | None, time: float, prior_value: float | Non
 
 def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
               thresholds: RigStateThresholds
-              ) -> tuple[float | None, float | None, float, float | None, float, bool]:
+              ) -> tuple[float | None, float | None, float, float | None, float, bool,
+                         float | None, float | None]:
     """(velocity, then the channel memory: bit depth, its time, block position, its time,
-    whether the block was loaded)."""
+    whether the block was loaded; then the block's and the bit depth's own velocities)."""
     # Two measures of the string's axial speed. The bit depth is what the rig reports for the
     # string, but it can jump (depth-tracking resets, Volve trip in); the block moves with the
     # string only while the hook carries it (in slips it travels empty) and its encoder can be
@@ -248,8 +410,9 @@ def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
     # when both agree the bit depth is used; when they disagree, the one continuing the last
     # velocity wins (a jump is a discontinuity), unless the bit depth is frozen. A frame that
     # repeats a channel's last sample keeps that channel's last velocity, except across the
-    # slips.
-    block, bit = _finite(sample.block_position), _finite(sample.bit_depth)
+    # slips. A channel judged frozen is not used (the other one gives the velocity).
+    block = _trusted(sample.block_position, "block_position", prior.frozen)
+    bit = _trusted(sample.bit_depth, "bit_depth", prior.frozen)
     t = sample.t
     block_time = t if sample.block_time is None else sample.block_time
     bit_time = t if sample.bit_time is None else sample.bit_time
@@ -288,7 +451,7 @@ def _velocity(prior: DetectorState, sample: RigSample, loaded: bool,
     else:
         velocity = v_block if abs(v_block - carry) < abs(v_bit - carry) else v_bit
     return (velocity, memory_bit, memory_bit_time, memory_block, memory_block_time,
-            memory_loaded)
+            memory_loaded, v_block, v_bit)
 
 
 def _hang(prior: DetectorState, same: bool, state: RigState, t: float, hookload: float | None,
@@ -302,6 +465,196 @@ def _hang(prior: DetectorState, same: bool, state: RigState, t: float, hookload:
     if same and mean is not None and abs(hookload - mean) <= tolerance:
         return mean + (hookload - mean) / (run + 1), prior.hang_since, run + 1
     return hookload, t, 1
+
+
+class _Neighbours(NamedTuple):
+    """What the channels say on one frame, for the frozen-channel evidence."""
+
+    t: float
+    loaded: bool  # the string hangs on the hook (not in slips)
+    velocity: float | None  # the string's axial velocity [m/s]
+    block_velocity: float | None  # the block's own [m/s]
+    bit_velocity: float | None  # the bit depth's own [m/s]
+    rpm: float | None  # the RPM reading [rad/s]
+    rpm_turning: bool  # a trusted RPM above the rotating speed
+    torque: TorqueZero | None  # the torque evidence (None: no trusted torque)
+    torque_changing: bool  # the torque changed at its last samples
+    flow: float | None  # trusted flow in [m3/s]
+    spp: float | None  # trusted standpipe pressure [Pa]
+    hookload: float | None  # [N]
+    on_bottom: bool  # on bottom by the depths, or by a weight on bit near the hole depth
+    thresholds: RigStateThresholds
+
+
+_NO_ANCHOR: Final = -math.inf  # no anchor (not NaN: states compare equal)
+_NO_EVIDENCE: Final = (False, _NO_ANCHOR, False)
+
+
+def _hookload_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    # a moving string's hook load varies (drag, noise, the depth's weight)
+    v = n.velocity
+    return n.loaded and v is not None and abs(v) > n.thresholds.moving_speed, _NO_ANCHOR, False
+
+
+def _torque_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    # a turning string's torque varies; at rest it may sit on one value (Volve: 5.2 N m)
+    return n.loaded and n.rpm_turning, _NO_ANCHOR, False
+
+
+def _rpm_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    # the torque turned during the RPM's run and now, still changing, says the string is
+    # still while the RPM still reads rotation (the latch keeps "the torque turned")
+    zero = n.torque
+    if zero is None:
+        return _NO_EVIDENCE
+    reads_turning = n.rpm is not None and n.rpm > n.thresholds.rotating_speed
+    evidence = (n.loaded and reads_turning and not zero.turning and n.torque_changing
+                and run is not None and run.anchor == 1.0)
+    return evidence, 1.0 if zero.turning else 0.0, True
+
+
+def _bit_depth_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    v = n.block_velocity
+    return n.loaded and v is not None and abs(v) > n.thresholds.moving_speed, _NO_ANCHOR, False
+
+
+def _block_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    v = n.bit_velocity
+    return n.loaded and v is not None and abs(v) > n.thresholds.moving_speed, _NO_ANCHOR, False
+
+
+def _pumps_evidence(run: ChannelRun | None, reads: bool, other: bool | None
+                    ) -> tuple[bool, float, bool]:
+    # the other channel started or stopped the pumps during this one's run and now
+    # contradicts it (a pressure bleeding off after the pumps stop agrees with a zero flow)
+    if other is None:
+        return _NO_EVIDENCE
+    anchor = 1.0 if other else 0.0
+    changed = run is not None and run.anchor == 1.0 - anchor
+    return changed and other != reads, anchor, False
+
+
+def _flow_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    th = n.thresholds
+    spp = None if n.spp is None else n.spp > th.circulating_pressure
+    reads = run is not None and run.low > th.circulating_flow
+    return _pumps_evidence(run, reads, spp)
+
+
+def _spp_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    th = n.thresholds
+    flow = None if n.flow is None else n.flow > th.circulating_flow
+    reads = run is not None and run.low > th.circulating_pressure
+    return _pumps_evidence(run, reads, flow)
+
+
+def _wob_evidence(run: ChannelRun | None, n: _Neighbours) -> tuple[bool, float, bool]:
+    # on bottom the rig's weight on bit is its hook-load reference less the hook load: weight
+    # set down on the bit (the hook load falling below the highest it read on bottom during
+    # the run, the latch) must show on it; off bottom some rigs hold it or zero it, and a
+    # hook load that changes off bottom (a ream down onto bottom) says nothing of it
+    hookload = n.hookload
+    if hookload is None:
+        return _NO_EVIDENCE
+    evidence = (n.loaded and n.on_bottom and run is not None and math.isfinite(run.anchor)
+                and run.anchor - hookload > n.thresholds.wob_follow)
+    return evidence, hookload if n.on_bottom else _NO_ANCHOR, True
+
+
+#: Each followed channel: its RigSample field and what its neighbours say of it.
+_FOLLOWED: Final = (
+    ("hookload", "hookload", _hookload_evidence),
+    ("torque", "torque", _torque_evidence),
+    ("rpm", "rpm", _rpm_evidence),
+    ("bit_depth", "bit_depth", _bit_depth_evidence),
+    ("block_position", "block_position", _block_evidence),
+    ("flow_in", "flow", _flow_evidence),
+    ("spp", "spp", _spp_evidence),
+    ("wob", "wob", _wob_evidence),
+)
+
+
+def _why(channel: str, n: _Neighbours) -> str:
+    """The neighbours' words, when a channel is judged frozen."""
+    th = n.thresholds
+    if channel == "hookload":
+        return f"while the string moves at {abs(n.velocity or 0.0):.2f} m/s"
+    if channel == "torque":
+        return (f"while the rpm reads {shown('rpm', n.rpm or 0.0)} (a turning string's torque "
+                "varies)")
+    if channel == "rpm":
+        zero = n.torque
+        level = (math.fsum(v for _, v in zero.recent) / len(zero.recent)
+                 if zero is not None and zero.recent else math.nan)
+        where = ("" if zero is None or zero.offset is None
+                 else f", its still-string zero offset being {shown('torque', zero.offset)}")
+        return (f"while the torque fell to {shown('torque', level)}{where}: the string is not "
+                "turning")
+    if channel == "bit_depth":
+        return f"while the block moves the string at {abs(n.block_velocity or 0.0):.2f} m/s"
+    if channel == "block_position":
+        return (f"while the bit depth moves at {abs(n.bit_velocity or 0.0):.2f} m/s with the "
+                "string on the hook")
+    if channel == "flow_in":
+        running = n.spp is not None and n.spp > th.circulating_pressure
+        return (f"while the standpipe pressure ({shown('spp', n.spp or 0.0)}) says the pumps "
+                f"{'started' if running else 'stopped'}")
+    if channel == "spp":
+        running = n.flow is not None and n.flow > th.circulating_flow
+        return (f"while the flow in ({shown('flow_in', n.flow or 0.0)}) says the pumps "
+                f"{'started' if running else 'stopped'}")
+    return "on bottom while the hook load changed"
+
+
+def _follow_channels(prior: DetectorState, sample: RigSample, n: _Neighbours
+                     ) -> tuple[Mapping[str, ChannelRun], frozenset[str],
+                                tuple[FrozenChannel, ...]]:
+    """Each present channel's run; the channels frozen now and their alarm records."""
+    th = n.thresholds
+    t = sample.t
+    ages = sample.ages
+    resolution = th.frozen_resolution
+    runs = dict(prior.runs)
+    changed = False
+    for channel, name, evidence_of in _FOLLOWED:
+        value = getattr(sample, name)
+        if value is None or not math.isfinite(value):
+            continue
+        run = runs.get(channel)
+        evidence, anchor, latch = evidence_of(run, n)
+        age = ages.get(channel) if ages is not None else None
+        sampled = t - age if age is not None and math.isfinite(age) else t
+        new = follow(run, t, value, sampled, resolution.get(channel, 0.0), evidence, anchor,
+                     latch, th.frozen_time, th.frozen_samples, th.max_gap)
+        if new.frozen and not (run is not None and run.frozen and run.since == new.since):
+            new = new._replace(reason=_why(channel, n))
+            changed = True
+        elif run is not None and run.frozen and not new.frozen:
+            changed = True  # it moved: no longer frozen
+        runs[channel] = new
+    if not changed:
+        return runs, prior.frozen, prior.frozen_channels
+    frozen = [channel for channel, _, _ in _FOLLOWED
+              if channel in runs and runs[channel].frozen]
+    records = tuple(FrozenChannel(channel, runs[channel].low, runs[channel].since,
+                                  runs[channel].reason) for channel in frozen)
+    return runs, frozenset(frozen), records
+
+
+def _on_bottom(bit: float | None, hole: float | None, wob: float | None,
+               thresholds: RigStateThresholds) -> bool:
+    off_bottom = None if bit is None or hole is None else hole - bit
+    if wob is not None:
+        # hole-depth channels are coarse; weight on the bit says the bit touches bottom
+        return wob > thresholds.drilling_wob and (
+            off_bottom is None or off_bottom <= thresholds.on_bottom_with_wob)
+    return off_bottom is not None and off_bottom <= thresholds.on_bottom
+
+
+def _trusted(value: float | None, channel: str, frozen: frozenset[str]) -> float | None:
+    """A channel's finite value, None when missing or judged frozen."""
+    value = _finite(value)
+    return None if value is None or (frozen and channel in frozen) else value
 
 
 def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThresholds
@@ -324,32 +677,55 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
         return replace(prior, state=RigState.UNKNOWN), Detection(RigState.UNKNOWN, False, None)
     dt = t - prior.t
     fresh = not (math.isfinite(dt) and 0.0 < dt <= thresholds.max_gap)
-    loaded = hookload is not None and (
-        hookload >= thresholds.block_weight + thresholds.in_slips_margin)
-    velocity, bit_depth, bit_time, block_position, block_time, block_loaded = _velocity(
-        prior, sample, loaded, thresholds)
+    limit = in_slips_limit(sample.string_weight, thresholds)
+    loaded = hookload is not None and hookload >= limit
+    (velocity, bit_depth, bit_time, block_position, block_time, block_loaded, block_velocity,
+     bit_velocity) = _velocity(prior, sample, loaded, thresholds)
     if fresh:
         velocity = None
-    rpm = _finite(sample.rpm)
-    flow, spp = _finite(sample.flow), _finite(sample.spp)
+    frozen = prior.frozen
+    rpm = _trusted(sample.rpm, "rpm", frozen)
+    torque = _trusted(sample.torque, "torque", frozen)
+    rpm_turning = rpm is not None and rpm > thresholds.rotating_speed
+    zero = prior.torque
+    if torque is not None:
+        known_still = (hookload is not None and not loaded) or (rpm is not None
+                                                                 and not rpm_turning)
+        age = sample.ages.get("torque") if sample.ages is not None else None
+        zero = torque_turning(zero, torque, t - age if age is not None else t, known_still,
+                              thresholds.torque_average, thresholds.rotating_torque,
+                              thresholds.torque_sigmas, thresholds.torque_fraction)
+        rotating = zero.turning and (rpm is None or rpm_turning)
+    else:
+        rotating = rpm_turning
+    # the RPM says the string turns, a torque channel says it does not: one of them lies
+    contradicted = rpm_turning and torque is not None and not zero.turning and loaded
+    flow = _trusted(sample.flow, "flow_in", frozen)
+    spp = _trusted(sample.spp, "spp", frozen)
     circulating = ((flow is not None and flow > thresholds.circulating_flow)
                    or (flow is None and spp is not None and spp > thresholds.circulating_pressure))
-    bit, hole, wob = _finite(sample.bit_depth), _finite(sample.hole_depth), _finite(sample.wob)
-    off_bottom = None if bit is None or hole is None else hole - bit
-    if wob is not None:
-        # hole-depth channels are coarse; weight on the bit says the bit touches bottom
-        on_bottom = wob > thresholds.drilling_wob and (
-            off_bottom is None or off_bottom <= thresholds.on_bottom_with_wob)
-    else:
-        on_bottom = off_bottom is not None and off_bottom <= thresholds.on_bottom
-    state = classify(hookload, velocity, rpm, circulating, on_bottom, thresholds)
+    bit, hole = _trusted(sample.bit_depth, "bit_depth", frozen), _finite(sample.hole_depth)
+    on_bottom = _on_bottom(bit, hole, _trusted(sample.wob, "wob", frozen), thresholds)
+    # on bottom by the depths, or reading weight near the hole depth (coarse hole depths)
+    wob_reading = _finite(sample.wob)
+    near_bottom = bit is not None and hole is not None and (
+        hole - bit <= thresholds.on_bottom
+        or (wob_reading is not None and wob_reading > thresholds.drilling_wob
+            and hole - bit <= thresholds.on_bottom_with_wob))
+    neighbours = _Neighbours(
+        t, loaded, velocity, block_velocity, bit_velocity, _finite(sample.rpm), rpm_turning,
+        zero if torque is not None else None, changing(prior.runs.get("torque")), flow, spp,
+        hookload, near_bottom, thresholds)
+    runs, frozen, frozen_channels = _follow_channels(prior, sample, neighbours)
+    state = classify(hookload, velocity, rpm, circulating, on_bottom, thresholds,
+                     rotating=rotating, in_slips_below=limit)
     same = state == prior.state and not fresh
     since = prior.state_since if same else t
     run = prior.run + 1 if same else 1
     prior_hookload = prior.hookload
     steady = (state != RigState.UNKNOWN and not fresh and t - since >= thresholds.settle_time
               and run >= thresholds.settle_samples
-              and hookload is not None and prior_hookload is not None)
+              and hookload is not None and prior_hookload is not None and not contradicted)
     if steady and velocity is not None and prior.velocity is not None:
         steady = abs(velocity - prior.velocity) / dt <= thresholds.max_acceleration
     if steady and hookload is not None and prior_hookload is not None:
@@ -362,10 +738,13 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     if steady and hang_load is not None:
         steady = (t - hang_since >= thresholds.settle_time
                   and hang_run >= thresholds.settle_samples)
+    suspect = (frozenset(c for c in frozen if state in RESTING_ON.get(c, ())) if frozen
+               else _NO_CHANNELS)
     # positional, in the order of the fields (once per frame: the keywords cost a third)
     new = DetectorState(t, bit_depth, bit_time, block_position, block_time, block_loaded,
-                        velocity, hookload, state, since, run, hang_load, hang_since, hang_run)
-    return new, Detection(state, bool(steady), velocity)
+                        velocity, hookload, state, since, run, hang_load, hang_since, hang_run,
+                        runs, frozen, frozen_channels, zero)
+    return new, Detection(state, bool(steady), velocity, suspect, frozen_channels)
 
 
 def _optional(values: ArrayLike | None, n: int) -> NDArray[np.float64]:
@@ -386,8 +765,10 @@ def detect_series(
     spp: ArrayLike | None = None,
     hole_depth: ArrayLike | None = None,
     wob: ArrayLike | None = None,
+    torque: ArrayLike | None = None,
+    string_weight: ArrayLike | None = None,
 ) -> tuple[NDArray[np.str_], NDArray[np.bool_]]:
-    """Run :func:`detect` over a whole record (NaN = missing).
+    """Run :func:`detect` over a whole record (NaN = missing; every channel sampled at ``t``).
 
     Returns
     -------
@@ -398,7 +779,8 @@ def detect_series(
     n = times.size
     columns = [np.asarray(hookload, dtype=np.float64), np.asarray(bit_depth, dtype=np.float64),
                _optional(block_position, n), _optional(rpm, n), _optional(flow, n),
-               _optional(spp, n), _optional(hole_depth, n), _optional(wob, n)]
+               _optional(spp, n), _optional(hole_depth, n), _optional(wob, n),
+               _optional(torque, n), _optional(string_weight, n)]
     states = np.empty(n, dtype="<U20")
     steady = np.zeros(n, dtype=bool)
     prior = DetectorState()
@@ -406,7 +788,8 @@ def detect_series(
         values = [float(column[i]) for column in columns]
         v = [x if math.isfinite(x) else None for x in values]
         sample = RigSample(float(times[i]), hookload=v[0], bit_depth=v[1], block_position=v[2],
-                           rpm=v[3], flow=v[4], spp=v[5], hole_depth=v[6], wob=v[7])
+                           rpm=v[3], flow=v[4], spp=v[5], hole_depth=v[6], wob=v[7],
+                           torque=v[8], string_weight=v[9])
         prior, result = detect(prior, sample, thresholds)
         states[i] = result.state
         steady[i] = result.steady

@@ -6,19 +6,23 @@ that each window stays local in bit depth for the friction profile). On closing 
 spikes are dropped (median absolute deviation), a stuck hook load (every sample identical)
 rejects it, a bit depth that does not follow the block flags it low-confidence, and so does a
 torque that never changes in a rotating window (a window without rotation does not use it).
-The standard error of its mean hook load carries a floor from the sensor's noise, so a
-one-sample window at 15 s sampling still has an honest uncertainty.
+A window any of whose samples rested on a channel the rig-state detector judged frozen carries
+that channel in ``suspect`` (`tdmon.calib.rigstate.Detection.suspect`; and the window being
+built when a channel its state rests on is judged frozen, for the run began before the
+judgement): the estimator feeds it to no estimate. The standard error of its mean hook load
+carries a floor from the sensor's noise, so a one-sample window at 15 s sampling still has an
+honest uncertainty.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from statistics import median
 
 import numpy as np
 
-from tdmon.calib.rigstate import Detection, RigSample
+from tdmon.calib.rigstate import RESTING_ON, Detection, RigSample
 from tdmon.vocabulary import MOVING_STATES, ROTATING_STATES, RigState
 
 #: states whose windows are estimated from their surface torque (the rotating ones): only they
@@ -74,6 +78,8 @@ class Window:
     velocity : mean axial velocity [m/s] (> 0 deeper; None when unknown)
     flags : quality remarks, e.g. ``"spikes_removed:2"``, ``"depth_not_following_block"``
     rejected : why the window must not be used (None when usable)
+    suspect : channels judged frozen that its samples' state rested on (sorted; the window
+        is then fed to no estimate)
     """
 
     state: RigState
@@ -91,6 +97,7 @@ class Window:
     velocity: float | None = None
     flags: tuple[str, ...] = ()
     rejected: str | None = None
+    suspect: tuple[str, ...] = ()
 
     @property
     def low_confidence(self) -> bool:
@@ -105,6 +112,7 @@ class WindowAccumulator:
     state: RigState = RigState.UNKNOWN  # of the samples; none yet: unknown is never steady
     samples: tuple[RigSample, ...] = ()
     velocities: tuple[float | None, ...] = ()
+    suspect: frozenset[str] = frozenset()  # the frozen channels its samples rested on
 
 
 def _robust_keep(values: np.ndarray, spike_mads: float, floor: float) -> np.ndarray:
@@ -137,7 +145,8 @@ def _mean(values: list[float] | np.ndarray) -> float:
 
 
 def summarise(state: RigState, samples: tuple[RigSample, ...],
-              velocities: tuple[float | None, ...], settings: WindowSettings) -> Window | None:
+              velocities: tuple[float | None, ...], settings: WindowSettings,
+              suspect: frozenset[str] = frozenset()) -> Window | None:
     """Check and summarise the samples of one window (None when there are none usable).
 
     Parameters
@@ -146,6 +155,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
     samples : the steady samples, in time order
     velocities : the detector's axial velocity of each sample [m/s]
     settings : window settings
+    suspect : frozen channels the samples rested on
 
     Returns
     -------
@@ -204,7 +214,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
         bit_depth_end=float(depth[-1]) if depth.size else 0.0,
         hookload=mean if hookload.size else 0.0, hookload_se=se if hookload.size else 0.0,
         torque=torque, torque_se=torque_se, rpm=rpm, velocity=velocity, flags=tuple(flags),
-        rejected=rejected,
+        rejected=rejected, suspect=tuple(sorted(suspect)),
     )
 
 
@@ -213,7 +223,8 @@ def close(acc: WindowAccumulator, settings: WindowSettings
     """Close the window being built (end of input, or forced)."""
     if not acc.samples:
         return WindowAccumulator(), None
-    return WindowAccumulator(), summarise(acc.state, acc.samples, acc.velocities, settings)
+    return WindowAccumulator(), summarise(acc.state, acc.samples, acc.velocities, settings,
+                                          acc.suspect)
 
 
 def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
@@ -224,6 +235,13 @@ def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
     a gap, closes it and starts a new one; a full window closes after taking the sample.
     """
     closed: Window | None = None
+    if detection.frozen and acc.samples:
+        # a channel judged frozen now was frozen during the window being built: its samples
+        # rested on it too
+        rested = frozenset(f.channel for f in detection.frozen
+                           if acc.state in RESTING_ON.get(f.channel, ()))
+        if not rested <= acc.suspect:
+            acc = replace(acc, suspect=acc.suspect | rested)
     if acc.samples:
         last = acc.samples[-1]
         gap = sample.t - last.t
@@ -235,8 +253,10 @@ def add_sample(acc: WindowAccumulator, sample: RigSample, detection: Detection,
             acc, closed = close(acc, settings)
     if not detection.steady:
         return acc, closed
+    suspect = detection.suspect
     acc = WindowAccumulator(detection.state, (*acc.samples, sample),
-                            (*acc.velocities, detection.velocity))
+                            (*acc.velocities, detection.velocity),
+                            acc.suspect | suspect if suspect else acc.suspect)
     if len(acc.samples) >= settings.max_samples:
         acc, full = close(acc, settings)
         return acc, full if closed is None else closed

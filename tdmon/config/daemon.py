@@ -516,6 +516,40 @@ class RigStateConfig(_Model):
     circulating_flow: CubicMetersPerSecond = Field(default=100 / 60_000, ge=0)
     on_bottom: Meters = Field(default=0.5, ge=0)
     steady_frames: int = Field(default=3, ge=1)
+    # rotation needs the surface torque above its still-string zero offset by at least this
+    # (and 4 standard deviations of its level), whenever a torque channel is there
+    rotating_torque: NewtonMetres = Field(default=100.0, ge=0)
+    # the torque level is the mean of its samples over this long
+    torque_average: Seconds = Field(default=5.0, gt=0)
+    # a channel unchanged (within its resolution) while its neighbours say it must move, for
+    # this long in all and over this many of its own samples, is frozen
+    frozen_time: Seconds = Field(default=30.0, gt=0)
+    frozen_samples: int = Field(default=4, ge=2)
+    # per channel, the change below which a reading counts as unchanged ("0.5 kN" for a hook
+    # load sent in whole kN); the channels of tdmon.calib.frozen, each with its unit
+    frozen_resolution: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("frozen_resolution", mode="before")
+    @classmethod
+    def _resolutions(cls, value: Any) -> Any:
+        from tdmon.calib.frozen import FROZEN_CHANNELS
+
+        if not isinstance(value, dict):
+            raise ValueError("a table of channel = \"resolution with its unit\"")
+        out: dict[str, float] = {}
+        for channel, text in value.items():
+            check_channel(channel, FROZEN_CHANNELS)
+            if not isinstance(text, str):
+                raise ValueError(f"{channel}: give the resolution with its unit "
+                                 f"(e.g. \"1 {CHANNEL_UNITS[channel][0]}\")")
+            try:
+                resolution = parse_quantity(text, CHANNEL_UNITS[channel][0])
+            except ValueError as exc:
+                raise ValueError(f"{channel}: {exc}") from exc
+            if not (math.isfinite(resolution) and resolution >= 0.0):
+                raise ValueError(f"{channel}: the resolution must be a finite amount >= 0")
+            out[channel] = resolution
+        return out
 
 
 class MonitorConfig(_Model):
@@ -537,6 +571,10 @@ class CalibrationConfig(_Model):
     # hook load up to the block weight plus this margin means in slips (replaces
     # [rig_state] in_slips_hookload when calibration is on)
     in_slips_margin: Newtons = Field(default=150e3, ge=0)
+    # ... but for a light string: this share of its modelled buoyed weight at the bit depth,
+    # at least in_slips_min_margin (in_slips_margin is then the largest margin)
+    in_slips_fraction: float = Field(default=0.5, gt=0, le=1)
+    in_slips_min_margin: Newtons = Field(default=20e3, ge=0)
     # live mu(T) calibration (needs the well file's [temperature] table): "family" calibrates
     # the coefficients of a section's law, "scale" one factor on `lab_fit`, "off" neither
     mu_t: Literal["off", "family", "scale"] = "family"

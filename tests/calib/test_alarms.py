@@ -24,12 +24,14 @@ from tdmon.calib.alarms import (
     SensorSettings,
     SensorState,
     friction_jump,
+    frozen_alarm,
     limit_alarms,
     profile_anomaly,
     sensor_alarms,
     update_band_trend,
 )
 from tdmon.calib.estimator import CalibrationSettings
+from tdmon.calib.frozen import FrozenChannel
 from tdmon.calib.rigstate import RigStateThresholds
 from tdmon.calib.windows import Window, WindowSettings
 from tdmon.daemon.pipeline import Frame
@@ -40,6 +42,7 @@ from tdmon.model.friction import KAARSTAD_2009
 from tdmon.model.string import DrillString
 from tdmon.model.torque_drag import WellModel
 from tdmon.record.schemas import schema_for
+from tdmon.vocabulary import AlarmKind
 
 
 def test_band_spike_is_not_a_trend_but_an_offset_is() -> None:
@@ -100,70 +103,66 @@ def test_limit_alarms_warn_then_critical(well_open: Any) -> None:
 
 
 def test_sensor_alarms() -> None:
-    s = SensorSettings(frozen_samples=5)
+    s = SensorSettings(persist_time=60.0)
     state = SensorState()
-    state, alarms = sensor_alarms(state, 0.0, {"hookload": 1e6}, ("torque",), False, s)
+    state, alarms = sensor_alarms(state, 0.0, {"hookload": 1e6}, ("torque",), (), s)
     assert [a.kind for a in alarms] == ["sensor_stale"]
-    state, alarms = sensor_alarms(state, 1.0, {"hookload": 1e6}, ("torque",), False, s)
+    state, alarms = sensor_alarms(state, 1.0, {"hookload": 1e6}, ("torque",), (), s)
     assert alarms == []  # reported once
-    state, alarms = sensor_alarms(state, 2.0, {"hookload": -5e3}, (), False, s)
+    state, alarms = sensor_alarms(state, 2.0, {"hookload": -5e3}, (), (), s)
     assert [(a.kind, a.severity) for a in alarms] == [("sensor_hookload_implausible",
                                                        "critical")]
     kinds = []
-    for k in range(10):
-        state, alarms = sensor_alarms(state, 3.0 + k, {"hookload": 1.2e6}, (), True, s)
-        kinds += [a.kind for a in alarms]
-    assert kinds == ["sensor_hookload_frozen"]
-    kinds = []
     for k in range(12):  # a depth inconsistency must persist (hole depth is coarse)
         state, alarms = sensor_alarms(state, 20.0 + 10 * k, {"bit_depth": 3010.0,
-                                                             "hole_depth": 3000.0}, (), False, s)
+                                                             "hole_depth": 3000.0}, (), (), s)
         kinds += [(k, a.kind) for a in alarms]
     assert kinds == [(6, "sensor_bit_below_hole")]
 
 
-def test_constant_torque_is_frozen_only_while_rotating() -> None:
-    # Volve F-4 trips: surface torque rests at its zero offset (5.2 N m) while the string moves
-    # without rotation; that must not read as a stuck sensor, the same value while rotating must.
-    s = SensorSettings(frozen_samples=5)
-    values = {"torque": 5.2, "rpm": 0.0}
-    state, kinds = SensorState(), []
-    for k in range(10):
-        state, alarms = sensor_alarms(state, float(k), values, (), True, s)
-        kinds += [a.kind for a in alarms]
-    assert kinds == []
-    state, kinds = SensorState(), []
-    for k in range(10):
-        state, alarms = sensor_alarms(state, float(k), {"torque": 5.2e3, "rpm": 12.0}, (), True,
-                                      s)
-        kinds += [a.kind for a in alarms]
-    assert kinds == ["sensor_torque_frozen"]
+def test_a_frozen_channel_raises_its_own_alarm_once_with_why() -> None:
+    # the rig-state detector names the frozen channels on every frame they stay frozen; the
+    # alarm is raised when one first appears and again only after it moved
+    rpm = FrozenChannel("rpm", 100 * math.pi / 30, 60.0,
+                        "while the torque fell to 0.81 kN m: the string is not turning")
+    torque = FrozenChannel("torque", 5.2e3, 70.0, "while the rpm reads 120.0 rpm")
+    s, state, raised = SensorSettings(), SensorState(), []
+    for t, frozen in ((90.0, (rpm,)), (91.0, (rpm,)), (100.0, (rpm, torque)), (101.0, ()),
+                      (102.0, (rpm,))):
+        state, alarms = sensor_alarms(state, t, {"hookload": 1e6}, (), frozen, s)
+        raised += [(t, a.kind, a.severity, a.value) for a in alarms]
+    assert raised == [(90.0, "sensor_rpm_frozen", "warning", pytest.approx(10.472, abs=1e-3)),
+                      (100.0, "sensor_torque_frozen", "warning", 5.2e3),
+                      (102.0, "sensor_rpm_frozen", "warning", pytest.approx(10.472, abs=1e-3))]
+    alarm = frozen_alarm(90.0, rpm)
+    assert alarm.message == (
+        "rpm reads 100.0 rpm unchanged for 30 s while the torque fell to 0.81 kN m: the string "
+        "is not turning; rotation is read from the torque alone and rotating windows are left "
+        "out of the estimates")
+    assert frozen_alarm(100.0, torque).message.startswith(
+        "torque reads 5.20 kN m unchanged for 30 s while the rpm reads 120.0 rpm; ")
 
 
 def test_sensor_state_carried_between_frames() -> None:
-    s = SensorSettings(frozen_samples=2, persist_time=1.0)
+    s = SensorSettings(persist_time=1.0)
+    hook = FrozenChannel("hookload", 1e6, 0.0, "while the string moves at 0.50 m/s")
     frames = [
-        ({"hookload": 1e6, "torque": 0.0, "rpm": 10.0}, ("spp",)),
-        ({"hookload": 1e6, "torque": 0.0, "bit_depth": 3010.0, "hole_depth": 3000.0}, ()),
-        ({"hookload": 1e6, "bit_depth": 3010.0, "hole_depth": 3000.0}, ("spp", "rpm")),
-        ({"hookload": 1.1e6, "bit_depth": 3010.0}, ("rpm",)),
+        ({"hookload": 1e6, "torque": 0.0, "rpm": 10.0}, ("spp",), ()),
+        ({"hookload": 1e6, "torque": 0.0, "bit_depth": 3010.0, "hole_depth": 3000.0}, (), ()),
+        ({"hookload": 1e6, "bit_depth": 3010.0, "hole_depth": 3000.0}, ("spp", "rpm"), (hook,)),
+        ({"hookload": 1.1e6, "bit_depth": 3010.0}, ("rpm",), ()),
     ]
     state, kinds = SensorState(), []
     states = []
-    for k, (values, stale) in enumerate(frames):
-        state, alarms = sensor_alarms(state, float(k), values, stale, True, s)
+    for k, (values, stale, frozen) in enumerate(frames):
+        state, alarms = sensor_alarms(state, float(k), values, stale, frozen, s)
         kinds.append([a.kind for a in alarms])
         states.append(state)
     assert kinds == [["sensor_stale"], [], ["sensor_stale", "sensor_stale",
                                             "sensor_bit_below_hole", "sensor_hookload_frozen"],
                      []]
-    # runs count repeats of the last value per channel, in the order channels were first seen
-    assert states[0].last == (("hookload", 1e6), ("torque", 0.0))
-    assert states[2].runs == (("hookload", 2), ("torque", 1), ("bit_depth", 1))
     assert states[2].active == frozenset({"sensor_hookload_frozen", "sensor_bit_below_hole"})
     assert states[1].below_since == 1.0 and states[2].below_since == 1.0
-    assert states[3].runs == (("hookload", 0), ("torque", 1), ("bit_depth", 2))
-    assert states[3].last == (("hookload", 1.1e6), ("torque", 0.0), ("bit_depth", 3010.0))
     assert states[3].stale == frozenset({"rpm"}) and states[3].active == frozenset()
     assert states[3].below_since is None
 
@@ -187,7 +186,7 @@ def _steps(model: WellModel, temperature: np.ndarray | None = None
         windows=WindowSettings(min_samples=5), prior_mu=0.25),
         temperature=temperature, friction_law=KAARSTAD_2009["glydril"]
         if temperature is not None else None)
-    return rig, calibrate, AlarmStep()
+    return rig, calibrate, AlarmStep(rig_state=rig)
 
 
 @functools.cache
@@ -395,19 +394,19 @@ def test_a_gap_is_one_stale_alarm_and_its_channels_are_not_named_again() -> None
     # the whole stream silent from 19 s (stale from 24 s) to 65 s; torque does not come back
     gap = (("hookload", 24.0), ("bit_depth", 24.0), ("torque", 23.5))
     state, alarms = sensor_alarms(state, 65.0, {"hookload": 1e6, "bit_depth": 3000.0},
-                                  ("torque",), False, s, gap)
+                                  ("torque",), (), s, gap)
     [alarm] = alarms
     assert (alarm.t, alarm.value) == (23.5, 41.5)
     assert alarm.message == ("3 channels went stale together, for 42 s until data resumed: "
                              "hookload, bit_depth, torque")
-    state, alarms = sensor_alarms(state, 66.0, {"hookload": 1e6}, ("torque",), False, s)
+    state, alarms = sensor_alarms(state, 66.0, {"hookload": 1e6}, ("torque",), (), s)
     assert alarms == []
     # torque heard from again, then stale again later: a new event, a new alarm
-    state, alarms = sensor_alarms(state, 67.0, {"hookload": 1e6, "torque": 5e3}, (), False, s)
-    state, alarms = sensor_alarms(state, 80.0, {"hookload": 1e6}, ("torque",), False, s)
+    state, alarms = sensor_alarms(state, 67.0, {"hookload": 1e6, "torque": 5e3}, (), (), s)
+    state, alarms = sensor_alarms(state, 80.0, {"hookload": 1e6}, ("torque",), (), s)
     assert [a.message for a in alarms] == ["channel torque is stale"]
     # the hook load alone
-    _, [alone] = sensor_alarms(SensorState(), 40.0, {"hookload": 1e6}, (), False, s,
+    _, [alone] = sensor_alarms(SensorState(), 40.0, {"hookload": 1e6}, (), (), s,
                                (("hookload", 30.0),))
     assert alone.message == "channel hookload went stale, for 10 s until it resumed"
 
@@ -418,10 +417,10 @@ def test_sensor_state_init_is_the_dataclass_one() -> None:
     import dataclasses
     import pickle
 
-    state = SensorState(frozenset({"torque"}), last=(("hookload", 1e6),), below_since=3.0)
-    assert (state.stale, state.announced, state.last, state.runs, state.active,
-            state.below_since) == (frozenset({"torque"}), frozenset(), (("hookload", 1e6),),
-                                   (), frozenset(), 3.0)
+    state = SensorState(frozenset({"torque"}), active=frozenset({AlarmKind.SENSOR_RPM_FROZEN}),
+                        below_since=3.0)
+    assert (state.stale, state.announced, state.active, state.below_since) == (
+        frozenset({"torque"}), frozenset(), frozenset({"sensor_rpm_frozen"}), 3.0)
     assert state == replace(state) and hash(state) == hash(replace(state))
     assert pickle.loads(pickle.dumps(state)) == state
     with pytest.raises(dataclasses.FrozenInstanceError):

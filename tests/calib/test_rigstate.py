@@ -307,7 +307,8 @@ def test_detector_values_are_built_frozen_compared_and_copied_like_dataclasses()
     assert dataclasses.astuple(prior)[0] == 3.0 and prior.run == 1
     assert detection == Detection(prior.state, detection.steady, detection.velocity)
     assert repr(detection) == (f"Detection(state={prior.state!r}, steady=False, "
-                               f"velocity={detection.velocity!r})")
+                               f"velocity={detection.velocity!r}, suspect=frozenset(), "
+                               "frozen=())")
     for value, name in ((sample, "hookload"), (prior, "run"), (detection, "steady")):
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(value, name, None)

@@ -1,9 +1,10 @@
-"""The per-frame alarm step: hook load trending out of the monitor's band, stale and
-implausible sensors (the window-level alarms come from the estimator, `steps.calibrate`).
+"""The per-frame alarm step: hook load trending out of the monitor's band, stale, implausible
+and frozen sensors (the window-level alarms come from the estimator, `steps.calibrate`).
 
 Frame fields read: ``values`` (``hookload`` [N] and what the sensor checks look at),
 ``frame.stale``, ``frame.gap``, ``frame.state``/``frame.steady`` (from the rig-state step) and
-``frame.results["model"]`` (the monitor's band).
+``frame.results["model"]`` (the monitor's band); the rig-state step's detection of the frame
+(the channels it judges frozen, `tdmon.calib.rigstate.Detection.frozen`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from tdmon.calib.alarms import (
 )
 from tdmon.calib.windows import WindowSettings
 from tdmon.daemon.pipeline import Emit, Frame
-from tdmon.vocabulary import MOVING_STATES, RigState
+from tdmon.daemon.steps.rig_state import RigStateStep
+from tdmon.vocabulary import RigState
 
 __all__ = ["AlarmStep"]
 
@@ -37,23 +39,30 @@ def _value(values: dict[str, float], name: str) -> float | None:
 
 
 class AlarmStep:
-    """Step: per-frame alarms (band trend from the monitor's ``model`` message, sensors)."""
+    """Step: per-frame alarms (band trend from the monitor's ``model`` message, sensors; the
+    frozen channels of ``rig_state``'s detection of the same frame)."""
 
     name = "alarms"
 
     def __init__(self, band: BandSettings | None = None, sensors: SensorSettings | None = None,
-                 windows: WindowSettings | None = None) -> None:
+                 windows: WindowSettings | None = None, *,
+                 rig_state: RigStateStep | None = None) -> None:
         self.band = band or BandSettings()
         self.sensors = sensors or SensorSettings()
         self.windows = windows or WindowSettings()
+        self.rig_state = rig_state
         self.trend: dict[str, BandTrendState] = {}
         self.sensor_state = SensorState()
 
     def on_frame(self, frame: Frame, emit: Emit) -> None:
         rig_state = frame.state
+        detection = self.rig_state.last_detection if self.rig_state is not None else None
+        sample = self.rig_state.last_sample if self.rig_state is not None else None
+        frozen = (detection.frozen if detection is not None and sample is not None
+                  and sample.t == frame.t else ())
         self.sensor_state, alarms = sensor_alarms(
-            self.sensor_state, frame.t, frame.values, frame.stale,
-            rig_state in MOVING_STATES, self.sensors, frame.gap, frame.gap_reported)
+            self.sensor_state, frame.t, frame.values, frame.stale, frozen, self.sensors,
+            frame.gap, frame.gap_reported)
         for sensor_alarm in alarms:
             emit("alarm", sensor_alarm.to_message())
         subject = _BAND_SUBJECTS.get(rig_state)

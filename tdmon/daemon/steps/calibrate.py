@@ -105,6 +105,7 @@ class CalibrationStep:
         have learnt, later windows are solved with ``model``. The joint weight factor starts
         again from its prior: it measured the old string's weight against its model."""
         self.estimator = FrictionEstimator(model, self.estimator.settings)
+        self.rig_state.use_model(model)  # the in-slips margin weighs the new string
         windows = self.state.windows
         windows.profile.model = model
         if windows.mu_t is not None:

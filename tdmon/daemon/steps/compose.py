@@ -14,6 +14,7 @@ from tdmon.daemon.pipeline import Step
 from tdmon.daemon.steps.monitor import LoadModel, MonitorStep
 from tdmon.daemon.steps.rig_state import (
     RigStateStep,
+    StringWeight,
     calibration_thresholds,
     rig_state_thresholds,
 )
@@ -90,8 +91,10 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
     assert well_file is not None
     if well is None:
         well = well_file.well
-    rig_state = RigStateStep(calibration_thresholds(config, well.block_weight))
     model = WellModel(well)
+    # the in-slips margin scales with the string's modelled weight at the bit depth
+    rig_state = RigStateStep(calibration_thresholds(config, well.block_weight),
+                             string_weight=StringWeight(model))
     setup = mu_t_setup(config, well_file, model.grid)
     settings = CalibrationSettings(mu_t_mode=setup.mode,
                                    joint=joint_settings(config.calibration, well))
@@ -110,5 +113,5 @@ def calibration_steps_for(config: DaemonConfig, well: Any = None,
         assert setup.law is not None and setup.temperature is not None
         log.info("mu(T) calibration on: %s (%s mode) over %.1f-%.1f degC", setup.law.describe(),
                  setup.mode, float(np.min(setup.temperature)), float(np.max(setup.temperature)))
-    return rig_state, [calibration, AlarmStep(),
+    return rig_state, [calibration, AlarmStep(rig_state=rig_state),
                        profile_step(config, well_file, model.grid, setup, calibration)]
