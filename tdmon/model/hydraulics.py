@@ -58,6 +58,7 @@ __all__ = [
     "AnnularSections",
     "Regime",
     "SurgeSwab",
+    "WellHydraulics",
     "annulus_pressure_gradient",
     "bit_pressure_drop",
     "clinging_constant",
@@ -252,7 +253,7 @@ def clinging_constant(diameter_ratio: ArrayLike, turbulent: ArrayLike = False) -
     ``K = (alpha^2 - 1 - 2 alpha^2 ln alpha) / (2 (1 - alpha^2) ln alpha)`` of it over the
     annulus area: 0 for a thin wire, 1/2 for a narrow slot; it is Burkhardt's laminar curve
     [1] (Guo and Liu's fit ``0.275 alpha + 0.25``, eq. 2.81 in [2], is within 0.005 of it for
-    0.3 < alpha < 0.9). Turbulent flow: ``K = 0.1 alpha + 0.41``, Guo and Liu's fit of
+    0.4 < alpha < 0.75 and 0.017 for 0.3 < alpha < 0.9). Turbulent flow: ``K = 0.1 alpha + 0.41``, Guo and Liu's fit of
     Burkhardt's turbulent curve (eq. 2.82 in [2]).
 
     References
@@ -534,3 +535,45 @@ def critical_trip_speed(pressure_at: Callable[[float], float], allowed: float, *
     if pressure_at(max_speed) < allowed:
         return math.inf
     return float(brentq(lambda v: pressure_at(v) - allowed, 0.0, max_speed, xtol=1e-6))
+
+
+@dataclass(frozen=True)
+class WellHydraulics:
+    """What the hydraulics of a well need beyond its geometry and fluid density.
+
+    Attributes
+    ----------
+    rheology : the mud's rheology, or None: not known, and then no viscous drag, no annular
+        friction and no surge or swab are modelled (docs/hydraulics.md)
+    nozzle_area : the bit's total flow area [m^2], or None (not known: the bit's pressure drop
+        then comes from the standpipe pressure, if given; an open string without it is taken
+        as open-ended)
+    float_valve : a float valve above the bit: no fluid enters the string from below (a closed
+        string for surge and swab)
+    discharge_coefficient : of the nozzles [-]
+    pump_open_area : area on which the pressure drop across the bit pushes pressure-actuated
+        tools open (jars, shock subs) [m^2]; 0 when there are none
+    pore_density, fracture_density : the open hole's pore and fracture pressures as equivalent
+        densities [kg/m^3], or None: the limits of the trip speed
+    """
+
+    rheology: Rheology | None = None
+    nozzle_area: float | None = None
+    float_valve: bool = False
+    discharge_coefficient: float = DISCHARGE_COEFFICIENT
+    pump_open_area: float = 0.0
+    pore_density: float | None = None
+    fracture_density: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.nozzle_area is not None and not self.nozzle_area > 0.0:
+            raise ModelError(f"nozzle area must be > 0 m^2, got {self.nozzle_area}")
+        if not 0.0 < self.discharge_coefficient <= 1.0:
+            raise ModelError(f"discharge coefficient must be in (0, 1], got "
+                             f"{self.discharge_coefficient}")
+        if not self.pump_open_area >= 0.0:
+            raise ModelError(f"pump-open area must be >= 0 m^2, got {self.pump_open_area}")
+        if (self.pore_density is not None and self.fracture_density is not None
+                and not self.pore_density < self.fracture_density):
+            raise ModelError(f"pore density ({self.pore_density:g} kg/m^3) must be below the "
+                             f"fracture density ({self.fracture_density:g} kg/m^3)")
