@@ -435,12 +435,13 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
     n = 0  # pieces marched
     n_runs = 0
     # Aadnoy runs: the state at the run's bottom, each case's length-weighted friction and,
-    # with fluid terms, each operation's fluid force and the length-weighted weight
+    # with fluid terms, each operation's fluid force and the length-weighted shift of the
+    # weight (a run is one component: its weight plus the mean shift)
     run_force = forces.copy()
     run_torque = torques.copy()
     run_mu_length = np.zeros(n_case)
     run_fluid = np.zeros(n_op)
-    run_weight_length = 0.0
+    run_shift_length = 0.0
     run_md = lower
     run_tan = tb
     run_first = k
@@ -459,9 +460,11 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
             tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
         length = lower - upper
         weight = well.component_weight[comp]
+        shift = 0.0  # of the weight, by the densities
         if with_fluid:
-            weight += (well.component_outside_sensitivity[comp] * fluid[n_op, j]
-                       + well.component_inside_sensitivity[comp] * fluid[n_op + 1, j])
+            shift = (well.component_outside_sensitivity[comp] * fluid[n_op, j]
+                     + well.component_inside_sensitivity[comp] * fluid[n_op + 1, j])
+            weight += shift
         radius = well.component_radius[comp]
         if tape is not None:
             tape.piece_element[n] = j
@@ -496,7 +499,7 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
             if with_fluid:
                 for o in range(n_op):
                     run_fluid[o] += fluid[o, j] * length
-                run_weight_length += weight * length
+                run_shift_length += shift * length
             if tape is not None:
                 tape.piece_values[n, 0] = length
             component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
@@ -506,7 +509,7 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
                 run_length = run_md - upper
                 kind = well.curve_kind[j]
                 if with_fluid:
-                    weight = run_weight_length / run_length
+                    weight = well.component_weight[comp] + run_shift_length / run_length
                 if profile is not None:
                     _record_run(profile, run_first, k, run_force, run_torque, run_md, run_tan,
                                 run_mu_length, run_length, kind, axial_factors, torque_factors,
@@ -527,7 +530,7 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
                     run_mu_length[c] = 0.0
                 for o in range(n_op):
                     run_fluid[o] = 0.0
-                run_weight_length = 0.0
+                run_shift_length = 0.0
                 run_md = upper
                 run_tan = tt
                 run_first = k + 1

@@ -22,8 +22,8 @@ from tdmon.errors import ModelError
 __all__ = ["NO_FLUID", "FluidTerms", "pack_fluid"]
 
 NO_FLUID: NDArray[np.float64] = np.empty((0, 0))
-"""The kernels' fluid argument of a march without fluid terms (read only)."""
-NO_FLUID.setflags(write=False)
+"""The kernels' fluid argument of a march without fluid terms (never written; not flagged
+read-only, which numba would compile as another argument type)."""
 
 
 def _per_element(values: ArrayLike | None, what: str) -> NDArray[np.float64] | None:

@@ -253,8 +253,9 @@ def clinging_constant(diameter_ratio: ArrayLike, turbulent: ArrayLike = False) -
     ``K = (alpha^2 - 1 - 2 alpha^2 ln alpha) / (2 (1 - alpha^2) ln alpha)`` of it over the
     annulus area: 0 for a thin wire, 1/2 for a narrow slot; it is Burkhardt's laminar curve
     [1] (Guo and Liu's fit ``0.275 alpha + 0.25``, eq. 2.81 in [2], is within 0.005 of it for
-    0.4 < alpha < 0.75 and 0.017 for 0.3 < alpha < 0.9). Turbulent flow: ``K = 0.1 alpha + 0.41``, Guo and Liu's fit of
-    Burkhardt's turbulent curve (eq. 2.82 in [2]).
+    0.4 < alpha < 0.75 and 0.017 for 0.3 < alpha < 0.9). Turbulent flow:
+    ``K = 0.1 alpha + 0.41``, Guo and Liu's fit of Burkhardt's turbulent curve (eq. 2.82 in
+    [2]).
 
     References
     ----------

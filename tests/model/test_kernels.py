@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,8 @@ import pytest
 from tdmon.errors import ModelError
 from tdmon.model import _kernels, kernels
 from tdmon.model.broomstick import broomstick_from_model
-from tdmon.model.fluid_terms import NO_FLUID
+from tdmon.model.fluid_terms import NO_FLUID, FluidTerms
+from tdmon.model.string import DrillString
 from tdmon.model.survey import tangent_vectors
 from tdmon.model.torque_drag import WellModel, torque_drag
 from tdmon.model.well import Well
@@ -246,3 +248,43 @@ def test_evaluate_cases_equals_evaluate(three_d: Well) -> None:
         model.evaluate_cases("pick_up", 2500.0, np.where(cases > 0.5, np.nan, cases))
     with pytest.raises(ModelError, match="n_cases"):
         model.evaluate_cases("pick_up", 2500.0, cases[0])
+
+
+def _fluid_everything(model: WellModel, method: str) -> list[np.ndarray]:
+    """Every call with fluid terms: random axial forces per element and operation, a pill
+    inside and a heavier annulus, a jets' force at the bit."""
+    rng = np.random.default_rng(3)
+    n = model.n_elements
+    outside = 1300.0 + rng.uniform(0.0, 200.0, n)
+    inside = np.where(np.arange(n) % 50 < 20, 1800.0, 1300.0)
+    terms = {op: FluidTerms(axial=rng.normal(0.0, 20.0, n), bit_force=-2500.0,
+                            outside_density=outside, inside_density=inside)
+             for op in ("pick_up", "slack_off", "rotating")}
+    cases = np.stack([model.friction(mu) for mu in (0.1, 0.3)])
+    out: list[np.ndarray] = []
+    for depth in (777.0, 2999.0):
+        for operation, fluid in terms.items():
+            out.append(np.array(model.evaluate(operation, depth, 0.23, method=method,
+                                               fluid=fluid)))
+            out.append(np.concatenate(model.evaluate_cases(operation, depth, cases,
+                                                           method=method, fluid=fluid)))
+            value, gradient = model.evaluate_gradient(operation, depth, cases[1],
+                                                      method=method, fluid=fluid)
+            out.append(np.append(gradient, value))
+        loads = model.loads(depth, 0.23, method=method, operations=list(terms), fluid=terms)
+        out.extend([*loads.axial_force.values(), *loads.torque.values()])
+    return out
+
+
+@pytest.mark.parametrize("method", ["soft-string", "aadnoy"])
+def test_the_engines_agree_with_fluid_terms(three_d: Well, method: str) -> None:
+    components = tuple(replace(c, buoyed_weight=None, weight_in_air=1.2 * c.buoyed_weight)
+                       for c in three_d.string.components)
+    well = replace(three_d, string=DrillString(components))
+    compiled, plain = WellModel(well, engine="numba"), WellModel(well, engine="python")
+    got, expected = _fluid_everything(compiled, method), _fluid_everything(plain, method)
+    assert len(got) == len(expected) == 30
+    for one, other in zip(got, expected, strict=True):
+        assert one.tolist() == other.tolist()  # bit for bit
+    without = compiled.evaluate("pick_up", 2999.0, 0.23, method=method)
+    assert got[6][0] != without[0]  # the terms did something
