@@ -45,7 +45,6 @@ from typing import Final, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq
 
 from tdmon.errors import ModelError
 from tdmon.model.rheology import Rheology
@@ -512,6 +511,8 @@ def _open_string_inflow(sections: AnnularSections, rheology: Rheology, speed: fl
     low, high = min(0.0, most), max(0.0, most)
     if imbalance(low) * imbalance(high) > 0.0:
         return 0.0
+    from scipy.optimize import brentq  # lazy: model.well imports this module
+
     return float(brentq(imbalance, low, high, xtol=1e-12, rtol=1e-10))
 
 
@@ -535,6 +536,8 @@ def critical_trip_speed(pressure_at: Callable[[float], float], allowed: float, *
         return 0.0
     if pressure_at(max_speed) < allowed:
         return math.inf
+    from scipy.optimize import brentq  # lazy: model.well imports this module
+
     return float(brentq(lambda v: pressure_at(v) - allowed, 0.0, max_speed, xtol=1e-6))
 
 
