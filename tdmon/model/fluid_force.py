@@ -357,8 +357,11 @@ class HydraulicModel:
         hydraulics = self.hydraulics
         if hydraulics.rheology is None:
             return TripSpeedLimits(math.nan, math.nan)
-        densities = {"outside_density": outside_density, "inside_density": inside_density}
-        at_rest = self.forces(bit_depth, 0.0, **densities)
+        def at(speed: float) -> FluidForces:
+            return self.forces(bit_depth, speed, outside_density=outside_density,
+                               inside_density=inside_density)
+
+        at_rest = at(0.0)
         running_in = pulling_out = math.nan
         if hydraulics.fracture_density is not None:
             limits = []
@@ -368,13 +371,16 @@ class HydraulicModel:
                 if not math.isfinite(static):
                     continue
                 allowed = hydraulics.fracture_density * GRAVITY * tvd - static
-                limits.append(critical_trip_speed(
-                    lambda v, w=where: getattr(self.forces(bit_depth, v, **densities),
-                                               f"surge_at_{w}"), allowed, max_speed=max_speed))
+                name = f"surge_at_{where}"
+
+                def surge(speed: float, name: str = name) -> float:
+                    return float(getattr(at(speed), name))
+
+                limits.append(critical_trip_speed(surge, allowed, max_speed=max_speed))
             running_in = min(limits)
         if hydraulics.pore_density is not None:
             allowed = at_rest.static_at_bit - hydraulics.pore_density * GRAVITY * at_rest.tvd_at_bit
             pulling_out = critical_trip_speed(
-                lambda v: -self.forces(bit_depth, -v, **densities).surge_at_bit, allowed,
+                lambda v: -at(-v).surge_at_bit, allowed,
                 max_speed=max_speed)
         return TripSpeedLimits(running_in, pulling_out)

@@ -29,10 +29,11 @@ read-only, which numba would compile as another argument type)."""
 def _per_element(values: ArrayLike | None, what: str) -> NDArray[np.float64] | None:
     if values is None:
         return None
-    array = np.ascontiguousarray(values, dtype=np.float64)
-    if array.ndim != 1 or not np.all(np.isfinite(array)):
+    array = np.array(values, dtype=np.float64, order="C")  # a copy, then read only: a
+    if array.ndim != 1 or not np.all(np.isfinite(array)):  # WellModel keeps it packed
         raise ModelError(f"{what} must be a 1-D array of finite numbers, one per hole-grid "
                          f"element, got shape {array.shape}")
+    array.setflags(write=False)
     return array
 
 
@@ -49,6 +50,8 @@ class FluidTerms:
         reaction while circulating is negative: it pushes the string up)
     outside_density, inside_density : fluid density outside and inside the string on each
         element [kg/m^3], or None (the well's fluid): they buoy each piece's weight by eq 36
+
+    The arrays are copies of those given, read only.
     """
 
     axial: NDArray[np.float64] | None = None

@@ -228,6 +228,7 @@ class WellModel:
         self._depth_above = float(self.node_md[0]) + _DEPTH_TOLERANCE
         self._depth_down_to = min(float(string.length), float(self.node_md[-1]))
         self._uniform: dict[float, NDArray[np.float64]] = {}
+        self._last_fluid: tuple[tuple[FluidTerms | None, ...], NDArray[np.float64]] | None = None
 
     @property
     def n_elements(self) -> int:
@@ -266,8 +267,19 @@ class WellModel:
         return uniform
 
     def kernel_fluid(self, terms: Sequence[FluidTerms | None]) -> NDArray[np.float64]:
-        """The element loop's fluid argument of a march of these operations' terms."""
-        return pack_fluid(terms, self.n_elements, *self._fluid_densities)
+        """The element loop's fluid argument of a march of these operations' terms.
+
+        The last one packed is kept with the terms it came from (their arrays are read only):
+        a sample's terms are evaluated many times over (the back-calculation's iterations),
+        and packing n_elements values costs more than a shallow march."""
+        key = tuple(terms)
+        last = self._last_fluid
+        if last is not None and len(last[0]) == len(key) and all(
+                a is b for a, b in zip(last[0], key, strict=True)):
+            return last[1]
+        packed = pack_fluid(key, self.n_elements, *self._fluid_densities)
+        self._last_fluid = (key, packed)
+        return packed
 
     def _kernel_friction(self, mu: float | ArrayLike | None) -> NDArray[np.float64]:
         """`friction` for the kernels: a uniform one is shared, not copied (they only read)."""

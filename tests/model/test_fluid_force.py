@@ -350,3 +350,19 @@ def test_zero_fluid_terms_change_no_bit(model: WellModel) -> None:
         without = model.loads(3100.0, 0.27, method=method)
         for name, force in without.axial_force.items():
             assert force.tolist() == with_terms.axial_force[name].tolist()
+
+
+def test_terms_are_packed_once_and_kept_from_the_caller_s_edits(model: WellModel) -> None:
+    n = model.n_elements
+    axial = np.full(n, 15.0)
+    terms = FluidTerms(axial=axial)
+    assert terms.axial is not None and not terms.axial.flags.writeable
+    first = model.evaluate("pick_up", 3000.0, 0.2, fluid=terms)
+    packed = model.kernel_fluid((terms,))
+    assert model.kernel_fluid((terms,)) is packed  # kept while the same terms come
+    axial[:] = 1000.0  # the caller's array: the terms hold a copy
+    assert model.evaluate("pick_up", 3000.0, 0.2, fluid=terms) == first
+    other = FluidTerms(axial=axial)
+    assert model.kernel_fluid((other,)) is not packed
+    assert model.evaluate("pick_up", 3000.0, 0.2, fluid=other)[0] > first[0] + 1e6
+    assert model.kernel_fluid((terms, None)).shape == (4, n)
