@@ -228,7 +228,8 @@ class WellModel:
         self._depth_above = float(self.node_md[0]) + _DEPTH_TOLERANCE
         self._depth_down_to = min(float(string.length), float(self.node_md[-1]))
         self._uniform: dict[float, NDArray[np.float64]] = {}
-        self._last_fluid: tuple[tuple[FluidTerms | None, ...], NDArray[np.float64]] | None = None
+        self._last_fluid: tuple[tuple[int, ...], tuple[FluidTerms | None, ...],
+                                NDArray[np.float64]] | None = None
 
     @property
     def n_elements(self) -> int:
@@ -272,13 +273,13 @@ class WellModel:
         The last one packed is kept with the terms it came from (their arrays are read only):
         a sample's terms are evaluated many times over (the back-calculation's iterations),
         and packing n_elements values costs more than a shallow march."""
-        key = tuple(terms)
+        ids = tuple(map(id, terms))
         last = self._last_fluid
-        if last is not None and len(last[0]) == len(key) and all(
-                a is b for a, b in zip(last[0], key, strict=True)):
-            return last[1]
-        packed = pack_fluid(key, self.n_elements, *self._fluid_densities)
-        self._last_fluid = (key, packed)
+        if last is not None and last[0] == ids:
+            return last[2]
+        kept = tuple(terms)  # held with their ids: no other object takes one while kept
+        packed = pack_fluid(kept, self.n_elements, *self._fluid_densities)
+        self._last_fluid = (ids, kept, packed)
         return packed
 
     def _kernel_friction(self, mu: float | ArrayLike | None) -> NDArray[np.float64]:
