@@ -5,6 +5,13 @@ The case (docs/reference-values.md §6): a 6000 m well, vertical to 1000 m, buil
 1.2 s.g. mud, friction 0.25; survey and elements every 1 m; 20 bit depths. At each depth:
 pick-up and slack-off hook load and rotating off-bottom torque.
 
+With the fluid terms (docs/hydraulics.md): the same well with a 65/40 Fann mud, its fluid
+forces for a trip out at 0.5 m/s and densities on every element (a pill in the string); one
+pick-up evaluation at TD and one of the kernel's fixed cost (the bit one element deep), each
+with the terms on and off. ``--fluid-only`` runs just these (no peers needed):
+
+    benchmarks/.venv/bin/python benchmarks/bench_torque_drag.py --fluid-only --steps 1
+
 Run it in the benchmark's own virtualenv (see benchmarks/README.md):
 
     benchmarks/setup.sh
@@ -28,6 +35,10 @@ from typing import Any
 import numpy as np
 
 from tdmon.model.broomstick import broomstick, broomstick_from_model
+from tdmon.model.fluid_force import HydraulicModel
+from tdmon.model.fluid_terms import FluidTerms
+from tdmon.model.hydraulics import WellHydraulics
+from tdmon.model.rheology import from_fann
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.survey import minimum_curvature
 from tdmon.model.torque_drag import WellModel
@@ -72,13 +83,79 @@ def best_of(function: Callable[[], Any], repeat: int) -> tuple[float, Any]:
 # --- tdmon ---------------------------------------------------------------------------------
 
 
-def tdmon_well(step: float) -> Well:
+def tdmon_well(step: float, hydraulics: WellHydraulics | None = None) -> Well:
     md, inc, azi = trajectory(step)
     string = DrillString((StringComponent("5in DP", TOTAL_DEPTH, PIPE_OD_IN * INCH,
                                           PIPE_ID_IN * INCH),))
     return Well(minimum_curvature(md, inc, azi), string,
                 (HoleSection(0.0, TOTAL_DEPTH, HOLE_IN * INCH, "open", FRICTION),),
-                Fluid(MUD_SG * 1000.0), element_length=step)
+                Fluid(MUD_SG * 1000.0), element_length=step,
+                hydraulics=hydraulics or WellHydraulics())
+
+
+def per_call(function: Callable[[], Any], repeat: int, calls: int = 200) -> float:
+    """Smallest mean wall time of one call over ``repeat`` batches of ``calls`` [s]."""
+    best = math.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for _ in range(calls):
+            function()
+        best = min(best, (time.perf_counter() - start) / calls)
+    return best
+
+
+def run_fluid(step: float, repeat: int) -> dict[str, Any]:
+    """One pick-up evaluation with the fluid terms off and on, at TD and at the shallowest
+    depth (the kernel's fixed cost), interleaved off, on, off, on (the best of each kept)."""
+    well = tdmon_well(step, WellHydraulics(rheology=from_fann(65.0, 40.0)))
+    model = WellModel(well)
+    n = model.n_elements
+    inside = np.where((model.node_md[:-1] > 500.0) & (model.node_md[:-1] < 800.0), 1800.0,
+                      MUD_SG * 1000.0)
+    hydraulic = HydraulicModel(well, model.grid)
+    hydraulic.forces(TOTAL_DEPTH, -0.5, inside_density=inside)  # imports scipy
+    hydraulics_s, forces = best_of(
+        lambda: hydraulic.forces(TOTAL_DEPTH, -0.5, inside_density=inside), repeat)
+    terms = FluidTerms(axial=forces.terms.axial, bit_force=forces.terms.bit_force,
+                       outside_density=np.full(n, MUD_SG * 1000.0), inside_density=inside)
+    shallow = float(model.node_md[1])
+    calls = {
+        "td_off": lambda: model.evaluate("pick_up", TOTAL_DEPTH, FRICTION),
+        "td_on": lambda: model.evaluate("pick_up", TOTAL_DEPTH, FRICTION, fluid=terms),
+        "fixed_off": lambda: model.evaluate("pick_up", shallow, FRICTION),
+        "fixed_on": lambda: model.evaluate("pick_up", shallow, FRICTION, fluid=terms),
+    }
+    for call in calls.values():
+        call()  # loads the kernels
+    best = dict.fromkeys(calls, math.inf)
+    for _ in range(2):  # A B A B
+        for name, call in calls.items():
+            best[name] = min(best[name], per_call(call, max(repeat // 2, 1)))
+    off, _ = model.evaluate("pick_up", TOTAL_DEPTH, FRICTION)
+    on, _ = model.evaluate("pick_up", TOTAL_DEPTH, FRICTION, fluid=terms)
+    return {"n_elements": n, "hydraulics_s": hydraulics_s, "swab_at_bit_Pa": forces.surge_at_bit,
+            "pick_up_off_N": off, "pick_up_on_N": on, **{f"{k}_s": v for k, v in best.items()}}
+
+
+def fluid_report(result: dict[str, Any]) -> str:
+    td = result["td_on_s"] / result["td_off_s"]
+    fixed = result["fixed_on_s"] / result["fixed_off_s"]
+    return "\n".join([
+        f"Fluid terms ({result['n_elements']} elements; trip out at 0.5 m/s, 65/40 Fann mud, "
+        f"a 1800 kg/m3 pill inside; swab at the bit {result['swab_at_bit_Pa'] / 1e5:.2f} bar, "
+        f"pick-up at TD {result['pick_up_off_N'] / 1e3:.1f} kN off, "
+        f"{result['pick_up_on_N'] / 1e3:.1f} kN on):",
+        "",
+        "| one pick-up evaluation | terms off | terms on | on / off |",
+        "|---|---|---|---|",
+        f"| bit at TD | {result['td_off_s'] * 1e3:.3f} ms | {result['td_on_s'] * 1e3:.3f} ms | "
+        f"{td:.2f} |",
+        f"| bit one element deep (fixed cost) | {result['fixed_off_s'] * 1e6:.1f} us | "
+        f"{result['fixed_on_s'] * 1e6:.1f} us | {fixed:.2f} |",
+        "",
+        f"The fluid forces themselves (HydraulicModel.forces, once per sample, not per "
+        f"evaluation): {result['hydraulics_s'] * 1e3:.1f} ms. A FluidTerms is packed for the "
+        f"loop once (WellModel keeps the last): the fixed cost above is that of the march."])
 
 
 def run_tdmon(step: float, repeat: int) -> dict[str, Any]:
@@ -244,14 +321,19 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=5, help="timed repetitions (best kept)")
     parser.add_argument("--steps", default="1,30", help="survey/element spacings [m]")
     parser.add_argument("--json", help="write all numbers to this file")
+    parser.add_argument("--fluid-only", action="store_true",
+                        help="only the fluid terms' cost, without the peers")
     args = parser.parse_args()
     print(f"Python {platform.python_version()} on {platform.machine()}, "
           f"numpy {np.__version__}; best of {args.repeat} runs\n")
-    everything = {}
+    everything: dict[str, Any] = {}
     for step in (float(s) for s in args.steps.split(",")):
-        results = run(step, args.repeat)
+        results = {} if args.fluid_only else run(step, args.repeat)
+        results["tdmon fluid terms"] = run_fluid(step, args.repeat)
         everything[f"{step:g}"] = results
-        print(report(step, results), "\n")
+        if not args.fluid_only:
+            print(report(step, {k: v for k, v in results.items() if k != "tdmon fluid terms"}))
+        print(fluid_report(results["tdmon fluid terms"]), "\n")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as handle:
             json.dump(everything, handle, indent=1)

@@ -36,6 +36,8 @@ from tdmon.config.thermal import FrictionModelConfig, TemperatureConfig
 from tdmon.errors import ConfigError, ModelError
 from tdmon.model.friction import local_friction
 from tdmon.model.hookload_sensor import HookloadSensor, SensorLocation
+from tdmon.model.hydraulics import WellHydraulics, nozzle_area
+from tdmon.model.rheology import Rheology, from_fann, from_pv_yp
 from tdmon.model.string import STEEL_DENSITY, DrillString, StringComponent, weight_per_length
 from tdmon.model.survey import Survey, minimum_curvature
 from tdmon.model.temperature import WellboreTemperature
@@ -164,6 +166,75 @@ class FluidConfig(StrictModel):
     buoyancy_factor: Dimensionless | None = Field(default=None, gt=0, le=1)
 
 
+Area = Annotated[float, quantity("m^2")]
+Viscosity = Annotated[float, quantity("Pa*s")]
+
+
+class HydraulicsConfig(StrictModel):
+    """``[hydraulics]``: the mud's rheology, the bit's nozzles, a float valve and the open
+    hole's pressure window (docs/hydraulics.md; :class:`tdmon.model.hydraulics.WellHydraulics`).
+
+    The rheology is the Fann 600 and 300 rpm dial readings (``fann_600``, ``fann_300``) or the
+    plastic viscosity and yield point (``plastic_viscosity``, ``yield_point``), read into
+    ``rheology_model`` (``bingham`` or ``power_law``). Without either pair the rheology is not
+    known and no viscous drag, surge or swab is modelled. The bit's flow area is ``nozzles``
+    (their diameters) or ``nozzle_area`` (the total flow area), not both."""
+
+    rheology_model: Literal["bingham", "power_law"] = "bingham"
+    fann_600: Dimensionless | None = Field(default=None, gt=0)
+    fann_300: Dimensionless | None = Field(default=None, gt=0)
+    plastic_viscosity: Viscosity | None = Field(default=None, gt=0)
+    yield_point: Pressure | None = Field(default=None, ge=0)
+    nozzles: list[Diameter] | None = Field(default=None, min_length=1)
+    nozzle_area: Area | None = Field(default=None, gt=0)
+    discharge_coefficient: Dimensionless = Field(default=0.95, gt=0, le=1)
+    float_valve: bool = False
+    pump_open_area: Area = Field(default=0.0, ge=0)
+    pore_density: Density | None = Field(default=None, gt=0)
+    fracture_density: Density | None = Field(default=None, gt=0)
+
+    @field_validator("nozzles")
+    @classmethod
+    def _positive(cls, nozzles: list[float] | None) -> list[float] | None:
+        if nozzles is not None and not all(d > 0.0 for d in nozzles):
+            raise ValueError(f"every nozzle diameter must be > 0 m, got {nozzles}")
+        return nozzles
+
+    @model_validator(mode="after")
+    def _pairs(self) -> HydraulicsConfig:
+        for first, second in (("fann_600", "fann_300"), ("plastic_viscosity", "yield_point")):
+            if (getattr(self, first) is None) != (getattr(self, second) is None):
+                missing = first if getattr(self, first) is None else second
+                raise CrossFieldError(missing, f"missing key (give both {first} and {second})")
+        if self.fann_600 is not None and self.plastic_viscosity is not None:
+            raise ValueError("give the Fann readings or plastic_viscosity and yield_point, "
+                             "not both")
+        if self.nozzles is not None and self.nozzle_area is not None:
+            raise ValueError("give 'nozzles' or 'nozzle_area', not both")
+        if (self.pore_density is not None and self.fracture_density is not None
+                and not self.pore_density < self.fracture_density):
+            raise ValueError(f"pore_density ({self.pore_density:g} kg/m3) must be below "
+                             f"fracture_density ({self.fracture_density:g} kg/m3)")
+        return self
+
+    def rheology(self) -> Rheology | None:
+        """The mud's rheology, or None when the file gives none."""
+        if self.fann_600 is not None and self.fann_300 is not None:
+            return from_fann(self.fann_600, self.fann_300, self.rheology_model)
+        if self.plastic_viscosity is not None and self.yield_point is not None:
+            return from_pv_yp(self.plastic_viscosity, self.yield_point, self.rheology_model)
+        return None
+
+    def to_model(self) -> WellHydraulics:
+        area = nozzle_area(self.nozzles) if self.nozzles is not None else self.nozzle_area
+        return WellHydraulics(rheology=self.rheology(), nozzle_area=area,
+                              float_valve=self.float_valve,
+                              discharge_coefficient=self.discharge_coefficient,
+                              pump_open_area=self.pump_open_area,
+                              pore_density=self.pore_density,
+                              fracture_density=self.fracture_density)
+
+
 class LimitsConfig(StrictModel):
     safety_factor: Dimensionless = Field(default=1.0, ge=1.0)
     helical_factor: Dimensionless = Field(default=math.sqrt(2.0), gt=1.0)
@@ -206,6 +277,7 @@ class WellConfig(StrictModel):
     string: list[StringComponentConfig] = Field(min_length=1)
     string_defaults: StringDefaultsConfig = StringDefaultsConfig()
     fluid: FluidConfig = FluidConfig()
+    hydraulics: HydraulicsConfig = HydraulicsConfig()
     limits: LimitsConfig = LimitsConfig()
     temperature: TemperatureConfig | None = None
     hookload_sensor: HookloadSensorConfig = HookloadSensorConfig()
@@ -290,7 +362,14 @@ class WellConfig(StrictModel):
             ),
             name=self.well.name,
             hookload_sensor=self.hookload_sensor.to_model(),
+            hydraulics=self._hydraulics(str(source)),
         )
+
+    def _hydraulics(self, source: str) -> WellHydraulics:
+        try:
+            return self.hydraulics.to_model()
+        except ModelError as exc:  # Fann readings no fluid of the model fits
+            raise ConfigError(source, "hydraulics", str(exc)) from exc
 
     def _components(self, source: str, hole_bottom: float) -> tuple[StringComponent, ...]:
         """The model's components: "rest" resolved, the string defaults and the buoyancy

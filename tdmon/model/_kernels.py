@@ -18,16 +18,18 @@ piece are written once, in `_soft_string_piece` (weight and friction of the soft
 `_aadnoy_run` (Aadnoy's closed forms over a run); the adjoint's backward pass reruns
 `_soft_string_piece` for the values it differentiates.
 
-Where a new force term goes (docs/architecture.md): an extra axial force per element (issue 30's
-pressure-area and viscous drag, computed outside the loops from the mud and the block speed) is
-added where the weight enters, ``axial_weight`` in `_soft_string_piece` and next to the weight
-terms of `_aadnoy_run`'s closed forms, and reaches them as one more argument of `_march`, per
-element (and per operation, for drag that follows the motion). In the soft string it adds
+The fluid terms (docs/hydraulics.md) are one more argument of `_march`, ``fluid``: an axial
+force per metre of every element and operation (the mud's viscous drag on the moving pipe and
+the annular flow's, computed outside the loops from the mud and the block speed), added where
+the weight enters, ``axial_weight`` in `_soft_string_piece` and with the weight's lift in
+`_aadnoy_run`'s closed forms; and the densities outside and inside the string at every element,
+which move a piece's buoyed weight (read once, in `_march`: the component's weight plus its
+sensitivities times the element's density shifts). In the soft string the axial force adds
 nothing to the adjoint's derivatives (it depends on neither the force nor the friction) and the
-backward pass gets its values through the rerun piece; in Aadnoy's closed forms
-`_aadnoy_run_adjoint` takes it where it takes the weight's lift. A piece's buoyed weight and
-radius are read once, in `_march` (per component today; a weight that varies with the densities
-inside and outside each element changes that read), and the adjoint takes them from its tape.
+backward pass gets its values through the rerun piece; `_aadnoy_run_adjoint` takes it where it
+takes the weight's lift. The adjoint reads each piece's weight, radius and fluid force from its
+tape. Without fluid terms (an empty array, checked once per march) every step is the one of a
+march without them, bit for bit.
 The bit's force and torque (WOB, bit torque) are the march's starting values, ``bit_forces`` and
 ``bit_torques``. What a sensor reads of the top force (sheave efficiency, dead-line sensor,
 block acceleration) is not the loops' business: `WellModel` adds the block weight to the top
@@ -155,14 +157,16 @@ def element_geometry(node_md, tangents):
 
 _WellArrays = namedtuple("_WellArrays", [
     "node_md", "tangents", "dogleg", "curve_kind", "run_break", "element_kk", "element_ke",
-    "element_ee", "element_dtvd", "component_top", "component_weight", "component_radius"])
+    "element_ee", "element_dtvd", "component_top", "component_weight", "component_radius",
+    "component_outside_sensitivity", "component_inside_sensitivity"])
 
 # the index buffer starts with the sizes: nodes, elements, components
 _HEADER = 3
 
 
 def pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
-              component_weight, component_radius):
+              component_weight, component_radius, component_outside_sensitivity,
+              component_inside_sensitivity):
     """Pack a well's arrays into the two buffers every entry point takes, and add the whole
     elements' `piece_geometry`.
 
@@ -170,17 +174,20 @@ def pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
     ``dogleg`` (n_elements,) [rad], ``curve_kind`` (n_elements,) (`STRAIGHT`, `PLANAR_BUILD`,
     `GENERAL_CURVE`), ``run_break`` (n_nodes,) where an Aadnoy run ends. String, bit first:
     ``component_top`` (n_components,) cumulative top from the bit [m], ``component_weight``
-    buoyed weight per length [N/m], ``component_radius`` friction radius of the torque [m].
+    buoyed weight per length [N/m], ``component_radius`` friction radius of the torque [m],
+    ``component_outside_sensitivity`` and ``component_inside_sensitivity`` the change of the
+    buoyed weight per unit of the fluid density outside and inside [N/m per kg/m^3] (what a
+    per-element density in a march's fluid terms changes; 0 for a weight given buoyed).
     Every array C-contiguous, float64 but ``curve_kind`` (int64) and ``run_break`` (bool).
 
     Returns ``(real, index)``: float64 node MD, tangents, dogleg, the elements' kk, ke, ee,
-    dtvd and the three component arrays, in this order; int64 sizes (`_HEADER`), curve kinds
+    dtvd and the five component arrays, in this order; int64 sizes (`_HEADER`), curve kinds
     and run breaks (0 or 1).
     """
     n_nodes = node_md.size
     n_elements = dogleg.size
     n_components = component_top.size
-    real = np.empty(4 * n_nodes + 5 * n_elements + 3 * n_components)
+    real = np.empty(4 * n_nodes + 5 * n_elements + 5 * n_components)
     index = np.empty(_HEADER + n_elements + n_nodes, dtype=np.int64)
     index[0] = n_nodes
     index[1] = n_elements
@@ -188,7 +195,8 @@ def pack_well(node_md, tangents, dogleg, curve_kind, run_break, component_top,
     kk, ke, ee, dtvd = element_geometry(node_md, tangents)
     at = 0
     for part in (node_md, tangents.ravel(), dogleg, kk, ke, ee, dtvd, component_top,
-                 component_weight, component_radius):
+                 component_weight, component_radius, component_outside_sensitivity,
+                 component_inside_sensitivity):
         real[at:at + part.size] = part
         at += part.size
     index[_HEADER:_HEADER + n_elements] = curve_kind
@@ -211,7 +219,8 @@ def _unpack(real, index):
         real[:n_nodes], real[t:d].reshape((n_nodes, 3)), real[d:g], index[_HEADER:k],
         index[k:k + n_nodes], real[g:g + n_el], real[g + n_el:g + 2 * n_el],
         real[g + 2 * n_el:g + 3 * n_el], real[g + 3 * n_el:c], real[c:c + n_comp],
-        real[c + n_comp:c + 2 * n_comp], real[c + 2 * n_comp:c + 3 * n_comp])
+        real[c + n_comp:c + 2 * n_comp], real[c + 2 * n_comp:c + 3 * n_comp],
+        real[c + 3 * n_comp:c + 4 * n_comp], real[c + 4 * n_comp:c + 5 * n_comp])
 
 
 def all_finite_non_negative(values):
@@ -231,10 +240,15 @@ def _normal_force(force, weight, kk, ke, ee):
     return math.sqrt(squared) if squared > 0.0 else 0.0
 
 
-def _soft_string_piece(force, kk, ke, ee, dtvd, weight, axial_mu):
+def _soft_string_piece(force, kk, ke, ee, dtvd, weight, axial_mu, fluid):
     """One piece of the 3D soft-string march: returns (force at the top, normal force, and the
     two intermediate values the adjoint needs: the normal force at the bottom, the predicted
     force at the top).
+
+    ``fluid`` is the piece's axial fluid force [N] (tension positive at the top: the viscous
+    drag of the mud on the moving pipe), added to the weight's axial part; it bends nothing, so
+    it is not in the contact force's weight term. Exactly 0.0 adds nothing, not even a
+    rounding: the march without fluid terms is the march of before, bit for bit.
 
     The contact force is ``N = |F (t_b - t_t) + W (e_z - (e_z . t_m) t_m)|``, the vector form of
     Johancsik's ``sqrt((F dphi sin a)^2 + (F da + W sin a)^2)`` with ``da = a_top - a_bottom``;
@@ -242,6 +256,8 @@ def _soft_string_piece(force, kk, ke, ee, dtvd, weight, axial_mu):
     averaged over the piece (Heun's predictor-corrector) rather than taken at the bottom.
     """
     axial_weight = weight * dtvd
+    if fluid != 0.0:
+        axial_weight += fluid
     n_bottom = _normal_force(force, weight, kk, ke, ee)
     predicted = force + axial_weight + axial_mu * n_bottom
     n_top = _normal_force(predicted, weight, kk, ke, ee)
@@ -263,22 +279,32 @@ def _run_geometry(top, bottom):
 
 
 def _aadnoy_run(force, torque, geometry, length, kind, mu, axial_factor, torque_factor, weight,
-                radius):
+                radius, fluid):
     """Closed-form step over one run (arc or straight) as Aadnoy publishes it; ``geometry`` is
     `_run_geometry`'s.
 
     Straight: eq 42 and eq 45 of the thesis. Planar build (inclination rising with depth):
     Tables 20-22 of the thesis, generalised from (0, alpha) to (a_top, a_bottom). Any other arc:
     Aadnoy, Fazaelizadeh and Hareland (2010), tension dominated.
+
+    ``fluid``, the run's axial fluid force [N], goes where the formulas take the weight's
+    lift: next to ``w L cos a`` on a straight run and to the lift of the 2010 arc formula (not
+    amplified), and into the lift of the build formulas, i.e. onto the run's bottom force,
+    which the capstan factor amplifies (the slack-off formula has no lift of its own: the fluid
+    force joins the bottom force there too). Exactly 0.0 adds nothing.
     """
     top_inc, bottom_inc, theta, cos_mean, sin_mean = geometry
     mu_axial = axial_factor * mu
     mu_torque = torque_factor * mu
     if theta < _STRAIGHT_DOGLEG:
         new_force = force + weight * length * (cos_mean + mu_axial * sin_mean)
+        if fluid != 0.0:
+            new_force += fluid
         new_torque = torque + mu_torque * weight * length * radius * sin_mean
         return new_force, new_torque
     if kind == PLANAR_BUILD and bottom_inc > top_inc:
+        if fluid != 0.0:
+            force = force + fluid
         sweep = bottom_inc - top_inc
         wr = weight * length / sweep
         lift = wr * (math.sin(bottom_inc) - math.sin(top_inc))
@@ -300,6 +326,8 @@ def _aadnoy_run(force, torque, geometry, length, kind, mu, axial_factor, torque_
         lift = weight * length * (math.sin(bottom_inc) - math.sin(top_inc)) / (bottom_inc - top_inc)
     else:
         lift = weight * length * math.cos(bottom_inc)
+    if fluid != 0.0:
+        lift += fluid
     new_force = force * math.exp(mu_axial * theta) + lift
     new_torque = torque + mu_torque * radius * abs(force) * theta
     return new_force, new_torque
@@ -311,16 +339,26 @@ def _aadnoy_run(force, torque, geometry, length, kind, mu, axial_factor, torque_
 # - a profile: per recorded node (bit first) its MD, the index of the component below it, its
 #   unit tangent, and per (case, operation) the axial force and torque there;
 # - a tape, for the adjoint of one case and one operation: per piece its element, the force at
-#   its bottom and (kk, ke, ee, dtvd, weight, radius) for the soft string or its length in
-#   column 0 for Aadnoy; per Aadnoy run its first piece (and, after the last run, one past the
-#   last piece), curve kind, the force at its bottom and (top inclination, bottom inclination,
-#   dogleg, cosine and sine of the mean inclination, length, friction, weight, radius). The
-#   backward pass reads the weight and radius the forward pass used from the tape.
+#   its bottom and (kk, ke, ee, dtvd, weight, radius, fluid force) for the soft string or its
+#   length in column 0 for Aadnoy; per Aadnoy run its first piece (and, after the last run,
+#   one past the last piece), curve kind, the force at its bottom and (top inclination, bottom
+#   inclination, dogleg, cosine and sine of the mean inclination, length, friction, weight,
+#   radius, fluid force). The backward pass reads what the forward pass used from the tape.
+#
+# The fluid terms of a march (docs/hydraulics.md) arrive as one array ``fluid``: empty (0, 0)
+# when there are none, else (n_op + 2, n_elements): per operation the axial fluid force per
+# metre of every element [N/m] (tension positive at the top), then the shift of the density
+# outside and inside the string at every element from the well's fluid [kg/m^3], which moves
+# a piece's buoyed weight by the component's sensitivities. Whether there are any is read
+# once per march; without them every piece takes the steps of a march without fluid terms.
 
 _Profile = namedtuple("_Profile", ["md", "component", "tangent", "force", "torque"])
 _Tape = namedtuple("_Tape", [
     "piece_element", "piece_force", "piece_values", "run_first", "run_kind", "run_force",
     "run_values"])
+
+NO_FLUID = np.empty((0, 0))
+"""The fluid terms of a march without any (see the comment above)."""
 
 
 def _record(profile, k, md, comp, tangent, forces, torques):
@@ -336,22 +374,27 @@ def _record(profile, k, md, comp, tangent, forces, torques):
 
 
 def _record_run(profile, first, last, run_force, run_torque, run_md, run_tan, run_mu_length,
-                run_length, kind, axial_factors, torque_factors, weight, radius):
+                run_length, kind, axial_factors, torque_factors, weight, radius, run_fluid):
     """The loads at the nodes ``first`` to ``last - 1`` recorded inside a closed Aadnoy run:
-    the run's closed form from its bottom state to each node, with the whole run's friction."""
+    the run's closed form from its bottom state to each node, with the whole run's friction
+    and its fluid force per metre."""
     for i in range(first, last):
         node_tan = (profile.tangent[i, 0], profile.tangent[i, 1], profile.tangent[i, 2])
         geometry = _run_geometry(node_tan, run_tan)
+        part = run_md - profile.md[i]
         for c in range(run_force.shape[0]):
             run_mu = run_mu_length[c] / run_length
             for o in range(run_force.shape[1]):
+                fluid = run_fluid[o]
+                if fluid != 0.0:
+                    fluid = fluid * part / run_length
                 profile.force[c, o, i], profile.torque[c, o, i] = _aadnoy_run(
-                    run_force[c, o], run_torque[c, o], geometry, run_md - profile.md[i], kind,
-                    run_mu, axial_factors[o], torque_factors[o], weight, radius)
+                    run_force[c, o], run_torque[c, o], geometry, part, kind,
+                    run_mu, axial_factors[o], torque_factors[o], weight, radius, fluid)
 
 
 def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
-           torque_factors, forces, torques, profile, tape):
+           torque_factors, fluid, forces, torques, profile, tape):
     """March from the bit to the top of the hole for every (case, operation) at once.
 
     An operation is a (bit force, bit torque, axial friction factor, torque friction factor)
@@ -360,7 +403,7 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
     for all; each (case, operation) then takes the same steps in the same order as it would
     alone, and gets the same numbers bit for bit. The cases are independent chains of square
     roots and divisions, which the processor overlaps: that, and the shared geometry, is why
-    several cost little more than one.
+    several cost little more than one. ``fluid`` holds the march's fluid terms (see above).
 
     Writes the top force and torque of every (case, operation) into ``forces`` and ``torques``
     (n_case, n_op), and the ``profile`` and the ``tape`` (see above) unless they are None.
@@ -376,6 +419,7 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
     comp_top = well.component_top
     n_comp = comp_top.size
     n_case, n_op = forces.shape
+    with_fluid = fluid.shape[0] > 0
     j = min(max(np.searchsorted(node_md, bit_depth) - 1, 0), node_md.size - 2)
     comp = 0
     lower = bit_depth
@@ -390,10 +434,14 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
         k += 1
     n = 0  # pieces marched
     n_runs = 0
-    # Aadnoy runs: the state at the run's bottom and each case's length-weighted friction
+    # Aadnoy runs: the state at the run's bottom, each case's length-weighted friction and,
+    # with fluid terms, each operation's fluid force and the length-weighted shift of the
+    # weight (a run is one component: its weight plus the mean shift)
     run_force = forces.copy()
     run_torque = torques.copy()
     run_mu_length = np.zeros(n_case)
+    run_fluid = np.zeros(n_op)
+    run_shift_length = 0.0
     run_md = lower
     run_tan = tb
     run_first = k
@@ -412,6 +460,11 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
             tt = (tangents[j, 0], tangents[j, 1], tangents[j, 2])
         length = lower - upper
         weight = well.component_weight[comp]
+        shift = 0.0  # of the weight, by the densities
+        if with_fluid:
+            shift = (well.component_outside_sensitivity[comp] * fluid[n_op, j]
+                     + well.component_inside_sensitivity[comp] * fluid[n_op + 1, j])
+            weight += shift
         radius = well.component_radius[comp]
         if tape is not None:
             tape.piece_element[n] = j
@@ -431,15 +484,22 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
                 tape.piece_values[n, 3] = dtvd
                 tape.piece_values[n, 4] = weight
                 tape.piece_values[n, 5] = radius
+                tape.piece_values[n, 6] = fluid[0, j] * length if with_fluid else 0.0
             for c in range(n_case):
                 mu = mu_cases[c, j]
                 for o in range(n_op):
+                    piece_fluid = fluid[o, j] * length if with_fluid else 0.0
                     forces[c, o], normal, _, _ = _soft_string_piece(
-                        forces[c, o], kk, ke, ee, dtvd, weight, axial_factors[o] * mu)
+                        forces[c, o], kk, ke, ee, dtvd, weight, axial_factors[o] * mu,
+                        piece_fluid)
                     torques[c, o] += torque_factors[o] * mu * normal * radius
         else:
             for c in range(n_case):
                 run_mu_length[c] += mu_cases[c, j] * length
+            if with_fluid:
+                for o in range(n_op):
+                    run_fluid[o] += fluid[o, j] * length
+                run_shift_length += shift * length
             if tape is not None:
                 tape.piece_values[n, 0] = length
             component_ends = comp < n_comp - 1 and component_top >= upper - _MD_TOLERANCE
@@ -448,23 +508,29 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
                 geometry = _run_geometry(tt, run_tan)
                 run_length = run_md - upper
                 kind = well.curve_kind[j]
+                if with_fluid:
+                    weight = well.component_weight[comp] + run_shift_length / run_length
                 if profile is not None:
                     _record_run(profile, run_first, k, run_force, run_torque, run_md, run_tan,
                                 run_mu_length, run_length, kind, axial_factors, torque_factors,
-                                weight, radius)
+                                weight, radius, run_fluid)
                 if tape is not None:
                     _tape_run(tape, n_runs, n, kind, run_force[0, 0], geometry, run_length,
-                              run_mu_length[0] / run_length, weight, radius)
+                              run_mu_length[0] / run_length, weight, radius, run_fluid[0])
                     n_runs += 1
                 for c in range(n_case):
                     run_mu = run_mu_length[c] / run_length
                     for o in range(n_op):
                         forces[c, o], torques[c, o] = _aadnoy_run(
                             run_force[c, o], run_torque[c, o], geometry, run_length, kind,
-                            run_mu, axial_factors[o], torque_factors[o], weight, radius)
+                            run_mu, axial_factors[o], torque_factors[o], weight, radius,
+                            run_fluid[o])
                         run_force[c, o] = forces[c, o]
                         run_torque[c, o] = torques[c, o]
                     run_mu_length[c] = 0.0
+                for o in range(n_op):
+                    run_fluid[o] = 0.0
+                run_shift_length = 0.0
                 run_md = upper
                 run_tan = tt
                 run_first = k + 1
@@ -483,7 +549,8 @@ def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_fac
     return k, n, n_runs
 
 
-def _tape_run(tape, r, last_piece, kind, bottom_force, geometry, length, mu, weight, radius):
+def _tape_run(tape, r, last_piece, kind, bottom_force, geometry, length, mu, weight, radius,
+              fluid):
     """Keep run ``r`` (its last piece ``last_piece``) on the tape."""
     tape.run_first[r + 1] = last_piece + 1
     tape.run_kind[r] = kind
@@ -498,43 +565,46 @@ def _tape_run(tape, r, last_piece, kind, bottom_force, geometry, length, mu, wei
     tape.run_values[r, 6] = mu
     tape.run_values[r, 7] = weight
     tape.run_values[r, 8] = radius
+    tape.run_values[r, 9] = fluid
 
 
 # --- the entry points ---
 
 
 def march_one(well_real, well_index, method, mu, bit_depth, bit_force, bit_torque, axial_factor,
-              torque_factor):
+              torque_factor, fluid):
     """The march of one operation and one friction array ``mu`` (n_elements,) [-], as two
     floats: (top force [N], top torque [N m]).
 
     ``method`` is `SOFT_STRING` or `AADNOY`; ``bit_depth`` [m] lies inside the string and the
     hole; the operation is its force [N] and torque [N m] at the bit and the multipliers of mu in
-    the axial and the torque balance [-]. Scalars in, scalars out: this keeps the call's fixed
-    cost low (the calibration makes thousands).
+    the axial and the torque balance [-]; ``fluid`` its fluid terms (`NO_FLUID`, or
+    (3, n_elements): see the element loop's notes). Scalars in, scalars out: this keeps the
+    call's fixed cost low (the calibration makes thousands).
     """
     forces = np.empty((1, 1))
     torques = np.empty((1, 1))
     _march(_unpack(well_real, well_index), method, mu.reshape((1, mu.size)), bit_depth,
            np.full(1, bit_force), np.full(1, bit_torque), np.full(1, axial_factor),
-           np.full(1, torque_factor), forces, torques, None, None)
+           np.full(1, torque_factor), fluid, forces, torques, None, None)
     return forces[0, 0], torques[0, 0]
 
 
 def march_cases(well_real, well_index, method, mu_cases, bit_depth, bit_forces, bit_torques,
-                axial_factors, torque_factors):
+                axial_factors, torque_factors, fluid):
     """The march of several friction cases and operations at once: arrays (n_case, n_op) of
     the top forces [N] and torques [N m]; ``mu_cases`` is (n_case, n_elements), C-contiguous
-    [-], the operations' terms (n_op,) each, as `march_one`'s."""
+    [-], the operations' terms (n_op,) each, as `march_one`'s, ``fluid`` `NO_FLUID` or
+    (n_op + 2, n_elements)."""
     forces = np.empty((mu_cases.shape[0], bit_forces.size))
     torques = np.empty((mu_cases.shape[0], bit_forces.size))
     _march(_unpack(well_real, well_index), method, mu_cases, bit_depth, bit_forces, bit_torques,
-           axial_factors, torque_factors, forces, torques, None, None)
+           axial_factors, torque_factors, fluid, forces, torques, None, None)
     return forces, torques
 
 
 def march_profile(well_real, well_index, method, mu, bit_depth, bit_forces, bit_torques,
-                  axial_factors, torque_factors, out_md, out_force, out_torque, out_comp,
+                  axial_factors, torque_factors, fluid, out_md, out_force, out_torque, out_comp,
                   out_tan):
     """The march of one friction array that also writes the loads at every node, bit first;
     returns the node count.
@@ -548,7 +618,7 @@ def march_profile(well_real, well_index, method, mu, bit_depth, bit_forces, bit_
                        out_torque.reshape((1, n_op, size)))
     count, _, _ = _march(_unpack(well_real, well_index), method, mu.reshape((1, mu.size)),
                          bit_depth, bit_forces, bit_torques, axial_factors, torque_factors,
-                         np.empty((1, n_op)), np.empty((1, n_op)), profile, None)
+                         fluid, np.empty((1, n_op)), np.empty((1, n_op)), profile, None)
     return count
 
 
@@ -556,7 +626,8 @@ def sweep(well_real, well_index, method, mu_cases, bit_depths, bit_forces, bit_t
           axial_factors, torque_factors):
     """Surface force and torque for every (case, depth, operation): arrays (n_case, n_depth, n_op).
 
-    ``mu_cases`` is (n_case, n_element); the other arguments are `march_cases`'.
+    ``mu_cases`` is (n_case, n_element); the other arguments are `march_cases`'. No fluid
+    terms: they depend on the bit depth (a broomstick with them marches depth by depth).
     """
     n_case = mu_cases.shape[0]
     n_depth = bit_depths.size
@@ -566,9 +637,10 @@ def sweep(well_real, well_index, method, mu_cases, bit_depths, bit_forces, bit_t
     top_forces = np.empty((n_case, n_op))
     top_torques = np.empty((n_case, n_op))
     well = _unpack(well_real, well_index)
+    no_fluid = np.empty((0, 0))
     for d in range(n_depth):
         _march(well, method, mu_cases, bit_depths[d], bit_forces, bit_torques, axial_factors,
-               torque_factors, top_forces, top_torques, None, None)
+               torque_factors, no_fluid, top_forces, top_torques, None, None)
         forces[:, d, :] = top_forces
         torques[:, d, :] = top_torques
     return forces, torques
@@ -593,13 +665,15 @@ def _normal_force_slope(force, weight, kk, ke, ee):
     return 0.0
 
 
-def _soft_string_piece_adjoint(force, kk, ke, ee, dtvd, weight, radius, mu, axial_factor,
+def _soft_string_piece_adjoint(force, kk, ke, ee, dtvd, weight, radius, fluid, mu, axial_factor,
                                torque_factor, lam_force, lam_torque):
     """Backward step over one `_soft_string_piece`: from the adjoints at the piece's top and the
-    force at its bottom, returns (adjoint of the bottom force, dq/dmu of the piece)."""
+    force at its bottom, returns (adjoint of the bottom force, dq/dmu of the piece). The
+    piece's fluid force depends on neither the force nor the friction: it only moves the
+    values the rerun piece gives."""
     axial_mu = axial_factor * mu
     _, normal, n_bottom, predicted = _soft_string_piece(force, kk, ke, ee, dtvd, weight,
-                                                        axial_mu)
+                                                        axial_mu, fluid)
     lam_normal = lam_force * axial_mu + lam_torque * torque_factor * mu * radius
     lam_predicted = 0.5 * lam_normal * _normal_force_slope(predicted, weight, kk, ke, ee)
     lam_n_bottom = 0.5 * lam_normal + lam_predicted * axial_mu
@@ -629,10 +703,11 @@ def _build_slack_off_term(sweep_angle, weight_radius, m, top_inc, bottom_inc):
 
 
 def _aadnoy_run_adjoint(force, geometry, length, kind, mu, axial_factor, torque_factor, weight,
-                        radius, lam_force, lam_torque):
+                        radius, fluid, lam_force, lam_torque):
     """Backward step over one `_aadnoy_run` (same branches): from the adjoints at the run's
     top and the force at its bottom, returns (adjoint of the bottom force, dq/d(run friction)).
-    The bottom torque's adjoint is the top's (torque adds)."""
+    The bottom torque's adjoint is the top's (torque adds). The run's fluid force enters the
+    build formulas with the bottom force, as in `_aadnoy_run`, and nothing else."""
     top_inc, bottom_inc, theta, _, sin_mean = geometry
     mu_axial = axial_factor * mu
     mu_torque = torque_factor * mu
@@ -641,6 +716,8 @@ def _aadnoy_run_adjoint(force, geometry, length, kind, mu, axial_factor, torque_
                 + lam_torque * torque_factor * weight * length * radius * sin_mean)
         return lam_force, d_mu
     if kind == PLANAR_BUILD and bottom_inc > top_inc:
+        if fluid != 0.0:
+            force = force + fluid
         sweep_angle = bottom_inc - top_inc
         wr = weight * length / sweep_angle
         lift = wr * (math.sin(bottom_inc) - math.sin(top_inc))
@@ -667,8 +744,9 @@ def _aadnoy_run_adjoint(force, geometry, length, kind, mu, axial_factor, torque_
 
 
 def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_torque,
-                   axial_factor, torque_factor, force_seed, torque_seed):
-    """`march_one` with the gradient of ``force_seed F_top + torque_seed T_top``.
+                   axial_factor, torque_factor, fluid, force_seed, torque_seed):
+    """`march_one` (its ``fluid`` too) with the gradient of ``force_seed F_top + torque_seed
+    T_top``.
 
     Returns (top force, top torque, gradient per element of ``mu``); elements the string does
     not reach get 0. One forward march with a tape and one backward sweep over its pieces (soft
@@ -676,15 +754,15 @@ def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_
     """
     well = _unpack(well_real, well_index)
     size = well.node_md.size + well.component_top.size  # more than the pieces
-    tape = _Tape(np.empty(size, dtype=np.int64), np.empty(size), np.empty((size, 6)),
+    tape = _Tape(np.empty(size, dtype=np.int64), np.empty(size), np.empty((size, 7)),
                  np.zeros(size + 1, dtype=np.int64), np.empty(size, dtype=np.int64),
-                 np.empty(size), np.empty((size, 9)))
+                 np.empty(size), np.empty((size, 10)))
     forces = np.empty((1, 1))
     torques = np.empty((1, 1))
     _, n_pieces, n_runs = _march(
         well, method, mu.reshape((1, mu.size)), bit_depth, np.full(1, bit_force),
-        np.full(1, bit_torque), np.full(1, axial_factor), np.full(1, torque_factor), forces,
-        torques, None, tape)
+        np.full(1, bit_torque), np.full(1, axial_factor), np.full(1, torque_factor), fluid,
+        forces, torques, None, tape)
     gradient = np.zeros(mu.size)
     lam_force = force_seed
     if method == SOFT_STRING:
@@ -693,8 +771,8 @@ def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_
             e = tape.piece_element[p]
             lam_force, d_mu = _soft_string_piece_adjoint(
                 tape.piece_force[p], pieces[p, 0], pieces[p, 1], pieces[p, 2], pieces[p, 3],
-                pieces[p, 4], pieces[p, 5], mu[e], axial_factor, torque_factor, lam_force,
-                torque_seed)
+                pieces[p, 4], pieces[p, 5], pieces[p, 6], mu[e], axial_factor, torque_factor,
+                lam_force, torque_seed)
             gradient[e] += d_mu
     else:
         runs = tape.run_values
@@ -702,7 +780,8 @@ def march_gradient(well_real, well_index, method, mu, bit_depth, bit_force, bit_
             geometry = (runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4])
             lam_force, d_run_mu = _aadnoy_run_adjoint(
                 tape.run_force[r], geometry, runs[r, 5], tape.run_kind[r], runs[r, 6],
-                axial_factor, torque_factor, runs[r, 7], runs[r, 8], lam_force, torque_seed)
+                axial_factor, torque_factor, runs[r, 7], runs[r, 8], runs[r, 9], lam_force,
+                torque_seed)
             # the run's friction is the length-weighted mean of its pieces' elements'
             scale = d_run_mu / runs[r, 5]
             for p in range(tape.run_first[r], tape.run_first[r + 1]):

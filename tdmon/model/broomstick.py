@@ -3,12 +3,13 @@ against bit depth for a family of friction factors.
 
 Measured hook loads drawn against these curves show which friction factor the well behaves
 like. All depths and cases go through one sweep of the element loop (`sweep` of
-`tdmon.model._kernels`).
+`tdmon.model._kernels`); with fluid terms, which change with the bit depth, one march of all
+cases and operations per depth.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
+from tdmon.model.fluid_terms import FluidTerms
 from tdmon.model.torque_drag import Method, Operation, WellModel, _check_method, operation_terms
 from tdmon.model.well import Well
 
@@ -82,12 +84,37 @@ def _limit_lines(model: WellModel, depths: NDArray[np.float64]) -> tuple[
     return hookload_limit, makeup_limit
 
 
+FluidAt = Callable[[float, Operation], FluidTerms | None]
+"""The fluid terms of an operation at a bit depth [m] (`tdmon.model.fluid_force` makes them)."""
+
+
+def _swept_with_fluid(model: WellModel, kernel_method: int, cases: NDArray[np.float64],
+                      depths: NDArray[np.float64], terms: NDArray[np.float64],
+                      fluid: FluidAt) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """`sweep`'s arrays, one march of every case and operation per depth with its fluid
+    terms (each the march `WellModel.evaluate` makes of them)."""
+    loops: Any = model.kernels.module
+    forces = np.empty((cases.shape[0], depths.size, len(BROOMSTICK_OPERATIONS)))
+    torques = np.empty_like(forces)
+    for d, depth in enumerate(depths):
+        per_operation = [fluid(float(depth), op) for op in BROOMSTICK_OPERATIONS]
+        bit_forces = terms[:, 0] + np.array(
+            [0.0 if t is None else t.bit_force for t in per_operation])
+        forces[:, d, :], torques[:, d, :] = loops.march_cases(
+            *model.kernel_well, kernel_method, cases, float(depth),
+            np.ascontiguousarray(bit_forces), np.ascontiguousarray(terms[:, 1]),
+            np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]),
+            model.kernel_fluid(per_operation))
+    return forces, torques
+
+
 def broomstick_from_model(
     model: WellModel,
     bit_depths: ArrayLike,
     mus: Sequence[float] | ArrayLike,
     *,
     method: Method | str = "soft-string",
+    fluid: FluidAt | None = None,
 ) -> Broomstick:
     """`broomstick` on a prepared `WellModel` (no grid rebuild when called repeatedly)."""
     kernel_method = _check_method(method)
@@ -98,10 +125,13 @@ def broomstick_from_model(
     cases = _friction_cases(model, mus)
     terms = np.array([operation_terms(op) for op in BROOMSTICK_OPERATIONS])
     loops: Any = model.kernels.module  # numba's dispatchers or plain Python (see `WellModel`)
-    forces, torques = loops.sweep(
-        *model.kernel_well, kernel_method, cases, depths,
-        np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
-        np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]))
+    if fluid is not None:
+        forces, torques = _swept_with_fluid(model, kernel_method, cases, depths, terms, fluid)
+    else:
+        forces, torques = loops.sweep(
+            *model.kernel_well, kernel_method, cases, depths,
+            np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
+            np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]))
     hookloads = forces + model.well.block_weight
     lengths = np.diff(model.node_md)
     labels = np.asarray(mus, dtype=np.float64)
@@ -125,6 +155,7 @@ def broomstick(
     mus: Sequence[float] | ArrayLike,
     *,
     method: Method | str = "soft-string",
+    fluid: FluidAt | None = None,
 ) -> Broomstick:
     """Pick-up, slack-off and rotating hook loads and rotating torque over bit depth.
 
@@ -135,6 +166,8 @@ def broomstick(
     mus : friction cases: a sequence of friction factors, or a 2-D array
         (n_cases, n_elements of ``hole_grid(well)``) of per-element friction [-]
     method : ``"soft-string"`` or ``"aadnoy"``
+    fluid : the fluid terms of an operation at a bit depth (a trip speed's viscous drag, say:
+        `tdmon.model.fluid_force.FluidForces`), or None
 
     Returns
     -------
@@ -146,4 +179,4 @@ def broomstick(
     `tdmon.model.torque_drag.torque_drag`, in one call, so the curves equal the single-depth
     model's numbers exactly.
     """
-    return broomstick_from_model(WellModel(well), bit_depths, mus, method=method)
+    return broomstick_from_model(WellModel(well), bit_depths, mus, method=method, fluid=fluid)

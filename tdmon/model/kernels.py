@@ -72,7 +72,8 @@ class KernelWell(NamedTuple):
 def kernel_well(kernels: Kernels, *, node_md: ArrayLike, tangents: ArrayLike,
                 dogleg: ArrayLike, curve_kind: ArrayLike, run_break: ArrayLike,
                 component_top: ArrayLike, component_weight: ArrayLike,
-                component_radius: ArrayLike) -> KernelWell:
+                component_radius: ArrayLike, component_outside_sensitivity: ArrayLike,
+                component_inside_sensitivity: ArrayLike) -> KernelWell:
     """Pack a well's arrays (see `tdmon.model._kernels.pack_well`) with ``kernels``.
 
     Each array is converted to the dtype and C layout the kernels' one compiled signature
@@ -83,7 +84,9 @@ def kernel_well(kernels: Kernels, *, node_md: ArrayLike, tangents: ArrayLike,
         vector(node_md, dtype=np.float64), vector(tangents, dtype=np.float64),
         vector(dogleg, dtype=np.float64), vector(curve_kind, dtype=np.int64),
         vector(run_break, dtype=np.bool_), vector(component_top, dtype=np.float64),
-        vector(component_weight, dtype=np.float64), vector(component_radius, dtype=np.float64))
+        vector(component_weight, dtype=np.float64), vector(component_radius, dtype=np.float64),
+        vector(component_outside_sensitivity, dtype=np.float64),
+        vector(component_inside_sensitivity, dtype=np.float64))
     return KernelWell(real, index)
 
 

@@ -191,6 +191,24 @@ class StringComponent:
         """Second moment of area of the tube body [m4]."""
         return math.pi / 64.0 * (self.outer_diameter**4 - self.inner_diameter**4)
 
+    def density_sensitivity(self) -> tuple[float, float]:
+        """How the buoyed weight per length changes with the density of the fluid outside and
+        inside [N/m per kg/m3]: ``(dw/drho_o, dw/drho_i)``.
+
+        Eq 36 is linear in both densities: ``w = w_air (1 - (rho_o D^2 - rho_i d^2) /
+        (rho_s (D^2 - d^2)))``, so ``dw/drho_o = -w_air D^2 / (rho_s (D^2 - d^2))`` and
+        ``dw/drho_i = w_air d^2 / (rho_s (D^2 - d^2))`` (``-pi/4 D^2 g`` and ``pi/4 d^2 g`` for
+        a plain tube, eq 41). A component given by its ``buoyed_weight`` keeps it: (0, 0).
+        """
+        if self.buoyed_weight is not None:
+            return 0.0, 0.0
+        in_air = (self.weight_in_air if self.weight_in_air is not None
+                  else float(weight_per_length(self.outer_diameter, self.inner_diameter)))
+        outer_sq = self.outer_diameter**2
+        inner_sq = self.inner_diameter**2
+        scale = in_air / (STEEL_DENSITY * (outer_sq - inner_sq))
+        return -scale * outer_sq, scale * inner_sq
+
     def buoyed_weight_in(
         self, mud_density: float, inside_density: float | None = None
     ) -> float:

@@ -24,7 +24,7 @@ the force at the top of the hole plus the travelling-block weight. See docs/torq
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from typing import Any, Literal
@@ -34,12 +34,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from tdmon.errors import ModelError
 from tdmon.model import kernels
+from tdmon.model.fluid_terms import NO_FLUID, FluidTerms, pack_fluid
 from tdmon.model.kernels import Engine
 from tdmon.model.survey import tangent_vectors, tvd_and_inclination
 from tdmon.model.well import HoleGrid, Well, hole_grid, section_friction
 from tdmon.vocabulary import Operation
 
-__all__ = ["METHODS", "Loads", "Method", "Operation", "WellModel", "torque_drag"]
+__all__ = ["METHODS", "FluidTerms", "Loads", "Method", "Operation", "WellModel", "torque_drag"]
 
 Method = Literal["soft-string", "aadnoy"]
 METHODS: tuple[str, ...] = ("soft-string", "aadnoy")
@@ -195,6 +196,11 @@ class WellModel:
              for c in string.components], dtype=np.float64)
         self.component_radius = np.array([c.torque_radius for c in string.components],
                                          dtype=np.float64)
+        sensitivity = np.array([c.density_sensitivity() for c in string.components],
+                               dtype=np.float64).reshape(-1, 2)
+        fluid = well.fluid
+        self._fluid_densities = (fluid.density, fluid.density if fluid.inside_density is None
+                                 else fluid.inside_density)
         self._section_mu: NDArray[np.float64] | None = None
         # the kernels (`kernels.load`), typed loosely: mypy cannot see into numba's dispatchers
         self.kernels = kernels.load(engine)
@@ -211,6 +217,8 @@ class WellModel:
             component_top=self.component_top,
             component_weight=self.component_weight,
             component_radius=self.component_radius,
+            component_outside_sensitivity=sensitivity[:, 0],
+            component_inside_sensitivity=sensitivity[:, 1],
         )
         self._well_real, self._well_index = self.kernel_well
         self._max_nodes = grid.n_elements + len(string.components) + 2
@@ -220,6 +228,8 @@ class WellModel:
         self._depth_above = float(self.node_md[0]) + _DEPTH_TOLERANCE
         self._depth_down_to = min(float(string.length), float(self.node_md[-1]))
         self._uniform: dict[float, NDArray[np.float64]] = {}
+        self._last_fluid: tuple[tuple[int, ...], tuple[FluidTerms | None, ...],
+                                NDArray[np.float64]] | None = None
 
     @property
     def n_elements(self) -> int:
@@ -256,6 +266,21 @@ class WellModel:
                 self._uniform.clear()
             uniform = self._uniform[value] = np.full(self.n_elements, value)
         return uniform
+
+    def kernel_fluid(self, terms: Sequence[FluidTerms | None]) -> NDArray[np.float64]:
+        """The element loop's fluid argument of a march of these operations' terms.
+
+        The last one packed is kept with the terms it came from (their arrays are read only):
+        a sample's terms are evaluated many times over (the back-calculation's iterations),
+        and packing n_elements values costs more than a shallow march."""
+        ids = tuple(map(id, terms))
+        last = self._last_fluid
+        if last is not None and last[0] == ids:
+            return last[2]
+        kept = tuple(terms)  # held with their ids: no other object takes one while kept
+        packed = pack_fluid(kept, self.n_elements, *self._fluid_densities)
+        self._last_fluid = (ids, kept, packed)
+        return packed
 
     def _kernel_friction(self, mu: float | ArrayLike | None) -> NDArray[np.float64]:
         """`friction` for the kernels: a uniform one is shared, not copied (they only read)."""
@@ -335,6 +360,7 @@ class WellModel:
         wob: float = 0.0,
         bit_torque: float = 0.0,
         psi: float | None = None,
+        fluid: FluidTerms | None = None,
     ) -> tuple[float, float]:
         """Hook load [N] and surface torque [N m] of one operation at one bit depth.
 
@@ -347,6 +373,8 @@ class WellModel:
         wob : weight on bit for ``on_bottom`` [N]
         bit_torque : bit torque for ``on_bottom`` [N m]
         psi : combined motion angle for pick-up/slack-off while rotating [rad]
+        fluid : the fluid's terms of this operation (`FluidTerms`: viscous drag, the jets'
+            force at the bit, densities per element); None: none
         """
         # the calibration's call: every step inlined where it costs more as a call
         kernel_method = _KERNEL_METHODS.get(method)
@@ -360,10 +388,14 @@ class WellModel:
             friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = _cached_terms(
             operation, wob, bit_torque, psi)
+        terms = NO_FLUID
+        if fluid is not None:
+            terms = self.kernel_fluid((fluid,))
+            bit_force += fluid.bit_force
         # positional: the fast path of numba's dispatch
         force, torque = self._march_one(self._well_real, self._well_index, kernel_method,
                                         friction, depth, bit_force, bit_torque_term,
-                                        axial_factor, torque_factor)
+                                        axial_factor, torque_factor, terms)
         return force + self.well.block_weight, torque
 
     def evaluate_cases(
@@ -376,12 +408,13 @@ class WellModel:
         wob: float = 0.0,
         bit_torque: float = 0.0,
         psi: float | None = None,
+        fluid: FluidTerms | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """`evaluate` for several friction cases at once, in one march.
 
         Parameters
         ----------
-        operation, bit_depth, method, wob, bit_torque, psi : as in `evaluate`
+        operation, bit_depth, method, wob, bit_torque, psi, fluid : as in `evaluate`
         mu_cases : (n_cases, n_elements) per-element friction factors, one row per case [-]
 
         Returns
@@ -399,9 +432,11 @@ class WellModel:
             )
         _check_friction_values(self._loops, cases, "friction factors")
         terms = np.array(_cached_terms(operation, wob, bit_torque, psi))
+        if fluid is not None:
+            terms[0] += fluid.bit_force
         forces, torques = self._loops.march_cases(
             *self.kernel_well, kernel_method, cases, depth, terms[0:1], terms[1:2], terms[2:3],
-            terms[3:4])
+            terms[3:4], NO_FLUID if fluid is None else self.kernel_fluid((fluid,)))
         return forces[:, 0] + self.well.block_weight, torques[:, 0]
 
     def evaluate_gradient(
@@ -415,13 +450,14 @@ class WellModel:
         wob: float = 0.0,
         bit_torque: float = 0.0,
         psi: float | None = None,
+        fluid: FluidTerms | None = None,
     ) -> tuple[float, NDArray[np.float64]]:
         """Hook load [N] or surface torque [N m] and its gradient with respect to the friction
         factor of every hole-grid element, from one march up and one sweep back down.
 
         Parameters
         ----------
-        operation, bit_depth, mu, method, wob, bit_torque, psi : as in `evaluate`
+        operation, bit_depth, mu, method, wob, bit_torque, psi, fluid : as in `evaluate`
         quantity_index : 0 for the hook load, 1 for the surface torque (`evaluate`'s order)
 
         Returns
@@ -460,9 +496,13 @@ class WellModel:
         friction = self._kernel_friction(mu)
         bit_force, bit_torque_term, axial_factor, torque_factor = operation_terms(
             operation, wob=wob, bit_torque=bit_torque, psi=psi)
+        terms = NO_FLUID
+        if fluid is not None:
+            terms = self.kernel_fluid((fluid,))
+            bit_force += fluid.bit_force
         force, torque, gradient = self._loops.march_gradient(
             *self.kernel_well, kernel_method, friction, depth, bit_force, bit_torque_term,
-            axial_factor, torque_factor, 1.0 - quantity_index, float(quantity_index))
+            axial_factor, torque_factor, terms, 1.0 - quantity_index, float(quantity_index))
         if quantity_index == 0:
             return float(force) + self.well.block_weight, gradient
         return float(torque), gradient
@@ -477,8 +517,12 @@ class WellModel:
         wob: float = 0.0,
         bit_torque: float = 0.0,
         psi: float | None = None,
+        fluid: FluidTerms | Mapping[str, FluidTerms] | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
         """Loads along the string for several operations in one march.
+
+        ``fluid``: one `FluidTerms` for every operation, or per operation name (an operation
+        left out has none; all share one set of densities).
 
         Returns
         -------
@@ -492,6 +536,10 @@ class WellModel:
         friction = self._kernel_friction(mu)
         terms = np.array([operation_terms(op, wob=wob, bit_torque=bit_torque, psi=psi)
                           for op in operations]).reshape(-1, 4)
+        per_operation = _fluid_per_operation(fluid, operations)
+        for row, term in enumerate(per_operation):
+            if term is not None:
+                terms[row, 0] += term.bit_force
         size = self._max_nodes
         md = np.empty(size)
         force = np.empty((terms.shape[0], size))
@@ -502,7 +550,7 @@ class WellModel:
             *self.kernel_well, kernel_method, friction, depth,
             np.ascontiguousarray(terms[:, 0]), np.ascontiguousarray(terms[:, 1]),
             np.ascontiguousarray(terms[:, 2]), np.ascontiguousarray(terms[:, 3]),
-            md, force, torque, component, tangent)
+            self.kernel_fluid(per_operation), md, force, torque, component, tangent)
         return (md[:count][::-1].copy(), force[:, :count][:, ::-1].copy(),
                 torque[:, :count][:, ::-1].copy(), component[:count][::-1].copy())
 
@@ -516,9 +564,10 @@ class WellModel:
         bit_torque: float = 0.0,
         psi: float | None = None,
         operations: Sequence[Operation | str] | None = None,
+        fluid: FluidTerms | Mapping[str, FluidTerms] | None = None,
     ) -> Loads:
         """`Loads` (of every operation, or of ``operations``, with profiles) at one bit depth;
-        see `torque_drag`.
+        see `torque_drag` (``fluid`` as in `profiles`).
 
         Each operation's loads are those of a march of all, so the calibration's limit check
         asks for the two it reads (the march 46 -> 38 us).
@@ -526,7 +575,8 @@ class WellModel:
         chosen = list(Operation) if operations is None else list(
             dict.fromkeys(Operation(op) for op in operations))
         md, force, torque, component = self.profiles(
-            chosen, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi)
+            chosen, bit_depth, mu, method=method, wob=wob, bit_torque=bit_torque, psi=psi,
+            fluid=fluid)
         names = [op.value for op in chosen]
         # one interpolation for both: the limit check needs the nodes' inclination too
         tvd, inclination = self._tvd_and_inclination(md)
@@ -542,6 +592,18 @@ class WellModel:
             component=component,
             inclination=inclination,
         )
+
+
+def _fluid_per_operation(fluid: FluidTerms | Mapping[str, FluidTerms] | None,
+                         operations: Sequence[Operation | str]) -> list[FluidTerms | None]:
+    """One `FluidTerms` (or None) per operation of a march."""
+    if fluid is None or isinstance(fluid, FluidTerms):
+        return [fluid] * len(operations)
+    by_name = {Operation(name).value: terms for name, terms in fluid.items()}
+    unknown = set(by_name) - {Operation(op).value for op in operations}
+    if unknown:
+        raise ModelError(f"fluid terms for operations not marched: {', '.join(sorted(unknown))}")
+    return [by_name.get(Operation(op).value) for op in operations]
 
 
 def torque_drag(

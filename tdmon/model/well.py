@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from tdmon.errors import ModelError
 from tdmon.model.hookload_sensor import HookloadSensor
+from tdmon.model.hydraulics import WellHydraulics
 from tdmon.model.string import DrillString
 from tdmon.model.survey import Survey, interpolate_survey
 
@@ -111,6 +112,9 @@ class Well:
     hookload_sensor : how the rig's hook-load channel reads the load on the hook (sensor
         location, lines, sheave efficiency; :mod:`tdmon.model.hookload_sensor`); the default
         reads the load on the hook
+    hydraulics : the mud's rheology, the bit's nozzles and float valve, the pore and fracture
+        pressures (:mod:`tdmon.model.hydraulics`); the default knows none of them, and the
+        model then has no fluid forces but buoyancy
     """
 
     survey: Survey
@@ -122,6 +126,7 @@ class Well:
     limits: LimitSettings = field(default_factory=LimitSettings)
     name: str = ""
     hookload_sensor: HookloadSensor = field(default_factory=HookloadSensor)
+    hydraulics: WellHydraulics = field(default_factory=WellHydraulics)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.element_length) and self.element_length > 0.0):

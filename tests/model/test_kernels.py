@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,8 @@ import pytest
 from tdmon.errors import ModelError
 from tdmon.model import _kernels, kernels
 from tdmon.model.broomstick import broomstick_from_model
+from tdmon.model.fluid_terms import NO_FLUID, FluidTerms
+from tdmon.model.string import DrillString
 from tdmon.model.survey import tangent_vectors
 from tdmon.model.torque_drag import WellModel, torque_drag
 from tdmon.model.well import Well
@@ -25,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 _FIELDS = ("node_md", "tangents", "dogleg", "curve_kind", "run_break", "element_kk",
            "element_ke", "element_ee", "element_dtvd", "component_top", "component_weight",
-           "component_radius")
+           "component_radius", "component_outside_sensitivity", "component_inside_sensitivity")
 
 
 def _fields(packed: kernels.KernelWell) -> dict[str, np.ndarray]:
@@ -47,6 +50,8 @@ def _distinct_inputs(n_nodes: int) -> dict[str, np.ndarray]:
         "component_top": np.array([10.0, 100.0]),
         "component_weight": np.array([3000.0, 300.0]),
         "component_radius": np.array([0.08, 0.0635]),
+        "component_outside_sensitivity": np.array([-0.2, -0.12]),
+        "component_inside_sensitivity": np.array([0.04, 0.09]),
     }
 
 
@@ -165,7 +170,8 @@ def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: i
            "axial_factors": np.array([1.0, -1.0, 0.0]), "torque_factors": np.array([0.0, 0.0, 1.0])}
     depth = 3000.0
     forces, torques = loops.march_cases(*model.kernel_well, method=method,
-                                        mu_cases=mu[None, :], bit_depth=depth, **ops)
+                                        mu_cases=mu[None, :], bit_depth=depth, **ops,
+                                        fluid=NO_FLUID)
     force, torque = forces[0], torques[0]
     name = "soft-string" if method == kernels.SOFT_STRING else "aadnoy"
     for i, operation in enumerate(("pick_up", "slack_off", "rotating")):
@@ -178,7 +184,7 @@ def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: i
            "out_torque": np.empty((3, size)), "out_comp": np.empty(size, dtype=np.int64),
            "out_tan": np.empty((size, 3))}
     count = loops.march_profile(*model.kernel_well, method=method, mu=mu,
-                                bit_depth=depth, **ops, **out)
+                                bit_depth=depth, **ops, fluid=NO_FLUID, **out)
     assert out["out_md"][0] == depth and out["out_md"][count - 1] == model.node_md[0]
     assert np.array_equal(out["out_force"][:, count - 1], force)
     assert np.array_equal(out["out_torque"][:, count - 1], torque)
@@ -189,7 +195,8 @@ def test_entry_points_by_keyword_give_the_model_numbers(three_d: Well, method: i
     assert np.array_equal(swept_torques[0, 0], torque)
     value, _, gradient = loops.march_gradient(
         *model.kernel_well, method=method, mu=mu, bit_depth=depth, bit_force=0.0,
-        bit_torque=0.0, axial_factor=1.0, torque_factor=0.0, force_seed=1.0, torque_seed=0.0)
+        bit_torque=0.0, axial_factor=1.0, torque_factor=0.0, fluid=NO_FLUID, force_seed=1.0,
+        torque_seed=0.0)
     assert value == force[0]
     assert gradient.sum() > 0.0  # more friction, more pick-up
 
@@ -212,17 +219,18 @@ def test_cases_marched_together_equal_marches_one_by_one(three_d: Well, method: 
                                    bit_depths=depths, **ops)
     for d, depth in enumerate(depths):
         together_f, together_t = loops.march_cases(*model.kernel_well, method, cases, depth,
-                                                   *ops.values())
+                                                   *ops.values(), NO_FLUID)
         for c in range(cases.shape[0]):
             alone_f, alone_t = loops.march_cases(*model.kernel_well, method, cases[c:c + 1],
-                                                 depth, *ops.values())
+                                                 depth, *ops.values(), NO_FLUID)
             assert together_f[c].tolist() == alone_f[0].tolist()
             assert together_t[c].tolist() == alone_t[0].tolist()
             assert swept_f[c, d].tolist() == alone_f[0].tolist()
             assert swept_t[c, d].tolist() == alone_t[0].tolist()
             for o in range(4):
                 terms = [ops[name][o] for name in ops]
-                one = loops.march_one(*model.kernel_well, method, cases[c], depth, *terms)
+                one = loops.march_one(*model.kernel_well, method, cases[c], depth, *terms,
+                                      NO_FLUID)
                 assert one == (alone_f[0, o], alone_t[0, o])
     assert len({tuple(row) for row in together_f.tolist()}) == cases.shape[0]  # cases differ
 
@@ -240,3 +248,43 @@ def test_evaluate_cases_equals_evaluate(three_d: Well) -> None:
         model.evaluate_cases("pick_up", 2500.0, np.where(cases > 0.5, np.nan, cases))
     with pytest.raises(ModelError, match="n_cases"):
         model.evaluate_cases("pick_up", 2500.0, cases[0])
+
+
+def _fluid_everything(model: WellModel, method: str) -> list[np.ndarray]:
+    """Every call with fluid terms: random axial forces per element and operation, a pill
+    inside and a heavier annulus, a jets' force at the bit."""
+    rng = np.random.default_rng(3)
+    n = model.n_elements
+    outside = 1300.0 + rng.uniform(0.0, 200.0, n)
+    inside = np.where(np.arange(n) % 50 < 20, 1800.0, 1300.0)
+    terms = {op: FluidTerms(axial=rng.normal(0.0, 20.0, n), bit_force=-2500.0,
+                            outside_density=outside, inside_density=inside)
+             for op in ("pick_up", "slack_off", "rotating")}
+    cases = np.stack([model.friction(mu) for mu in (0.1, 0.3)])
+    out: list[np.ndarray] = []
+    for depth in (777.0, 2999.0):
+        for operation, fluid in terms.items():
+            out.append(np.array(model.evaluate(operation, depth, 0.23, method=method,
+                                               fluid=fluid)))
+            out.append(np.concatenate(model.evaluate_cases(operation, depth, cases,
+                                                           method=method, fluid=fluid)))
+            value, gradient = model.evaluate_gradient(operation, depth, cases[1],
+                                                      method=method, fluid=fluid)
+            out.append(np.append(gradient, value))
+        loads = model.loads(depth, 0.23, method=method, operations=list(terms), fluid=terms)
+        out.extend([*loads.axial_force.values(), *loads.torque.values()])
+    return out
+
+
+@pytest.mark.parametrize("method", ["soft-string", "aadnoy"])
+def test_the_engines_agree_with_fluid_terms(three_d: Well, method: str) -> None:
+    components = tuple(replace(c, buoyed_weight=None, weight_in_air=1.2 * c.buoyed_weight)
+                       for c in three_d.string.components)
+    well = replace(three_d, string=DrillString(components))
+    compiled, plain = WellModel(well, engine="numba"), WellModel(well, engine="python")
+    got, expected = _fluid_everything(compiled, method), _fluid_everything(plain, method)
+    assert len(got) == len(expected) == 30
+    for one, other in zip(got, expected, strict=True):
+        assert one.tolist() == other.tolist()  # bit for bit
+    without = compiled.evaluate("pick_up", 2999.0, 0.23, method=method)
+    assert got[6][0] != without[0]  # the terms did something

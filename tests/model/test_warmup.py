@@ -17,6 +17,7 @@ from tdmon.calib.backcalc import back_calculate
 from tdmon.cli import main
 from tdmon.model import kernels, warmup
 from tdmon.model.broomstick import broomstick_from_model
+from tdmon.model.fluid_terms import FluidTerms
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Well
 
@@ -46,6 +47,16 @@ def test_the_model_calls_only_signatures_the_warmup_compiled(three_d: Well) -> N
                               method=method)
         measured = model.evaluate("pick_up", 2500.0, 0.22, method=method)[0]
         back_calculate(model, "pick_up", 2500.0, measured, 1e3, method=method)
+        # with fluid terms: the same argument types as without
+        fluid = FluidTerms(axial=np.full(model.n_elements, 10.0), bit_force=-2e3,
+                           inside_density=np.full(model.n_elements, 1500.0))
+        model.evaluate("pick_up", 3000.0, 0.2, method=method, fluid=fluid)
+        model.evaluate_cases("slack_off", 3000.0, np.full((3, model.n_elements), 0.2),
+                             method=method, fluid=fluid)
+        model.evaluate_gradient("pick_up", 3000.0, 0.25, method=method, fluid=fluid)
+        model.loads(3000.0, None, method=method, fluid=fluid)
+        broomstick_from_model(model, [1000.0, 3000.0], [0.1, 0.2], method=method,
+                              fluid=lambda depth, operation, terms=fluid: terms)
     assert _signatures() == compiled
     assert [len(signatures) for signatures in compiled] == [1] * len(kernels.ENTRY_POINTS)
 
