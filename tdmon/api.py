@@ -86,6 +86,15 @@ class WellFile:
     friction: NDArray[np.float64]
     config: WellConfig
 
+    def __repr__(self) -> str:
+        # the model's arrays and the whole validated file are a few thousand characters: the
+        # repr says which well it is and its size; the fields hold the rest
+        model = self.model
+        friction = self.friction
+        return (f"WellFile({str(self.path)!r}, name={self.name!r}, "
+                f"string {model.string.length:.1f} m, hole {model.sections[-1].bottom:.1f} m, "
+                f"{friction.size} elements, friction {friction.min():.3g}-{friction.max():.3g})")
+
 
 def load_well(path: str | os.PathLike[str]) -> WellFile:
     """Read a well file (TOML; docs/configuration.md) and build its model.
@@ -138,7 +147,8 @@ def evaluate_loads(
     Raises
     ------
     ModelError
-        A depth below the string or the hole, an unknown operation or method, bad friction.
+        A depth below the string or the hole, an unknown operation or method, a friction
+        factor outside 0-1 (the rule of the well files and ``tdmon model loads --mu``).
     """
     import numpy as np
     import pandas as pd
@@ -151,7 +161,7 @@ def evaluate_loads(
         raise ModelError(f"unknown operation {operation!r}: use one of "
                          f"{', '.join(o.value for o in Operation)}")
     model = well.model if isinstance(well, WellFile) else well
-    friction = well.friction if mu is None and isinstance(well, WellFile) else mu
+    friction = well.friction if mu is None and isinstance(well, WellFile) else _friction(mu)
     evaluator = WellModel(model)
     rows = []
     for depth in np.atleast_1d(np.asarray(depths, dtype=float)):
@@ -163,3 +173,34 @@ def evaluate_loads(
                  if operation is None or name == operation]
     return pd.DataFrame(rows, columns=["bit_depth_m", "operation", "hookload_N",
                                        "surface_torque_Nm"])
+
+
+def _friction(mu: float | ArrayLike | None) -> float | ArrayLike | None:
+    """``mu`` checked as the command line and the well files check a friction factor.
+
+    Raises
+    ------
+    ModelError
+        A value that is not a number, or outside 0 to ``tdmon.config.common.MAX_FRICTION``.
+    """
+    import numpy as np
+
+    from tdmon.config.common import MAX_FRICTION, check_friction
+    from tdmon.errors import ModelError
+
+    if mu is None:
+        return None
+    if np.ndim(mu) == 0:
+        try:
+            return check_friction(mu)  # type: ignore[arg-type]
+        except ValueError as exc:
+            raise ModelError(f"mu: {exc}") from None
+    try:
+        values = np.asarray(mu, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError("mu: expected friction factors (numbers)") from None
+    bad = np.flatnonzero(~((values >= 0.0) & (values <= MAX_FRICTION)))
+    if bad.size:
+        raise ModelError(f"mu: friction factor {values.flat[bad[0]]:g} (element {bad[0]}) is "
+                         f"outside 0-{MAX_FRICTION:g}")
+    return values

@@ -5,6 +5,9 @@ and sets ``func`` (a callable taking the parsed arguments and returning the exit
 User mistakes surface as :class:`tdmon.errors.TdmonError` and are printed as one line on stderr
 with exit code 2; anything else is a bug and keeps its traceback.
 
+``-q`` and ``-v`` (before the command) apply to every command: the log's level, over
+``--log-level`` where a command has it, and with ``-q`` no progress bar or status line.
+
 SIGINT is handled from this module's first line: a shell without job control starts a
 background job (``tdmon publish ... &`` in a script) with SIGINT ignored, and Python then
 installs no handler of its own, so ``kill -INT`` would be lost until a command re-armed it.
@@ -30,6 +33,7 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 
 import argparse  # noqa: E402 (after SIGINT is armed)
 import importlib  # noqa: E402
+import logging  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 from typing import NoReturn  # noqa: E402
 
@@ -37,7 +41,11 @@ from tdmon import __version__  # noqa: E402
 from tdmon.blas import limit_blas_threads  # noqa: E402
 from tdmon.errors import TdmonError  # noqa: E402
 
-_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "fleet", "batch")
+_COMMAND_MODULES = ("model", "lab", "run", "record", "replay", "bridge", "fleet", "batch",
+                    "examples")
+
+#: The log's format with -q or -v (that of ``tdmon run``'s log).
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -59,6 +67,13 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     parser.add_argument("--version", action="version", version=f"tdmon {__version__}")
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-v", "--verbose", action="count", default=0,
+                          help="more in the log: info messages, -vv debug (run and bridge, "
+                               "which log info by default: debug); over --log-level")
+    loudness.add_argument("-q", "--quiet", action="store_true",
+                          help="errors only in the log, and no progress bar or status line "
+                               "(as --no-progress, --status-every 0); results still print")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in _COMMAND_MODULES:
         module = importlib.import_module(f"tdmon.cli.{name}")
@@ -83,6 +98,7 @@ def _run(argv: Sequence[str] | None) -> int:
     if func is None:
         parser.print_help(sys.stderr)
         return 2
+    set_loudness(args)
     # the small matrices of the calibration run faster on one BLAS thread (tdmon.blas); after
     # parsing, so that --help and usage mistakes do not import numpy
     limit_blas_threads()
@@ -93,6 +109,27 @@ def _run(argv: Sequence[str] | None) -> int:
         return 2
     except BrokenPipeError:
         return 0
+
+
+def set_loudness(args: argparse.Namespace) -> None:
+    """Apply -q / -v: the level of tdmon's loggers (other libraries' stay at warning, or
+    error with -q), a handler on the root logger (which makes a command's own
+    ``logging.basicConfig(level=--log-level)`` a no-op), and with -q the command's progress
+    and status options off. Without either, nothing changes."""
+    if not (args.quiet or args.verbose):
+        return
+    if args.quiet:
+        level = logging.ERROR
+        for name, off in (("no_progress", True), ("status_every", 0.0)):
+            if hasattr(args, name):
+                setattr(args, name, off)
+    else:
+        # one step below the command's own default: warning, or info where it has --log-level
+        default = logging.INFO if hasattr(args, "log_level") else logging.WARNING
+        level = max(logging.DEBUG, default - 10 * args.verbose)
+    logging.basicConfig(level=max(level, logging.WARNING), stream=sys.stderr,
+                        format=LOG_FORMAT, force=True)
+    logging.getLogger("tdmon").setLevel(level)
 
 
 if __name__ == "__main__":

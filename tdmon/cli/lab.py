@@ -23,6 +23,10 @@ if TYPE_CHECKING:
     from tdmon.calib.labfit import FrictionFit, TribometerData
 
 _MODEL_NAMES = "linear, poly-2, poly-3 (any poly-m), power, exponential, saturation-growth"
+#: What a tribometer CSV holds, for the message about a file that is none.
+_LAYOUT = "a CSV with columns test, temperature_C, friction_coefficient (docs/lab-fit.md)"
+#: How much of a file is looked at to tell text from a binary file [bytes].
+_SNIFF_BYTES = 65536
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -107,6 +111,7 @@ def _fits(path: Path, models: list[str] | None, given_averages: bool) -> _Fits:
 
 
 def _run_fit(args: argparse.Namespace) -> int:
+    check_text_file(args.data)
     fits = _fits(args.data, args.models, args.averages)
     if args.json:
         json.dump(_document(args.data, fits), sys.stdout, allow_nan=False)
@@ -118,6 +123,39 @@ def _run_fit(args: argparse.Namespace) -> int:
             _plot(fits, args.png, args.data)
             print(f"\nwrote {args.png}")
     return 0
+
+
+def check_text_file(path: Path) -> None:
+    """Refuse a file that is not text (an MCAP recording, a spreadsheet, an image) with one
+    line saying what it is and what ``lab fit`` reads, instead of the CSV reader's decoding
+    error. A missing or unreadable file is left to the reader, which names the cause.
+
+    Raises
+    ------
+    FitError
+        Naming the file.
+    """
+    import codecs
+
+    from tdmon.errors import FitError
+
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(_SNIFF_BYTES)
+    except OSError:
+        return
+    if head.startswith(b"\x89MCAP"):
+        raise FitError(f"{path}: an MCAP recording, not tribometer data: lab fit reads "
+                       f"{_LAYOUT}; a recording goes to tdmon report or tdmon view")
+    try:
+        # incremental: a character cut at the end of the sample is not a mistake
+        codecs.getincrementaldecoder("utf-8")().decode(head, final=False)
+        binary = b"\x00" in head
+    except UnicodeDecodeError:
+        binary = True
+    if binary:
+        raise FitError(f"{path}: not a text file (not UTF-8), so not tribometer data: lab fit "
+                       f"reads {_LAYOUT}")
 
 
 def _document(path: Path, fits: _Fits) -> dict[str, Any]:

@@ -158,9 +158,10 @@ def _run(args: argparse.Namespace) -> int:
     # the Rerun views are built inside the daemon: they read the units from tdmon.display
     with using(display_units(args, config.display.units)):
         stats = asyncio.run(main())
+    jumps = f", {stats.clock_jumps} clock jumps" if stats.clock_jumps else ""  # logged sparingly
     print(f"tdmon: stopped: {stats.samples_in} samples, {stats.rejected} rejected, "
           f"{stats.dropped} dropped, {stats.duplicates} duplicates, {stats.out_of_order} "
-          f"out of order, {stats.frames} frames", file=sys.stderr)
+          f"out of order, {stats.frames} frames{jumps}", file=sys.stderr)
     return 0
 
 

@@ -22,6 +22,11 @@ A rig clock going back is seen by the aligner instead (:class:`tdmon.daemon.alig
 hook loads older than its last frame), which reports the same :class:`ClockJump`; the
 pipeline then moves the anchor here with :meth:`ClockGuard.reanchor`.
 
+:class:`JumpLog` words the log lines of the jumps: the first at once, then at most one per
+interval of receive time, counting the jumps it stands for, so that a clock running fast (a
+session played faster than real time into a daemon that has seen the present) is a few lines
+with the real figures, not a warning per jump (136 in 25 s before).
+
 Pure apart from its own state; no I/O, no wall clock.
 """
 
@@ -33,7 +38,7 @@ from dataclasses import dataclass
 
 from tdmon.ingest.types import Sample
 
-__all__ = ["ClockGuard", "ClockJump", "ClockSettings"]
+__all__ = ["ClockGuard", "ClockJump", "ClockSettings", "JumpLog"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +96,8 @@ class ClockGuard:
     def __init__(self, settings: ClockSettings | None = None) -> None:
         self.settings = settings or ClockSettings()
         self.offset = 0.0
+        # whether ``offset`` was measured (a jump, a re-anchoring) rather than assumed (0)
+        self._anchored = False
         self.jumps = 0
         self.rejected = 0
         self._channels: set[str] = set()
@@ -120,9 +127,13 @@ class ClockGuard:
             if (max(offsets) - min(offsets) <= settings.jump_spread
                     and distinct >= min(2, len(channels))):
                 new = statistics.median(offsets)
-                # measured from the last sample on the old clock (its latency included, so
-                # that a constant latency cancels out)
-                before = self.offset if self._last_offset is None else self._last_offset
+                # measured from the rig clock's usual offset once it was measured: a sample
+                # accepted within the tolerance above it is no measure of the old clock (a
+                # clock running fast moves the anchor ~11 s per jump while its last accepted
+                # sample was already ~10 s ahead); before that, from the last sample on the
+                # old clock (its latency included, so that a constant latency cancels out)
+                before = (self.offset if self._anchored or self._last_offset is None
+                          else self._last_offset)
                 jump = ClockJump(new - before, sample.t, sample.receive_time, new)
                 self._last_offset = new
                 self.reanchor(new)
@@ -137,7 +148,43 @@ class ClockGuard:
     def reanchor(self, offset: float) -> None:
         """Take ``offset`` [s] as the rig clock's usual offset from now on."""
         self.offset = offset
+        self._anchored = True
         self._ahead.clear()
+
+
+class JumpLog:
+    """The log lines of clock jumps, at most one per ``interval`` [s] of receive time.
+
+    The first jump is a line at once; the next ones within ``interval`` of the last line are
+    held, and the first jump after it is a line that also counts the jumps held since the last
+    line and their sum (the alarms are not limited: one per jump). Receive times, not the wall
+    clock, keep it pure and a replay's lines those of the live run.
+    """
+
+    def __init__(self, interval: float = 10.0) -> None:
+        self.interval = interval
+        self._last_line: float | None = None  # receive time of the last line
+        self._held: list[float] = []  # seconds of the jumps since the last line
+
+    def line(self, jump: ClockJump) -> str | None:
+        """The log line for ``jump``, or None while it is held."""
+        if self._last_line is not None and jump.receive_time < self._last_line + self.interval:
+            self._held.append(jump.seconds)
+            return None
+        text = (f"{jump.message} (rig time {jump.t:.3f}, receive time "
+                f"{jump.receive_time:.3f})")
+        if self._held:
+            held = [*self._held, jump.seconds]
+            assert self._last_line is not None
+            text += (f"; {len(held)} clock jumps in the last "
+                     f"{_seconds(jump.receive_time - self._last_line)} s, "
+                     f"{sum(held):+.0f} s in all")
+            if all(seconds > 0 for seconds in held):
+                text += (": a rig clock running fast (or a session played faster than real "
+                         "time after the daemon took an earlier time as the rig's clock)")
+        self._held = []
+        self._last_line = jump.receive_time
+        return text
 
 
 def _seconds(value: float) -> str:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, Protocol, runtime_checkable
 
-from tdmon.daemon.clock import ClockGuard, ClockJump
+from tdmon.daemon.clock import ClockGuard, ClockJump, JumpLog
 from tdmon.daemon.loss import LossDetector
 from tdmon.ingest.decode import Decoder
 from tdmon.ingest.types import (
@@ -164,6 +164,7 @@ class Pipeline:
         # the rig clock against the receive time (docs/daemon.md, "Clock faults"); None: no
         # future check, as for a pipeline built by hand
         self.clock = clock
+        self._jump_log = JumpLog()
         self.steps = list(steps)
         self.sinks = list(sinks)
         #: the sinks that are flight recorders (the daemon acknowledges input by their marks)
@@ -319,10 +320,10 @@ class Pipeline:
         return rejected
 
     def _clock_jump(self, jump: ClockJump, log_ns: int) -> None:
-        """One alarm and one log line per clock jump: never a silent stall."""
+        """One alarm per clock jump and a rate-limited log line: never a silent stall."""
         self.stats.clock_jumps += 1
-        log.warning("%s (rig time %.3f, receive time %.3f)", jump.message, jump.t,
-                    jump.receive_time)
+        if (line := self._jump_log.line(jump)) is not None:
+            log.warning("%s", line)
         self._write("/tdmon/alarm", log_ns, alarm_message(
             jump.t, AlarmKind.CLOCK_JUMP, Severity.WARNING, jump.message, value=jump.seconds))
 

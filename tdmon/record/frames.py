@@ -73,6 +73,14 @@ class Recording:
         held += [topic for topic, frame in self.other.items() if not frame.empty]
         return tuple(sorted(held))
 
+    def __repr__(self) -> str:
+        # the frames would print whole (thousands of lines): the file and its messages per
+        # topic, the topics not read marked
+        held = set(self.topics)
+        counts = ", ".join(f"{topic} {count}" + ("" if topic in held else " (not read)")
+                           for topic, count in sorted(self.counts.items()) if count)
+        return f"Recording({str(self.path)!r}, messages: {counts or 'none'})"
+
     def __getitem__(self, topic: str) -> pd.DataFrame:
         """The frame of a topic by its name (``"/tdmon/estimate"``) or attribute
         (``"estimates"``)."""

@@ -156,7 +156,10 @@ def _one_line_error(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
         ("test,temperature_C,friction_coefficient\n1,30,\n", "no successful run"),
         ("test,temperature_C,friction_coefficient\n1,30,0.3\n2,30,0.4\n",
          "could be fitted"),
-        (b"\x89PNG\r\n\x1a\n\x00\xff\xfe binary", "cannot read tribometer data"),
+        (b"\x89PNG\r\n\x1a\n\x00\xff\xfe binary",
+         "bad.csv: not a text file (not UTF-8), so not tribometer data: lab fit reads a CSV "
+         "with columns test, temperature_C, friction_coefficient"),
+        (b"test,temperature_C\x00,friction_coefficient\n", "not a text file"),
     ],
 )
 def test_bad_csv_is_one_line(tmp_path, capsys, content, message):
@@ -167,6 +170,27 @@ def test_bad_csv_is_one_line(tmp_path, capsys, content, message):
         path.write_text(content)
     line = _one_line_error(capsys, "lab", "fit", str(path))
     assert message in line
+
+
+def test_a_recording_is_named_for_what_it_is(capsys):
+    # issue 33: it said "'utf-8' codec can't decode byte 0x89 in position 0"
+    recording = DATA.parents[2] / "replays" / "trip-in-noisy.mcap"
+    line = _one_line_error(capsys, "lab", "fit", str(recording))
+    assert line == (f"tdmon: error: {recording}: an MCAP recording, not tribometer data: lab "
+                    "fit reads a CSV with columns test, temperature_C, friction_coefficient "
+                    "(docs/lab-fit.md); a recording goes to tdmon report or tdmon view")
+
+
+def test_text_with_a_character_cut_at_the_sniffed_length_is_read(tmp_path, capsys):
+    # the first 64 kB are looked at: a two-byte character across that edge is no mistake
+    from tdmon.cli.lab import _SNIFF_BYTES
+
+    header = "# données: ".encode()
+    pad = _SNIFF_BYTES - 1 - len(header)
+    path = tmp_path / "long-comment.csv"
+    path.write_bytes(header + b"x" * pad + "é\n".encode() + DATA.read_bytes())
+    assert path.read_bytes()[_SNIFF_BYTES - 1:_SNIFF_BYTES + 1] == "é".encode()
+    assert run_json(capsys, str(path))["runs"] == 34
 
 
 def test_missing_file_is_one_line(tmp_path, capsys):
