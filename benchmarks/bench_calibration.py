@@ -19,6 +19,8 @@ To compare two trees, run it with ``PYTHONPATH`` on each, alternately, on the sa
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python benchmarks/bench_calibration.py \\
         --session /tmp/session.mcap --hours 3.3
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python benchmarks/bench_calibration.py \\
+        --session /tmp/session.mcap --rig-state-only --replays 0
 
 Not part of the test suite.
 """
