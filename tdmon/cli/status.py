@@ -58,7 +58,9 @@ class StatusLine(MessageSink):
             self._depth = float(depth) if isinstance(depth, int | float) else math.nan
         elif topic == "/tdmon/estimate":
             if message.get("kind") == "window":
-                self._friction = (str(message.get("operation")), float(message.get("mu", math.nan)),
+                mu = message.get("mu")  # None: friction not resolvable there
+                self._friction = (str(message.get("operation")),
+                                  float(mu) if isinstance(mu, int | float) else math.nan,
                                   float(message.get("mu_std") or math.nan))
         elif topic == "/tdmon/alarm":
             self._alarms += 1
@@ -94,7 +96,8 @@ class StatusLine(MessageSink):
         if self._friction is not None:
             operation, mu, std = self._friction
             spread = f" ± {std:.3f}" if math.isfinite(std) else ""
-            parts.append(f"mu {operation} {mu:.3f}{spread}")
+            parts.append(f"mu {operation} {mu:.3f}{spread}" if math.isfinite(mu)
+                         else f"mu {operation} not resolvable")
         if self._alarms:
             severity, kind = self._last_alarm or ("", "")
             parts.append(f"alarms {self._alarms}, {self._severe} warning or critical "

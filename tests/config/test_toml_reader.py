@@ -98,7 +98,7 @@ def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
 
 def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     scenarios = sorted((REPO / "replays" / "scenarios").glob("*.toml"))
-    assert len(scenarios) == 11
+    assert len(scenarios) == 12
     prefixes = {load_scenario(path).scenario.prefix for path in scenarios}
     assert prefixes == {"sim/trip-out", "sim/trip-in", "sim/faults", "sim/drill",
                         "sim/model-error", "sim/sheave", "sim/shallow"}

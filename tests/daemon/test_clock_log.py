@@ -22,6 +22,7 @@ from tdmon.daemon.clock import ClockGuard, ClockJump, ClockSettings, JumpLog
 from tdmon.daemon.pipeline import Pipeline
 from tdmon.ingest.decode import ChannelSpec, Decoder
 from tdmon.ingest.types import RawMessage, Sample
+from tdmon.record.sink import MessageSink
 
 T0 = 1_700_000_000.0
 STEP = 0.5  # [s] of rig time between rows
@@ -30,7 +31,7 @@ SPEED = 60.0
 CHANNELS = ("hookload", "torque", "bit_depth")
 
 
-class _Alarms:
+class _Alarms(MessageSink):
     """A sink keeping (receive time of the message being processed, seconds) of every clock
     jump alarm."""
 

@@ -149,7 +149,7 @@ def test_load_find_and_mistakes(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"bad.toml: states.agrement: unknown key"):
         load_expectations(bad)
     bad.write_text('replay = "x"\nconfig = "y"\n[[friction]]\noperation = "pick_up"\n')
-    with pytest.raises(ConfigError, match="give min, max, truth_abs or within_2_std"):
+    with pytest.raises(ConfigError, match="give min, max, truth_abs, within_2_std or resolvable"):
         load_expectations(bad)
     with pytest.raises(ConfigError, match="no such file"):
         load_expectations(tmp_path / "none.toml")

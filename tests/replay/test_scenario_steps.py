@@ -111,7 +111,7 @@ def run_daemon_steps(run: ReplayRun) -> ReplayResult:
                                [0.15, 0.25, 0.35], method=scenario.method)),
         CalibrationStep(model, rig, CalibrationSettings(windows=WindowSettings(min_samples=3),
                                                         method=scenario.method)),
-        AlarmStep(),
+        AlarmStep(rig_state=rig),
     ]
     messages: list[tuple[str, dict[str, Any]]] = []
 
@@ -239,7 +239,8 @@ def test_steps_behind_the_daemon_aligner(replay: Any) -> None:
     model = WellModel(session.scenario.well)
     rig = RigStateStep(RigStateThresholds(block_weight=session.scenario.well.block_weight))
     steps = [rig, CalibrationStep(model, rig, CalibrationSettings(
-        windows=WindowSettings(min_samples=3), method=session.scenario.method)), AlarmStep()]
+        windows=WindowSettings(min_samples=3), method=session.scenario.method)),
+        AlarmStep(rig_state=rig)]
     messages: list[tuple[str, dict[str, Any]]] = []
     states: list[tuple[float, str]] = []
     frames = []
