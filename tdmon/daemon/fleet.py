@@ -326,6 +326,9 @@ class FleetPipeline:
             rig = self.rigs.pop(prefix)
             del self._rig_of[rig.pipeline]
             rig.pipeline.flush()
+            for recorder in rig.pipeline.recorders:
+                # durable now: acknowledgements waiting on this recorder's marks can go
+                recorder.flush()
             for sink in rig.owned:
                 try:
                     sink.close()

@@ -421,3 +421,54 @@ def test_fuzz_fleet_over_mqtt(tmp_path: Path, mosquitto: Any,
     finally:
         client.loop_stop()
         client.disconnect()
+
+
+def test_a_silent_found_rig_is_retired_with_its_recording_finished(
+        tmp_path: Path, free_tcp_port: Callable[[], int]) -> None:
+    from tdmon.record.reader import read_messages
+
+    rig_port, daemon_port = free_tcp_port(), free_tcp_port()
+    config = _config({"sources": {"zenoh": {"listen": [f"tcp/127.0.0.1:{daemon_port}"],
+                                            "connect": [f"tcp/127.0.0.1:{rig_port}"]}},
+                      "fleet": {"idle_rig_timeout": "1.5 s", "max_rigs": 1},
+                      "recorder": {"enabled": True, "output": str(tmp_path / "rec"),
+                                   "flush_interval": "0.2 s"}}, tmp_path)
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{rig_port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    session = zenoh.open(conf)
+
+    def send(topic: str, value: float) -> None:
+        session.put(topic, payload(time.time(), value),
+                    congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def wait(what: str, done: Callable[[], bool]) -> None:
+        deadline = time.monotonic() + 30
+        while not done():
+            assert time.monotonic() < deadline, what
+            time.sleep(0.02)
+
+    try:
+        with running_fleet(config) as harness:
+            fleet = harness.fleet
+            assert fleet is not None
+            probe = session.declare_publisher("rig/D/hookload")
+            wait("the subscription", lambda: probe.matching_status.matching)
+            probe.undeclare()
+            send("rig/D/hookload", 500.0)
+            wait("rig/D built", lambda: "rig/D" in fleet.rigs.copy())
+            send("rig/E/hookload", 600.0)  # max_rigs = 1: refused while D holds the slot
+            wait("rig/E refused", lambda: sum(fleet.refusals.values()) == 1)
+            wait("rig/D retired", lambda: fleet.retired == 1)
+            assert "rig/D" not in fleet.rigs.copy()
+            # D's recording was closed with its sample in it
+            files = sorted((tmp_path / "rec" / "rig_D").glob("*.mcap"))
+            assert len(files) == 1
+            samples = [m.message for m in read_messages(files[0], "/tdmon/sample")]
+            assert [s["value"] for s in samples] == [500e3]
+            send("rig/E/hookload", 700.0)  # the freed slot
+            wait("rig/E built", lambda: "rig/E" in fleet.rigs.copy())
+    finally:
+        session.close()
