@@ -38,6 +38,7 @@ from tdmon.config.common import (
     read_toml,
     validation_to_config_error,
 )
+from tdmon.config.rig_names import DEFAULT_NAME_PATTERN
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
 from tdmon.units import conversion, parse_quantity, parse_time
@@ -662,6 +663,20 @@ class FleetConfig(_Model):
     wells: Path | None = None  # folder of well files named after the rigs
     # a bound on the rigs found (a stray publisher must not grow the daemon without limit)
     max_rigs: int = Field(default=200, ge=1)
+    # what a found rig's name must match besides the fixed rule (tdmon/config/rig_names.py):
+    # it narrows the rule, never widens it
+    name_pattern: str = DEFAULT_NAME_PATTERN
+    # a found rig silent this long is retired: its recording finished, its slot freed
+    idle_rig_timeout: Seconds = Field(default=3600.0, gt=0)
+
+    @field_validator("name_pattern")
+    @classmethod
+    def _name_pattern(cls, value: str) -> str:
+        try:
+            re.compile(value)
+        except re.error as exc:
+            raise ValueError(f"not a regular expression: {exc}") from None
+        return value
 
 
 class DaemonConfig(_Model):

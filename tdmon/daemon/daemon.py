@@ -2,7 +2,8 @@
 
 Backpressure: sources ``await queue.put``, so a slow pipeline slows the sources down instead of
 losing data (the Zenoh bridge then blocks zenoh, and MQTT messages wait in the client). The only
-places that can drop are the publisher queues, and they count every drop into the status.
+places that can drop are the publisher queues and, for QoS 0 messages beyond ``[queues] ingest``,
+the MQTT client's queue; they count every drop into the status.
 Shutdown (``stop`` set, e.g. by SIGINT/SIGTERM): stop taking messages from the sources, process
 everything already queued, flush the recorder and acknowledge what it holds (the sources'
 connections are still open for that), close the sources, flush the aligner and the steps, send a

@@ -25,12 +25,16 @@ from __future__ import annotations
 import contextlib
 import gc
 import logging
+import math
+import re
+import time
 from collections.abc import AsyncIterator, Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from tdmon.config.daemon import DaemonConfig, RigConfig
+from tdmon.config.rig_names import DEFAULT_NAME_PATTERN, name_refusal, printable
 from tdmon.config.well_file import WellFile, read_well_file
 from tdmon.daemon.build import Built, assemble_pipeline, rig_steps
 from tdmon.daemon.daemon import Daemon
@@ -41,6 +45,7 @@ from tdmon.daemon.steps.monitor import LoadModel
 from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
 from tdmon.errors import TdmonError
+from tdmon.ingest.decode import parse_payload
 from tdmon.ingest.types import RawMessage
 from tdmon.record.sink import Recorder
 
@@ -49,6 +54,15 @@ log = logging.getLogger(__name__)
 #: Routed topics remembered (a topic is looked up once); past this the memory starts afresh,
 #: so that a flood of stray topics cannot grow it without bound.
 MAX_ROUTES = 100_000
+#: Topics longer than this are looked up every time, never remembered [characters].
+MAX_REMEMBERED_TOPIC = 256
+#: Names of rigs that could not be built (no well file), remembered so that each is logged
+#: once; past this the memory starts afresh (each name is at most 64 characters).
+MAX_UNBUILDABLE = 10_000
+#: At most one log line per this many seconds about refused rig names [s].
+REFUSAL_LOG_INTERVAL = 60.0
+#: How often silent rigs are looked for [s].
+IDLE_CHECK_INTERVAL = 1.0
 
 #: The per-rig counters summed into the fleet's when it stops (``tdmon run``'s last line).
 SUMMED = ("messages_in", "samples_in", "rejected", "dropped", "duplicates", "out_of_order",
@@ -101,37 +115,62 @@ class WellCache:
 
 @dataclass
 class Rig:
-    """One rig of the fleet: its prefix, configuration and pipeline."""
+    """One rig of the fleet: its prefix, configuration and pipeline; ``owned`` are the sinks
+    only this rig writes to (closed when a silent rig is retired)."""
 
     prefix: str
     config: DaemonConfig
     pipeline: Pipeline
+    owned: Sequence[Sink] = ()
+    last_message: float = field(default_factory=time.monotonic)
 
 
 class FleetPipeline:
     """Route each message to its rig's pipeline; rigs listed in the file exist from the start,
-    rigs found under ``[fleet]`` appear with their first message.
+    rigs found under ``[fleet]`` appear with their first valid message.
 
     ``make_rig(prefix, rig)`` builds a rig's pipeline (``rig``: its ``[[rigs]]`` entry, None
     for a rig found by topic); it returns None when the rig cannot run (no well file for the
     calibration), whose messages are then counted in ``unrouted``.
+
+    What anyone who can publish could otherwise exhaust is bounded (docs/fleet.md, "Rig
+    names"): a found rig's name must meet the rule of :mod:`tdmon.config.rig_names`, its first
+    message must be a sample on a channel topic, at most ``max_rigs`` exist at once, and a
+    found rig silent for ``idle_rig_timeout`` is retired and its slot freed. Refused names
+    are counted in ``refusals`` (by reason), never kept.
     """
 
     def __init__(self, config: DaemonConfig,
                  make_rig: Callable[[str, RigConfig | None], Rig | None],
-                 stats: Stats | None = None) -> None:
+                 stats: Stats | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.root = config.prefix
         self.listed = {rig.prefix: rig for rig in config.rigs}
-        self.discover = config.fleet is not None and config.fleet.discover
-        self.max_rigs = config.fleet.max_rigs if config.fleet is not None else len(self.listed)
+        fleet = config.fleet
+        self.discover = fleet is not None and fleet.discover
+        self.max_rigs = fleet.max_rigs if fleet is not None else len(self.listed)
+        self.name_pattern = re.compile(DEFAULT_NAME_PATTERN if fleet is None
+                                       else fleet.name_pattern)
+        self.idle_timeout = math.inf if fleet is None else fleet.idle_rig_timeout
+        self.channel_topics = frozenset(spec.topic for spec in config.channel_specs())
         self.make_rig = make_rig
+        self.clock = clock
         #: every rig's flight recorders, for the daemon's acknowledgements (grows with rigs)
         self.recorders: list[Recorder] = []
         self.stats = stats or Stats()
         self.rigs: dict[str, Rig] = {}
+        self._rig_of: dict[Pipeline, Rig] = {}
+        #: names of rigs that could not be built (bounded: MAX_UNBUILDABLE)
         self.refused: set[str] = set()
+        #: refused rig names and first messages, by reason (counted, never kept)
+        self.refusals: dict[str, int] = {}
+        #: found rigs retired after a silence
+        self.retired = 0
         self.unrouted = 0
         self._routes: dict[str, Pipeline | None] = {}
+        self._retired_counts = Stats()
+        self._last_refusal_log = -math.inf
+        self._next_idle_check = clock() + IDLE_CHECK_INTERVAL
         self._closed = False
         try:
             for prefix, rig in self.listed.items():
@@ -147,15 +186,19 @@ class FleetPipeline:
             return None
         try:
             built = self.make_rig(prefix, rig)
-        except TdmonError as exc:
+        except (TdmonError, OSError, ValueError) as exc:
+            # a found rig's folder or file that cannot be made refuses that rig, not the daemon
             if not found:
                 raise
-            log.error("rig %s ignored: %s", prefix, exc)
+            log.error("rig %s ignored: %s", prefix, printable(str(exc), 200))
             built = None
         if built is None:
+            if len(self.refused) >= MAX_UNBUILDABLE:
+                self.refused.clear()
             self.refused.add(prefix)
             return None
         self.rigs[prefix] = built
+        self._rig_of[built.pipeline] = built
         self.recorders.extend(built.pipeline.recorders)
         # What a rig keeps for its life (well model, filters, recorder) goes to the permanent
         # generation: a full collection then scans only what came after. Without it, building
@@ -166,51 +209,85 @@ class FleetPipeline:
                  "" if len(self.rigs) == 1 else "s")
         return built.pipeline
 
-    def _route(self, topic: str) -> Pipeline | None:
-        """The pipeline of the rig ``topic`` belongs to; None for results (``tdmon/``) and
-        for topics of no rig."""
+    def _route(self, topic: str, payload: bytes | None = None) -> Pipeline | None:
+        """The pipeline of the rig ``topic`` belongs to; None for results (``tdmon/``), for
+        topics of no rig, and for a rig not found yet whose first message ``payload`` is not
+        a valid sample."""
+        return self._resolve(topic, payload)[0]
+
+    def _resolve(self, topic: str, payload: bytes | None) -> tuple[Pipeline | None, bool]:
+        """``_route``'s answer and whether it holds for the topic's next messages too."""
         root = self.root
         if not topic.startswith(root + "/"):
-            return None
+            return None, True
         prefix = max((p for p in self.listed if topic.startswith(p + "/")), key=len,
                      default=None)
         if prefix is None:
             if not self.discover:
-                return None
+                return None, True
             name, _, rest = topic[len(root) + 1:].partition("/")
             if not rest or name == "tdmon":
-                return None
+                return None, True
+            refusal = name_refusal(name, self.name_pattern)
+            if refusal is not None:
+                self._refuse(refusal, name)
+                return None, True
             prefix = f"{root}/{name}"
-        if topic[len(prefix) + 1:].startswith("tdmon/"):
-            return None  # results of this or another daemon: not input
+        rest = topic[len(prefix) + 1:]
+        if rest.startswith("tdmon/"):
+            return None, True  # results of this or another daemon: not input
         rig = self.rigs.get(prefix)
         if rig is not None:
-            return rig.pipeline
+            return rig.pipeline, True
         if len(self.rigs) >= self.max_rigs:
-            if prefix not in self.refused:
-                self.refused.add(prefix)
-                log.warning("rig %s ignored: [fleet] max_rigs = %d reached", prefix,
-                            self.max_rigs)
-            return None
-        return self._add(prefix, None)
+            # remembered until a slot is freed (the memory of routes is cleared then)
+            self._refuse(f"[fleet] max_rigs = {self.max_rigs} reached", prefix)
+            return None, True
+        if prefix not in self.listed and not self._valid_first(rest, payload):
+            # not remembered: the rig's next message may be a valid one
+            self._refuse("first message not a sample on a channel topic", prefix)
+            return None, False
+        return self._add(prefix, None), True
 
-    def _pipeline_of(self, topic: str) -> Pipeline | None:
+    def _valid_first(self, channel_topic: str, payload: bytes | None) -> bool:
+        """Whether a message on ``<rig>/<channel_topic>`` may found a rig: a channel topic
+        of the file and a payload that reads as a sample."""
+        return (channel_topic in self.channel_topics and payload is not None
+                and not isinstance(parse_payload(payload), str))
+
+    def _refuse(self, reason: str, name: str) -> None:
+        """Count a refused rig name or first message; one log line a minute at most, the name
+        escaped and cut short."""
+        refusals = self.refusals
+        refusals[reason] = refusals.get(reason, 0) + 1
+        now = self.clock()
+        if now - self._last_refusal_log >= REFUSAL_LOG_INTERVAL:
+            self._last_refusal_log = now
+            log.warning("rig %s ignored: %s (refused so far: %s)", printable(name), reason,
+                        ", ".join(f"{count} {why}" for why, count in refusals.items()))
+
+    def _pipeline_of(self, topic: str, payload: bytes | None = None) -> Pipeline | None:
         """The rig pipeline of an input topic, remembered (None: counted as unrouted unless
         it is a result)."""
         routes = self._routes
         if topic in routes:
             pipeline = routes[topic]
         else:
-            if len(routes) >= MAX_ROUTES:
-                routes.clear()
-            pipeline = routes[topic] = self._route(topic)
+            pipeline, remember = self._resolve(topic, payload)
+            if remember and len(topic) <= MAX_REMEMBERED_TOPIC:
+                if len(routes) >= MAX_ROUTES:
+                    routes.clear()
+                routes[topic] = pipeline
         if pipeline is None and "/tdmon/" not in topic:
             self.unrouted += 1
         return pipeline
 
     def process(self, raw: RawMessage) -> Any:
-        pipeline = self._pipeline_of(raw.topic)
-        return None if pipeline is None else pipeline.process(raw)
+        pipeline = self._pipeline_of(raw.topic, raw.payload)
+        if pipeline is None:
+            return None
+        self._heard(pipeline)
+        return pipeline.process(raw)
 
     def process_burst(self, raws: Sequence[RawMessage]) -> None:
         """``process`` for each message, each rig's share in one burst of its pipeline (the
@@ -218,15 +295,62 @@ class FleetPipeline:
         shares: dict[Pipeline, list[RawMessage]] = {}
         pipeline_of = self._pipeline_of
         for raw in raws:
-            pipeline = pipeline_of(raw.topic)
+            pipeline = pipeline_of(raw.topic, raw.payload)
             if pipeline is not None:
                 shares.setdefault(pipeline, []).append(raw)
         for pipeline, messages in shares.items():
+            self._heard(pipeline)
             pipeline.process_burst(messages)
+
+    def _heard(self, pipeline: Pipeline) -> None:
+        """Note that the rig of ``pipeline`` is not silent (found rigs only: listed ones are
+        never retired)."""
+        if self.discover:
+            self._rig_of[pipeline].last_message = self.clock()
 
     def tick(self) -> None:
         for rig in self.rigs.values():
             rig.pipeline.tick()
+        now = self.clock()
+        if now >= self._next_idle_check:
+            self._next_idle_check = now + IDLE_CHECK_INTERVAL
+            self.retire_silent(now)
+
+    def retire_silent(self, now: float) -> list[str]:
+        """Retire the found rigs silent for ``idle_rig_timeout``: each flushes, its own sinks
+        close (its recording is finished), its counters are kept for the fleet's totals and
+        its slot is free for a rig that sends again. The prefixes retired."""
+        silent = [prefix for prefix, rig in self.rigs.items()
+                  if prefix not in self.listed and now - rig.last_message >= self.idle_timeout]
+        for prefix in silent:
+            rig = self.rigs.pop(prefix)
+            del self._rig_of[rig.pipeline]
+            rig.pipeline.flush()
+            for recorder in rig.pipeline.recorders:
+                # durable now: acknowledgements waiting on this recorder's marks can go
+                recorder.flush()
+            for sink in rig.owned:
+                try:
+                    sink.close()
+                except Exception:
+                    rig.pipeline.stats.sink_errors += 1
+                    log.exception("rig %s: sink %r failed while closing", prefix, sink)
+            for recorder in rig.pipeline.recorders:
+                if recorder in self.recorders:
+                    self.recorders.remove(recorder)
+            for name in SUMMED:
+                setattr(self._retired_counts, name, getattr(self._retired_counts, name)
+                        + getattr(rig.pipeline.stats, name))
+            self.retired += 1
+            log.info("rig %s: retired after %.0f s without a message (%d rig%s left)", prefix,
+                     now - rig.last_message, len(self.rigs), "" if len(self.rigs) == 1 else "s")
+        if silent:
+            self._routes.clear()  # topics of the retired rigs, and those refused for room
+            # what the retired rigs held was frozen with them (see _add): let it be collected
+            gc.unfreeze()
+            gc.collect()
+            gc.freeze()
+        return silent
 
     def emit_status(self, connections: dict[str, str]) -> None:
         """Each rig's ``status`` on its own prefix (the connections are the fleet's)."""
@@ -251,8 +375,8 @@ class FleetPipeline:
         stats = self.stats
         own_dropped = stats.dropped
         for name in SUMMED:
-            setattr(stats, name, sum(getattr(rig.pipeline.stats, name)
-                                     for rig in self.rigs.values()))
+            setattr(stats, name, getattr(self._retired_counts, name) + sum(
+                getattr(rig.pipeline.stats, name) for rig in self.rigs.values()))
         stats.dropped += own_dropped
         stats.messages_in += self.unrouted
 
@@ -320,9 +444,11 @@ async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
             pipeline = assemble_pipeline(rig_config, well_obj, steps, rig_wiring.sinks,
                                          rig_wiring.stats)
             rig_wiring.pipeline = pipeline
-            return Rig(prefix, rig_config, pipeline)
+            return Rig(prefix, rig_config, pipeline, owned=list(rig_wiring.owned))
 
         fleet = FleetPipeline(config, make_rig, stats)
+        # a source's health alarms (e.g. MQTT messages dropped) go to every rig
+        wiring.pipeline = fleet  # type: ignore[assignment]
         sources = wiring.sources
         if stop_when_sources_done is None:
             stop_when_sources_done = bool(sources) and all(s.finite for s in sources)

@@ -7,8 +7,11 @@ alarms a sample reveals, and the counters go into the status message.
 
 from __future__ import annotations
 
+import asyncio
 import statistics
+import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -133,3 +136,42 @@ class LossDetector:
                 state.median = statistics.median(state.intervals)
                 state.since_median = 0
         return alarm
+
+
+#: A stretch of drops is alarmed once per this many seconds, with its count [s].
+DROP_ALARM_INTERVAL = 5.0
+
+
+class DropAlarm:
+    """Messages a full queue had to drop: each counted at once (``count``), and one
+    ``data_loss`` alarm (``emit``) per :data:`DROP_ALARM_INTERVAL` while drops go on, with how
+    many were dropped since the last alarm. Call :meth:`add` on the event loop's thread."""
+
+    def __init__(self, what: str, count: Callable[[int], None],
+                 emit: Callable[[dict[str, Any]], None],
+                 interval: float = DROP_ALARM_INTERVAL) -> None:
+        self.what = what
+        self.count = count
+        self.emit = emit
+        self.interval = interval
+        self.dropped = 0
+        self.alarms = 0
+        self._unreported = 0
+        self._timer: asyncio.TimerHandle | None = None
+
+    def add(self, n: int = 1) -> None:
+        self.dropped += n
+        self._unreported += n
+        self.count(n)
+        if self._timer is None:
+            self._timer = asyncio.get_running_loop().call_later(self.interval, self.report)
+
+    def report(self) -> None:
+        """Alarm what was dropped since the last alarm (nothing: no alarm)."""
+        self._timer = None
+        n, self._unreported = self._unreported, 0
+        if n:
+            self.alarms += 1
+            self.emit(alarm_message(
+                time.time(), AlarmKind.DATA_LOSS, Severity.WARNING,
+                f"{n} message(s) dropped: {self.what}", value=n))

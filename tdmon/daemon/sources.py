@@ -15,6 +15,7 @@ from tdmon.config.daemon import (
     ZenohConfig,
 )
 from tdmon.daemon.daemon import SourceSpec
+from tdmon.daemon.loss import DropAlarm
 from tdmon.daemon.wiring import Entry, Table, Wiring
 from tdmon.errors import ConfigError, IngestError
 from tdmon.ingest.decode import topic_for
@@ -44,9 +45,12 @@ def mqtt_source(wiring: Wiring, section: MqttConfig) -> None:
     ignore = (wiring.own_prefix,)
     base = wiring.base
     recent = RecentDeliveries()  # over reconnects: a resent message is recognised
+    max_queued = wiring.config.queues.ingest
+    drops = DropAlarm(f"more than {max_queued} QoS 0 messages waiting in the MQTT client "
+                      "([queues] ingest)", wiring.count_drop, wiring.emit_alarm)
 
     def open_mqtt() -> MqttSource:
-        return MqttSource(section, subscribe, ignore, base, recent)
+        return MqttSource(section, subscribe, ignore, base, recent, max_queued, drops.add)
 
     wiring.sources.append(SourceSpec("mqtt", open_mqtt))
 

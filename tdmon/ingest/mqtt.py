@@ -129,25 +129,46 @@ def connect_error(config: MqttConfig, exc: BaseException) -> IngestError:
 
 
 class _Inbox(asyncio.Queue[aiomqtt.Message]):
-    """The queue aiomqtt puts incoming messages in, with an event set by the first one."""
+    """The queue aiomqtt puts incoming messages in, with an event set by the first one.
 
-    def __init__(self, maxsize: int = 0) -> None:
+    Bounded for QoS 0: a QoS 0 message that finds ``limit`` messages waiting is dropped and
+    counted through ``on_drop`` (the broker keeps nothing of it anyway). A QoS 1/2 message is
+    always kept: the broker sends no more of them unacknowledged than its in-flight window
+    (``max_inflight_messages``), so they are bounded already, and dropping one would leave it
+    unacknowledged, holding a slot of that window until the next connection. aiomqtt's own
+    bound (``max_queued_incoming_messages``) is not used: it drops QoS 1 messages too and logs
+    a line per message dropped.
+    """
+
+    def __init__(self, maxsize: int = 0, limit: int = 0,
+                 on_drop: Callable[[int], None] | None = None) -> None:
         super().__init__(maxsize)
         self.arrived = asyncio.Event()
+        self.limit = limit
+        self.on_drop = on_drop
+        self.dropped = 0
 
     def put_nowait(self, item: aiomqtt.Message) -> None:
+        if self.limit and item.qos == 0 and self.qsize() >= self.limit:
+            self.dropped += 1
+            if self.on_drop is not None:
+                self.on_drop(1)
+            return
         super().put_nowait(item)
         self.arrived.set()
 
 
-def _inbox_class(made: list[_Inbox]) -> type[asyncio.Queue[aiomqtt.Message]]:
+def _inbox_class(made: list[_Inbox], limit: int = 0,
+                 on_drop: Callable[[int], None] | None = None
+                 ) -> type[asyncio.Queue[aiomqtt.Message]]:
     """A queue class for aiomqtt's ``queue_type`` whose instance, once aiomqtt has made it,
     is in ``made``: the source takes what waits there without aiomqtt's message iterator,
-    which makes a task per message (:meth:`MqttSource.batches`)."""
+    which makes a task per message (:meth:`MqttSource.batches`). ``limit`` and ``on_drop``:
+    see :class:`_Inbox` (0: unbounded)."""
 
     class Inbox(_Inbox):
         def __init__(self, maxsize: int = 0) -> None:
-            super().__init__(maxsize)
+            super().__init__(maxsize, limit, on_drop)
             made.append(self)
 
     return Inbox
@@ -228,6 +249,9 @@ class MqttSource:
     On a connection after this run's first (``recent`` is shared by every connection of one
     daemon), a message whose topic and payload this run already handed out is one the broker
     sent again, and is marked ``duplicate``.
+
+    At most ``max_queued`` QoS 0 messages wait in the client (0: no bound); one more is
+    dropped and counted through ``on_drop`` (see :class:`_Inbox`).
     """
 
     name = "mqtt"
@@ -239,9 +263,13 @@ class MqttSource:
         ignore_prefixes: tuple[str, ...] = (),
         base: Path | None = None,
         recent: RecentDeliveries | None = None,
+        max_queued: int = 0,
+        on_drop: Callable[[int], None] | None = None,
     ) -> None:
         self.config = config
         self.subscribe = subscribe
+        self.max_queued = max_queued
+        self.on_drop = on_drop
         self.ignore_prefixes = ignore_prefixes
         self.base = base
         self.recent = recent if recent is not None else RecentDeliveries()
@@ -255,7 +283,7 @@ class MqttSource:
     async def __aenter__(self) -> MqttSource:
         made: list[_Inbox] = []
         client = make_client(self.config, self.config.client_id, self.base,
-                             queue_type=_inbox_class(made))
+                             queue_type=_inbox_class(made, self.max_queued, self.on_drop))
         (inbox,) = made  # made by the client's constructor
         acks = ManualAcks(client)  # before connecting: see ManualAcks
         try:

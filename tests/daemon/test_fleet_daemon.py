@@ -88,13 +88,15 @@ def test_topics_route_to_their_rig_and_results_are_not_input(tmp_path: Path) -> 
         return type("Rig", (), {"pipeline": Named(prefix)})()
 
     fleet = FleetPipeline(config, make)
+    sample = payload(1.7e9, 900.0)
     assert fleet._route("rig/north/A/hookload") == "rig/north/A"  # listed, two levels
-    assert fleet._route("rig/B/hookload") == "rig/B"  # found by topic
+    assert fleet._route("rig/B/hookload") is None  # found by topic, but no valid sample yet
+    assert fleet._route("rig/B/hookload", sample) == "rig/B"  # found by its first sample
     assert fleet._route("rig/B/tdmon/state") is None  # a result, not input
-    assert fleet._route("rig/A/tdmon/state") is None
-    assert fleet._route("rig/tdmon/status") is None
-    assert fleet._route("other/B/hookload") is None
-    assert fleet._route("rig/C/hookload") is None  # max_rigs = 2 reached
+    assert fleet._route("rig/A/tdmon/state", sample) is None
+    assert fleet._route("rig/tdmon/status", sample) is None
+    assert fleet._route("other/B/hookload", sample) is None
+    assert fleet._route("rig/C/hookload", sample) is None  # max_rigs = 2 reached
     assert made == ["rig/north/A", "rig/B"]
 
 

@@ -4,6 +4,7 @@ messages taken with a timeout, and a wait until the broker has its acknowledgeme
 from __future__ import annotations
 
 import asyncio
+import socket
 
 import paho.mqtt.client as mqtt
 
@@ -50,3 +51,36 @@ async def nothing_within(source: MqttSource, seconds: float) -> bool:
     except TimeoutError:
         return True
     return False
+
+
+def _remaining_length(n: int) -> bytes:
+    """MQTT's variable-length integer (MQTT 3.1.1, 2.2.3)."""
+    out = bytearray()
+    while True:
+        n, digit = n >> 7, n & 0x7F
+        out.append(digit | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def _packet(kind: int, body: bytes) -> bytes:
+    return bytes([kind]) + _remaining_length(len(body)) + body
+
+
+def _string(text: str) -> bytes:
+    data = text.encode()
+    return len(data).to_bytes(2, "big") + data
+
+
+def flood(port: int, topic: str, payload: bytes, count: int) -> None:
+    """Publish ``count`` QoS 0 messages as fast as the socket takes them (blocking). The
+    packets are written by hand (MQTT 3.1.1, 3.1 CONNECT and 3.3 PUBLISH): a Python client's
+    work per message would be slower than the reader it is meant to outrun."""
+    with socket.create_connection(("127.0.0.1", port), timeout=30) as sock:
+        connect = _string("MQTT") + bytes([4, 0x02]) + (60).to_bytes(2, "big") + _string("flood")
+        sock.sendall(_packet(0x10, connect))
+        assert sock.recv(4) == b"\x20\x02\x00\x00", "CONNACK refused"
+        publish = _packet(0x30, _string(topic) + payload)
+        for _ in range(count // 1000):
+            sock.sendall(publish * 1000)
+        sock.sendall(publish * (count % 1000) + _packet(0xE0, b""))
