@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install everything the tests need on a fresh Debian machine, then run lint, types and tests.
-# Usage: bash scripts/test.sh [pytest arguments]
+# Usage: bash scripts/test.sh [pytest arguments]  (TDMON_TEST_WORKERS=N: pytest workers)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,4 +20,6 @@ fi
 
 .venv/bin/ruff check tdmon tests benchmarks
 .venv/bin/mypy
-.venv/bin/python -m pytest "$@"
+# one pytest worker per core (pytest-xdist), whole files to a worker so that a file's
+# module-scoped replays run once; TDMON_TEST_WORKERS=0 runs them in this process, one by one
+.venv/bin/python -m pytest -n "${TDMON_TEST_WORKERS:-logical}" --dist loadfile "$@"

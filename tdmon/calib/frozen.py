@@ -148,15 +148,21 @@ def follow(run: ChannelRun | None, t: float, value: float, sampled: float, resol
     """
     if run is None or not (run.high - resolution <= value <= run.low + resolution):
         return ChannelRun(t, value, value, sampled, 1, 0.0, t, anchor)
-    low = value if value < run.low else run.low
-    high = value if value > run.high else run.high
-    count = run.samples + 1 if sampled > run.sampled else run.samples
-    step = t - run.t
-    gained = run.evidence + (min(step, max_step) if evidence and step > 0.0 else 0.0)
-    frozen = run.frozen or (gained >= time and count >= samples)
-    kept = max(run.anchor, anchor) if latch else run.anchor
-    return ChannelRun(run.since, low, high, max(sampled, run.sampled), count, gained, t, kept,
-                      frozen, run.reason)
+    # once per channel and frame: the fields unpacked once rather than read one by one
+    since, low, high, last_sampled, count, gained, last_t, kept, frozen, reason = run
+    if value < low:
+        low = value
+    elif value > high:
+        high = value
+    if sampled > last_sampled:
+        count += 1
+        last_sampled = sampled
+    if evidence and t > last_t:
+        gained += min(t - last_t, max_step)
+    frozen = frozen or (gained >= time and count >= samples)
+    if latch and anchor > kept:
+        kept = anchor
+    return ChannelRun(since, low, high, last_sampled, count, gained, t, kept, frozen, reason)
 
 
 def changing(run: ChannelRun | None) -> bool:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Final
 
 from tdmon.calib.windows import Window
@@ -90,9 +91,16 @@ class SensorEstimate:
     efficiency_std: float = 0.0
     hysteresis: float = 0.0
 
+    @cached_property
+    def _factors(self) -> tuple[float, float, float]:
+        """The factors lowering, still and hoisting (worked out once: the monitor reads every
+        frame's curves through them)."""
+        return (self.sensor.factor(-1, self.efficiency), self.sensor.factor(0, self.efficiency),
+                self.sensor.factor(1, self.efficiency))
+
     def factor(self, motion: int) -> float:
-        """The sensor's factor for ``motion`` at the estimated efficiency [-]."""
-        return self.sensor.factor(motion, self.efficiency)
+        """The sensor's factor for ``motion`` (-1, 0, +1) at the estimated efficiency [-]."""
+        return self._factors[motion + 1]
 
     def reading(self, string_load: float, motion: int) -> float:
         """What the sensor reads [N] of a string top force ``string_load`` [N]."""

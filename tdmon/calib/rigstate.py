@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from operator import attrgetter
 from types import MappingProxyType
 from typing import Final, NamedTuple
 
@@ -574,6 +575,11 @@ _FOLLOWED: Final = (
 )
 
 
+#: The followed channels' readings of a sample, in the order of `_FOLLOWED`.
+_followed_values: Final = attrgetter(*(name for _, name, _ in _FOLLOWED))
+_NO_AGES: Final[Mapping[str, float]] = MappingProxyType({})
+
+
 def _why(channel: str, n: _Neighbours) -> str:
     """The neighbours' words, when a channel is judged frozen."""
     th = n.thresholds
@@ -612,24 +618,26 @@ def _follow_channels(prior: DetectorState, sample: RigSample, n: _Neighbours
     """Each present channel's run; the channels frozen now and their alarm records."""
     th = n.thresholds
     t = sample.t
-    ages = sample.ages
+    ages = sample.ages if sample.ages is not None else _NO_AGES
     resolution = th.frozen_resolution
+    frozen_time, frozen_samples, max_gap = th.frozen_time, th.frozen_samples, th.max_gap
     runs = dict(prior.runs)
     changed = False
-    for channel, name, evidence_of in _FOLLOWED:
-        value = getattr(sample, name)
+    values = _followed_values(sample)
+    for (channel, _, evidence_of), value in zip(_FOLLOWED, values, strict=True):
         if value is None or not math.isfinite(value):
             continue
         run = runs.get(channel)
         evidence, anchor, latch = evidence_of(run, n)
-        age = ages.get(channel) if ages is not None else None
+        age = ages.get(channel)
         sampled = t - age if age is not None and math.isfinite(age) else t
         new = follow(run, t, value, sampled, resolution.get(channel, 0.0), evidence, anchor,
-                     latch, th.frozen_time, th.frozen_samples, th.max_gap)
-        if new.frozen and not (run is not None and run.frozen and run.since == new.since):
-            new = new._replace(reason=_why(channel, n))
-            changed = True
-        elif run is not None and run.frozen and not new.frozen:
+                     latch, frozen_time, frozen_samples, max_gap)
+        if new.frozen:
+            if not (run is not None and run.frozen and run.since == new.since):
+                new = new._replace(reason=_why(channel, n))
+                changed = True
+        elif run is not None and run.frozen:
             changed = True  # it moved: no longer frozen
         runs[channel] = new
     if not changed:

@@ -33,7 +33,8 @@ Pure functions on a small named tuple (updated once per frame).
 from __future__ import annotations
 
 import math
-from statistics import median
+from itertools import repeat
+from operator import sub
 from typing import Final, NamedTuple
 
 __all__ = ["STILL_SAMPLES", "TorqueZero", "torque_turning"]
@@ -63,10 +64,26 @@ class TorqueZero(NamedTuple):
     turning: bool = False
 
 
-def _learn(still: tuple[float, ...], torque: float) -> tuple[tuple[float, ...], float, float]:
+def _middle(ordered: list[float]) -> float:
+    """The median of sorted values (as `statistics.median`: the mean of the two middle ones
+    for an even count)."""
+    n = len(ordered)
+    half = n // 2
+    return ordered[half] if n % 2 else (ordered[half - 1] + ordered[half]) / 2
+
+
+def _learn(zero: TorqueZero, torque: float) -> tuple[tuple[float, ...], float, float]:
+    """The still samples with ``torque`` added (the oldest dropped past
+    :data:`STILL_SAMPLES`), their median and scaled median absolute deviation."""
+    still = zero.still
     kept = (*still[-(STILL_SAMPLES - 1):], torque)
-    middle = median(kept)
-    spread = 1.4826 * median([abs(x - middle) for x in kept])
+    if (len(still) == STILL_SAMPLES and zero.offset is not None and still[0] == torque
+            and math.copysign(1.0, still[0]) == math.copysign(1.0, torque)):
+        # the sample dropped is the one added (a still string's torque often repeats one
+        # reading for hours): the same values, the same median and spread
+        return kept, zero.offset, zero.spread
+    middle = _middle(sorted(kept))
+    spread = 1.4826 * _middle(sorted(map(abs, map(sub, kept, repeat(middle)))))
     return kept, middle, spread
 
 
@@ -98,7 +115,7 @@ def torque_turning(zero: TorqueZero, torque: float, sampled: float, known_still:
         start = sampled - average
         recent = (*(item for item in recent if item[0] > start), (sampled, torque))
         if known_still:
-            still, offset, spread = _learn(still, torque)
+            still, offset, spread = _learn(zero, torque)
     n = len(recent)
     level = math.fsum(value for _, value in recent) / n
     peak = 0.0 if known_still else max(zero.peak, level)

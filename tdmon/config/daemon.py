@@ -65,6 +65,27 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+def _resolved_password(password: str | None, env: str | None, file: Path | None
+                       ) -> str | None:
+    """The password given as ``password``, in the environment variable ``env`` or as the first
+    line of ``file`` (read at each connection, so that a changed file is used); None when none
+    is given or the variable is unset.
+
+    Raises
+    ------
+    OSError
+        ``file`` cannot be read.
+    """
+    if password is not None:
+        return password
+    if env is not None:
+        return os.environ.get(env)
+    if file is not None:
+        text = file.read_text(encoding="utf-8")
+        return text.splitlines()[0] if text else ""
+    return None
+
+
 class TlsConfig(_Model):
     """TLS towards the broker. Paths relative to the config file."""
 
@@ -105,23 +126,8 @@ class MqttConfig(_Model):
         return self
 
     def resolved_password(self) -> str | None:
-        """The password from ``password``, the ``password_env`` variable or the first line of
-        ``password_file`` (read at each connection, so that a changed file is used); None when
-        none is given or the variable is unset.
-
-        Raises
-        ------
-        OSError
-            ``password_file`` cannot be read.
-        """
-        if self.password is not None:
-            return self.password
-        if self.password_env is not None:
-            return os.environ.get(self.password_env)
-        if self.password_file is not None:
-            text = self.password_file.read_text(encoding="utf-8")
-            return text.splitlines()[0] if text else ""
-        return None
+        """The password (:func:`_resolved_password`)."""
+        return _resolved_password(self.password, self.password_env, self.password_file)
 
 
 class ZenohConfig(_Model):
@@ -364,22 +370,8 @@ class OpcUaConfig(_Model):
                 warn_if_readable_by_others(path, "sources.opcua.password_file")
 
     def resolved_password(self) -> str | None:
-        """The password from ``password``, the ``password_env`` variable or the first line of
-        ``password_file`` (read at each connection); None when none is given.
-
-        Raises
-        ------
-        OSError
-            ``password_file`` cannot be read.
-        """
-        if self.password is not None:
-            return self.password
-        if self.password_env is not None:
-            return os.environ.get(self.password_env)
-        if self.password_file is not None:
-            text = self.password_file.read_text(encoding="utf-8")
-            return text.splitlines()[0] if text else ""
-        return None
+        """The password (:func:`_resolved_password`)."""
+        return _resolved_password(self.password, self.password_env, self.password_file)
 
 
 class SourcesConfig(_Model):

@@ -393,7 +393,7 @@ def _record_run(profile, first, last, run_force, run_torque, run_md, run_tan, ru
                     run_mu, axial_factors[o], torque_factors[o], weight, radius, fluid)
 
 
-def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,
+def _march(well, method, mu_cases, bit_depth, bit_forces, bit_torques, axial_factors,  # noqa: C901  (the one element loop, one compiled body)
            torque_factors, fluid, forces, torques, profile, tape):
     """March from the bit to the top of the hole for every (case, operation) at once.
 

@@ -35,10 +35,10 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, ClassVar, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -188,8 +188,8 @@ class RerunViews(MessageSink):
         if self._closed:
             return
         self.stats.messages += 1
-        handler = _HANDLERS.get(topic.removeprefix("/tdmon/") if topic.startswith("/tdmon/")
-                                else "")
+        handler = self._handlers.get(topic.removeprefix("/tdmon/")
+                                     if topic.startswith("/tdmon/") else "")
         if handler is None:
             self.stats.skipped += 1
             return
@@ -450,6 +450,13 @@ class RerunViews(MessageSink):
         for key in ("samples_in", "rejected", "dropped", "lag_s"):
             self._scalar(f"status/{key}", TIME, t_ns, _finite(message.get(key)))
 
+    #: the handler of each topic's messages (``/tdmon/<name>``)
+    _handlers: ClassVar[dict[str, Callable[[RerunViews, int, Message], None]]] = {
+        "model": _on_model, "state": _on_state, "estimate": _on_estimate,
+        "profile": _on_profile, "well": _on_well, "alarm": _on_alarm,
+        "rejected": _on_rejected, "sample": _on_sample, "status": _on_status,
+    }
+
     def _positions(self, md: NDArray[np.float64]) -> NDArray[np.float64]:
         assert self._well is not None
         well = self._well
@@ -521,19 +528,6 @@ def _time_ns(message: Message, log_time_ns: int) -> int:
     if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t):
         return round(t * 1e9)
     return int(log_time_ns)
-
-
-_HANDLERS: Final = {
-    "model": RerunViews._on_model,
-    "state": RerunViews._on_state,
-    "estimate": RerunViews._on_estimate,
-    "profile": RerunViews._on_profile,
-    "well": RerunViews._on_well,
-    "alarm": RerunViews._on_alarm,
-    "rejected": RerunViews._on_rejected,
-    "sample": RerunViews._on_sample,
-    "status": RerunViews._on_status,
-}
 
 
 def blueprint(units: UnitSystem | None = None) -> Any:

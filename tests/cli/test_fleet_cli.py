@@ -14,7 +14,7 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import pytest
 import zenoh
@@ -138,16 +138,35 @@ def _wait(predicate: Callable[[], bool], timeout: float, what: str,
         time.sleep(0.05)
 
 
-def _stderr_lines(process: subprocess.Popen[str]) -> list[str]:
+def _lines(stream: IO[str] | None) -> tuple[list[str], threading.Thread]:
+    """The lines of a child's pipe as they come, read by a thread (ends at the pipe's end)."""
+    assert stream is not None
     lines: list[str] = []
 
     def read() -> None:
-        assert process.stderr is not None
-        for line in process.stderr:
+        for line in stream:
             lines.append(line)
 
-    threading.Thread(target=read, daemon=True).start()
-    return lines
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    return lines, reader
+
+
+def _newest_cells(results: dict[str, list[dict[str, Any]]], rig: str) -> tuple[str, str]:
+    """What ``rig``'s row shows of its newest messages: the rig state, the friction cell."""
+    windows = [m for m in results[f"{rig}/tdmon/estimate"] if m["kind"] == "window"]
+    assert windows, f"{rig} sent no friction estimate"
+    state = RigState(results[f"{rig}/tdmon/state"][-1]["state"]).value
+    return state, f"{windows[-1]['mu']:.3f} ± {windows[-1]['mu_std']:.3f}"
+
+
+def _last_table_shows(out: list[str], cells: dict[str, tuple[str, str]]) -> bool:
+    """Whether the last table drawn whole shows each rig's row with its cells."""
+    drawn = "".join(out).split("\n\n")[:-1]  # the part after the last blank line is unfinished
+    if not drawn:
+        return False
+    rows = {line.split()[0]: line for line in drawn[-1].splitlines()[2:] if line.strip()}
+    return all(cell in rows.get(rig, "") for rig, row in cells.items() for cell in row)
 
 
 def _friction_series(rrd: Path) -> dict[str, list[float]]:
@@ -167,7 +186,8 @@ def test_operations_centre_router_and_three_rig_daemons(
     rrd = tmp_path / "fleet.rrd"
     centre = _tdmon("fleet", "--listen", router, "--interval", "2 s", "--duration", "300 s",
                     "--rerun-file", str(rrd))
-    centre_err = _stderr_lines(centre)
+    centre_out, centre_reader = _lines(centre.stdout)
+    centre_err, _ = _lines(centre.stderr)
     processes = [centre]
     results: dict[str, list[dict[str, Any]]] = defaultdict(list)
     session = None
@@ -204,10 +224,14 @@ def test_operations_centre_router_and_three_rig_daemons(
             daemon.send_signal(signal.SIGTERM)
         for daemon in daemons:
             assert daemon.wait(60) == 0
-        time.sleep(2.5)  # the centre takes the daemons' last results and draws once more
+        # the centre has taken the daemons' last estimates and drawn them (was: a 2.5 s pause)
+        last_cells = {rig: _newest_cells(results, rig) for rig in rigs}
+        _wait(lambda: _last_table_shows(centre_out, last_cells), 120,
+              "the centre's table of the rigs' last estimates", [centre])
         centre.send_signal(signal.SIGTERM)
-        out, _ = centre.communicate(timeout=60)
-        assert centre.returncode == 0, "".join(centre_err)
+        assert centre.wait(60) == 0, "".join(centre_err)
+        centre_reader.join(60)
+        out = "".join(centre_out)
     finally:
         if session is not None:
             session.close()

@@ -11,6 +11,7 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
@@ -22,6 +23,18 @@ from tdmon.record.sink import MessageSink
 
 FAST_BACKOFF = Backoff(initial=0.1, maximum=0.5)
 WELL_FILE = Path(__file__).resolve().parents[2] / "config" / "wells" / "aadnoy-example-7-1.toml"
+
+
+def schema_validators(schemas: dict[str, Any]) -> dict[str, Any]:
+    """A validator per topic: ``validators[topic].validate(message)`` is
+    ``jsonschema.validate(message, schemas[topic])``, which checks the schema and builds its
+    validator on every call (minutes over a whole recording); here each is done once."""
+    validators: dict[str, Any] = {}
+    for topic, schema in schemas.items():
+        kind = jsonschema.validators.validator_for(schema)
+        kind.check_schema(schema)
+        validators[topic] = kind(schema)
+    return validators
 
 
 class CollectSink(MessageSink):

@@ -21,9 +21,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import jsonschema
 import pytest
 import zenoh
+from daemon_support import schema_validators
 
 from tdmon.cli import main
 from tdmon.record.reader import is_finished, read_messages, schemas_of
@@ -96,10 +96,10 @@ def _start(config: Path, log: Path) -> subprocess.Popen[bytes]:
 
 
 def _validate_all(path: Path) -> int:
-    stored = schemas_of(path)
+    stored = schema_validators(schemas_of(path))
     n = 0
     for item in read_messages(path):
-        jsonschema.validate(item.message, stored[item.topic])
+        stored[item.topic].validate(item.message)
         n += 1
     return n
 

@@ -17,9 +17,9 @@ from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
-import jsonschema
 import numpy as np
 import pytest
+from daemon_support import schema_validators
 from rerun.chunk import RrdReader
 
 from tdmon.config.well import load_well
@@ -80,10 +80,10 @@ profile_interval = "60 s"
 
 
 def test_every_topic_validates_against_the_schema_in_its_channel(run: Run) -> None:
-    stored = schemas_of(run.mcap)
+    stored = schema_validators(schemas_of(run.mcap))
     counts: Counter[str] = Counter()
     for item in run.messages:
-        jsonschema.validate(item.message, stored[item.topic])
+        stored[item.topic].validate(item.message)
         counts[item.topic] += 1
     assert dict(counts) == {t: n for t, n in topic_counts(run.mcap).items() if n}
     expected_topics = {"/tdmon/raw", "/tdmon/sample", "/tdmon/state", "/tdmon/model",

@@ -64,16 +64,19 @@ class CalibrationStep:
         self.state: EstimatorState = self.estimator.initial_state(
             temperature=temperature, friction_law=friction_law, mu_t_mask=mu_t_mask,
             mu_t_base=mu_t_base, mu_t_prior_std=mu_t_prior_std)
-        self._sensor: tuple[object, tuple[SensorEstimate, float]] | None = None
+        self._sensor: tuple[object, tuple[SensorEstimate, float] | None] | None = None
 
-    def sensor_reading(self) -> tuple[SensorEstimate, float]:
+    def sensor_reading(self) -> tuple[SensorEstimate, float] | None:
         """What is known now of the hook-load measurement, with the model's block weight [N]
-        (the monitor shows its curves as the sensor reads them); worked out again only when
-        the joint estimate moved."""
+        (the monitor shows its curves as the sensor reads them; None while the sensor reads
+        the modelled load as it is); worked out again only when the joint estimate moved."""
         joint = self.state.windows.joint
         if self._sensor is None or self._sensor[0] is not joint:
             estimate = self.estimator.sensor(self.state.windows, self.state.samples.block_weight)
-            self._sensor = (joint, (estimate, self.estimator.model.well.block_weight))
+            block = self.estimator.model.well.block_weight
+            as_is = (estimate.offset == 0.0 and estimate.block_weight == block
+                     and all(estimate.factor(m) == 1.0 for m in (-1, 0, 1)))
+            self._sensor = (joint, None if as_is else (estimate, block))
         return self._sensor[1]
 
     def on_frame(self, frame: Frame, emit: Emit) -> None:
