@@ -59,8 +59,14 @@ def raw_from_record(channel_topic: str, data: bytes, log_time_ns: int) -> RawMes
             return _raw_of_record(data, log_time_ns, json_module=True)
         # bytes that say what raw_message would of the RawMessage may be recorded again as
         # they are (RawMessage.recorded)
-        recorded = data if _says_what_raw_message_would(record) else None
-        return _raw_of_record(record, log_time_ns, recorded=recorded)
+        if _says_what_raw_message_would(record):
+            return _raw_of_record(record, log_time_ns, recorded=data)
+        if type(record) is dict and not all(type(record.get(k, "")) is str
+                                            for k in ("source", "topic")):
+            # a name that is not text (orjson reads an integer beyond 64 bits as a float):
+            # the json module's reading is the one given
+            return _raw_of_record(data, log_time_ns, json_module=True)
+        return _raw_of_record(record, log_time_ns)
     if channel_topic.startswith("/tdmon/"):
         return None  # derived data (samples, results): replay recomputes it
     return RawMessage("mcap", channel_topic.lstrip("/"), bytes(data), log_time_ns / 1e9)
