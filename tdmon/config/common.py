@@ -5,14 +5,23 @@ from __future__ import annotations
 
 import difflib
 import re
+import sys
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
 from types import UnionType
 from typing import Annotated, Any, Final, TypeVar, Union, get_args, get_origin
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError, ValidationInfo
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    ValidationError,
+    ValidationInfo,
+)
 
+from tdmon.config.limits import MAX_DURATION, MAX_TOML_BYTES
 from tdmon.errors import ConfigError
 from tdmon.units import UnitError, examples, parse_quantity, split_quantity
 
@@ -136,6 +145,15 @@ def check_friction(value: float) -> float:
     return _friction_factor(value)
 
 
+def _bounded_duration(value: float) -> float:
+    if value > MAX_DURATION:
+        raise ValueError(f"{value:g} s is longer than a week ({MAX_DURATION:g} s), the longest "
+                         "duration accepted (a longer one is a typing mistake)")
+    return value
+
+
+#: A duration [s] with its unit, at most :data:`~tdmon.config.limits.MAX_DURATION`
+Duration = Annotated[float, quantity("s"), AfterValidator(_bounded_duration)]
 Length = Annotated[float, quantity("m")]
 Diameter = Annotated[float, quantity("m")]
 #: A force; a mass (``"40 t"``) is its weight under standard gravity (tdmon.units.GRAVITY)
@@ -276,19 +294,33 @@ def validation_to_config_error(path: Path | str, error: ValidationError,
 
 
 def read_toml(path: Path | str) -> dict[str, Any]:
-    """Read a TOML file, translating missing files and syntax errors into ConfigError."""
+    """Read a TOML file, translating missing files, syntax errors, a file over
+    :data:`~tdmon.config.limits.MAX_TOML_BYTES` and nesting too deep for the parser into
+    ConfigError."""
     path = Path(path)
     try:
         with path.open("rb") as handle:
-            return tomllib.load(handle)
+            data = handle.read(MAX_TOML_BYTES + 1)
     except FileNotFoundError as exc:
         raise ConfigError(str(path), "", "no such file") from exc
     except IsADirectoryError as exc:
         raise ConfigError(str(path), "", "is a folder, not a TOML file") from exc
+    except OSError as exc:
+        raise ConfigError(str(path), "", f"cannot be read: {exc}") from exc
+    if len(data) > MAX_TOML_BYTES:
+        raise ConfigError(str(path), "", f"larger than {MAX_TOML_BYTES // 1024} KiB, the most "
+                          "a TOML file of tdmon may hold (a long survey belongs in a CSV file: "
+                          "[survey] file)")
+    try:
+        return tomllib.loads(data.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), "", f"not valid TOML: {exc}") from exc
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
         raise ConfigError(str(path), "", f"cannot be read: {exc}") from exc
+    except RecursionError:
+        # tomllib parses nested arrays and tables recursively
+        raise ConfigError(str(path), "", "not valid TOML: arrays or tables nested too deeply "
+                          f"(more than Python's {sys.getrecursionlimit()} levels)") from None
 
 
 def validate_model(
@@ -329,6 +361,7 @@ __all__ = [
     "Density",
     "Diameter",
     "Dimensionless",
+    "Duration",
     "Force",
     "FrictionFactor",
     "Length",

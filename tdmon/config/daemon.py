@@ -13,6 +13,7 @@ import math
 import os
 import re
 import stat
+from collections.abc import Callable
 from datetime import UTC, date, datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -32,12 +33,14 @@ from tdmon.channels import CHANNEL_UNITS, ChannelSpec, check_channel, validate_p
 from tdmon.config.common import (
     UNITS_REQUIRED,
     CrossFieldError,
+    Duration,
     FrictionFactor,
     missing_unit,
     quantity,
     read_toml,
     validation_to_config_error,
 )
+from tdmon.config.limits import MAX_PAYLOAD_BYTES, MAX_QUEUE
 from tdmon.config.rig_names import DEFAULT_NAME_PATTERN
 from tdmon.config.thermal import FrictionModelConfig
 from tdmon.errors import ConfigError
@@ -51,7 +54,7 @@ def _quantity(target: str) -> BeforeValidator:
     return quantity(target)
 
 
-Seconds = Annotated[float, _quantity("s")]
+Seconds = Duration
 Meters = Annotated[float, _quantity("m")]
 Newtons = Annotated[float, _quantity("N")]
 NewtonMetres = Annotated[float, _quantity("N*m")]
@@ -453,10 +456,29 @@ class RerunConfig(_Model):
         return self
 
 
+def _at_most(limit: int, why: str) -> Callable[[Any], Any]:
+    """A check before pydantic's own that a number is at most ``limit``, with the reason:
+    pydantic's own words for 1e30 are about parsing a string."""
+
+    def check(value: Any) -> Any:
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > limit:
+            raise ValueError(f"{value:g} is more than {limit} {why}")
+        return value
+
+    return check
+
+
+#: a queue's length: each waiting message holds up to ``max_payload_bytes``
+QueueSize = Annotated[int, BeforeValidator(_at_most(
+    MAX_QUEUE, "messages, the most a queue may hold (each holds its payload in memory)")),
+    Field(ge=1)]
+
+
 class QueuesConfig(_Model):
-    ingest: int = Field(default=10_000, ge=1, description="raw messages waiting for the pipeline")
-    publish: int = Field(default=10_000, ge=1, description="results waiting for a publisher")
-    max_payload_bytes: int = Field(default=4096, ge=16)
+    ingest: QueueSize = Field(default=10_000, description="raw messages waiting for the pipeline")
+    publish: QueueSize = Field(default=10_000, description="results waiting for a publisher")
+    max_payload_bytes: Annotated[int, BeforeValidator(_at_most(
+        MAX_PAYLOAD_BYTES, "bytes, more than any rig message needs"))] = Field(default=4096, ge=16)
 
 
 def _unix_time(value: Any, name: str, example: str) -> Any:
@@ -662,7 +684,7 @@ class FleetConfig(_Model):
     discover: bool = True
     wells: Path | None = None  # folder of well files named after the rigs
     # a bound on the rigs found (a stray publisher must not grow the daemon without limit)
-    max_rigs: int = Field(default=200, ge=1)
+    max_rigs: int = Field(default=200, ge=1, le=100_000)
     # what a found rig's name must match besides the fixed rule (tdmon/config/rig_names.py):
     # it narrows the rule, never widens it
     name_pattern: str = DEFAULT_NAME_PATTERN

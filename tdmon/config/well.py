@@ -16,7 +16,14 @@ from typing import Annotated, Any, Final, Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BeforeValidator, Field, ValidationInfo, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from tdmon.config.common import (
     CrossFieldError,
@@ -31,6 +38,12 @@ from tdmon.config.common import (
     WeightPerLength,
     load_model,
     quantity,
+)
+from tdmon.config.limits import (
+    MAX_ELEMENTS,
+    MAX_MEASURED_DEPTH,
+    MAX_SURVEY_FILE_BYTES,
+    MAX_SURVEY_STATIONS,
 )
 from tdmon.config.thermal import FrictionModelConfig, TemperatureConfig
 from tdmon.errors import ConfigError, ModelError
@@ -59,6 +72,30 @@ class WellInfo(StrictModel):
     block_weight: Force = Field(default=0.0, ge=0)
 
 
+def _check_station_count(count: int) -> None:
+    if count < 2:
+        raise ValueError(f"{count} station{'' if count == 1 else 's'}: a survey needs at least "
+                         "two (the surface and the bottom of the hole)")
+    if count > MAX_SURVEY_STATIONS:
+        raise ValueError(f"{count} stations, more than the {MAX_SURVEY_STATIONS} a survey may "
+                         "hold (closer than any element length of the model)")
+
+
+def _depth_reason(value: float) -> str:
+    return (f"{value:g} m is deeper than {MAX_MEASURED_DEPTH:g} m, the deepest measured depth "
+            "accepted (the longest wells reach about 15 km)")
+
+
+def _check_depth(value: float) -> float:
+    if value > MAX_MEASURED_DEPTH:
+        raise ValueError(_depth_reason(value))
+    return value
+
+
+#: A measured depth or length along the hole, at most :data:`MAX_MEASURED_DEPTH`
+Depth = Annotated[Length, AfterValidator(_check_depth)]
+
+
 class SurveyConfig(StrictModel):
     """Survey stations, inline (``stations = [[md, inclination, azimuth], ...]``) or from a
     CSV file (path relative to the well file).
@@ -81,6 +118,8 @@ class SurveyConfig(StrictModel):
     def _finite(
         cls, stations: list[tuple[float, float, float]] | None
     ) -> list[tuple[float, float, float]] | None:
+        if stations is not None:
+            _check_station_count(len(stations))
         for index, station in enumerate(stations or []):
             if not all(math.isfinite(value) for value in station):
                 raise ValueError(f"station {index} {list(station)} holds a NaN or infinite value")
@@ -96,8 +135,8 @@ class SurveyConfig(StrictModel):
 class HoleSectionConfig(StrictModel):
     name: str = ""
     kind: Literal["cased", "open"]
-    top: Length = Field(ge=0)
-    bottom: Length
+    top: Depth = Field(ge=0)
+    bottom: Depth
     diameter: Diameter = Field(gt=0)
     friction: FrictionModelConfig | None = None
 
@@ -137,6 +176,11 @@ class StringComponentConfig(StrictModel):
     def _consistent(self) -> StringComponentConfig:
         if isinstance(self.length, float) and not self.length > 0:
             raise CrossFieldError("length", f"must be > 0 m or \"{REST}\", got {self.length:g}")
+        if isinstance(self.length, float):
+            try:
+                _check_depth(self.length)
+            except ValueError as exc:
+                raise CrossFieldError("length", str(exc)) from None
         if (self.od is None) != (self.id is None):
             raise CrossFieldError("od" if self.od is None else "id",
                                   "missing key (give both od and id, or neither with a buoyed "
@@ -292,6 +336,17 @@ class WellConfig(StrictModel):
                     f"above the bottom of the one before ({upper.bottom:g} m)"
                 )
         return hole
+
+    @model_validator(mode="after")
+    def _elements_bounded(self) -> WellConfig:
+        elements = self.hole[-1].bottom / self.well.element_length
+        if elements > MAX_ELEMENTS:
+            raise CrossFieldError(
+                "well.element_length",
+                f"{self.well.element_length:g} m makes {elements:.3g} elements down to "
+                f"{self.hole[-1].bottom:g} m, more than the {MAX_ELEMENTS} the model marches "
+                "for every hook load")
+        return self
 
     @model_validator(mode="after")
     def _string_complete(self) -> WellConfig:
@@ -465,6 +520,9 @@ class WellConfig(StrictModel):
             table = _read_survey_csv(source, config)
             key = f"survey.file ({config.file})"
         scale = 1.0 if config.md_unit == "m" else _md_scale(source, config.md_unit)
+        deepest = float(np.max(table[:, 0])) * scale if len(table) else 0.0
+        if deepest > MAX_MEASURED_DEPTH:
+            raise ConfigError(source, key, _depth_reason(deepest))
         unit = _angle_unit(source, config)
         if unit is None and looks_like_radians(table[:, 1], table[:, 2]):
             raise ConfigError(
@@ -545,6 +603,13 @@ def _read_survey_csv(source: str, config: SurveyConfig) -> np.ndarray[Any, np.dt
 
     columns = [config.md_column, config.inclination_column, config.azimuth_column]
     try:
+        size = config.file.stat().st_size
+    except OSError:
+        size = 0  # pandas names the problem below
+    if size > MAX_SURVEY_FILE_BYTES:
+        raise ConfigError(source, "survey.file", f"{config.file} holds {size} bytes, more than "
+                          f"the {MAX_SURVEY_FILE_BYTES // 1024 ** 2} MiB a survey file may hold")
+    try:
         frame = pd.read_csv(config.file)
     except FileNotFoundError as exc:
         raise ConfigError(source, "survey.file", f"no such file: {config.file}") from exc
@@ -558,6 +623,10 @@ def _read_survey_csv(source: str, config: SurveyConfig) -> np.ndarray[Any, np.dt
             f"{config.file} has no column {', '.join(missing)} "
             f"(columns: {', '.join(map(str, frame.columns))})",
         )
+    try:
+        _check_station_count(len(frame))
+    except ValueError as exc:
+        raise ConfigError(source, "survey.file", f"{config.file}: {exc}") from None
     try:
         return frame[columns].to_numpy(dtype=float)
     except ValueError as exc:
