@@ -48,6 +48,7 @@ __all__ = [
     "ResolvedCurve",
     "block_samples",
     "curve_fates",
+    "cut",
     "detect_object",
     "iter_log",
     "local_name",
@@ -180,18 +181,42 @@ def _normal(text: str) -> str:
     return text.replace(" ", "").replace("_", "").lower()
 
 
+#: [Unix s] The first time after the last an MCAP recording can hold: its log times are
+#: unsigned 64-bit nanoseconds since 1970, which end in July 2554.
+LATEST_TIME: Final = 2.0**64 / 1e9
+
+
 def parse_time(text: str) -> float:
     """Unix seconds of a WITSML ``dateTime`` (ISO 8601; without an offset it is taken as UTC).
 
     Raises
     ------
     ValueError
-        Not an ISO 8601 time.
+        Not an ISO 8601 time, or one outside 1970-01-01 to :data:`LATEST_TIME` (2554-07-21).
     """
-    stamp = datetime.fromisoformat(text.strip())
+    try:
+        stamp = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise ValueError(f"cannot read time '{cut(text.strip())}' (ISO 8601 expected)") from None
     if stamp.tzinfo is None:
         stamp = stamp.replace(tzinfo=UTC)
-    return stamp.timestamp()
+    t = stamp.timestamp()
+    if not 0.0 <= t < LATEST_TIME:
+        raise ValueError(f"time '{cut(text.strip())}' is outside 1970-2554, the times a "
+                         "recording can hold")
+    return t
+
+
+#: [characters] Most of a file's text an error message quotes
+QUOTED_TEXT: Final = 40
+
+
+def cut(text: str, limit: int = QUOTED_TEXT) -> str:
+    """``text`` as an error message quotes it: at most ``limit`` characters, a longer one cut
+    with the whole length stated."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
 
 
 # -- the streaming reader ----------------------------------------------------------------------
@@ -330,73 +355,150 @@ def detect_object(stream: IO[bytes], source: str) -> str:
     raise IngestError(f"{source}: empty file")
 
 
+#: [characters] Most text kept of one element the reader uses (a ``<data>`` row, a header
+#: field, a ``logCurveInfo``): a row of 10 000 curves of 100 characters fits; a longer one is
+#: a broken or hostile file, refused rather than held in memory.
+MAX_ELEMENT_TEXT: Final = 1024 * 1024
+
+#: [bytes] How much of the file the parser is given at a time
+_CHUNK: Final = 64 * 1024
+
+#: Children of ``<log>`` (depth 3) and of ``<logData>`` (depth 4) the reader keeps whole
+_KEPT_IN_LOG: Final = frozenset({"logCurveInfo", *_HEADER_FIELDS})
+_KEPT_IN_DATA: Final = frozenset({"data", "mnemonicList", "unitList"})
+
+
+class _LogTarget:
+    """An ``ET.XMLParser`` target building only what :func:`iter_log` reads: the root,
+    ``<log>`` and ``<logData>`` as bare elements (their start and end), and the header fields,
+    ``logCurveInfo`` and the data blocks' children whole. Every other element, and its text,
+    is dropped as the parser reports it, so an unknown element of any size costs no memory
+    (ElementTree's own builder keeps every element of an open ``<log>``)."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.events: list[tuple[str, int, str, ET.Element]] = []
+        self._path: list[str] = []
+        self._builder: ET.TreeBuilder | None = None
+        self._kept_depth = 0
+        self._kept_text = 0
+
+    def _kept(self, name: str) -> bool:
+        path, depth = self._path, len(self._path)
+        if depth == 3:
+            return path[1] == "log" and name in _KEPT_IN_LOG
+        return depth == 4 and path[1] == "log" and path[2] == "logData" and name in _KEPT_IN_DATA
+
+    def start(self, tag: str, attrib: dict[str, str]) -> None:
+        name = local_name(tag)
+        self._path.append(name)
+        depth = len(self._path)
+        if self._builder is not None:
+            self._builder.start(tag, attrib)
+        elif depth == 1 or (depth == 2 and name == "log") or (
+                depth == 3 and name == "logData" and self._path[1] == "log"):
+            self.events.append(("start", depth, name, ET.Element(tag, attrib)))
+        elif self._kept(name):
+            self._builder, self._kept_depth, self._kept_text = ET.TreeBuilder(), depth, 0
+            self._builder.start(tag, attrib)
+
+    def data(self, text: str) -> None:
+        if self._builder is None:
+            return
+        self._kept_text += len(text)
+        if self._kept_text > MAX_ELEMENT_TEXT:
+            raise IngestError(f"{self.source}: <{self._path[self._kept_depth - 1]}> holds more "
+                              f"than {MAX_ELEMENT_TEXT} characters (at depth {self._kept_depth})")
+        self._builder.data(text)
+
+    def end(self, tag: str) -> None:
+        name = self._path.pop()
+        depth = len(self._path) + 1
+        if self._builder is not None:
+            self._builder.end(tag)
+            if depth == self._kept_depth:
+                self.events.append(("end", depth, name, self._builder.close()))
+                self._builder = None
+        elif depth == 1 or (depth == 2 and name == "log") or (
+                depth == 3 and name == "logData" and self._path[1] == "log"):
+            self.events.append(("end", depth, name, ET.Element(tag)))
+
+    def close(self) -> None:
+        return None
+
+
+def _parse(stream: IO[bytes], source: str) -> Iterator[tuple[str, int, str, ET.Element]]:
+    """The events of :class:`_LogTarget`, (event, depth, local name, element), as the file
+    is read in chunks."""
+    target = _LogTarget(source)
+    parser = ET.XMLParser(target=target)
+    try:
+        while chunk := stream.read(_CHUNK):
+            parser.feed(chunk)
+            yield from target.events
+            target.events.clear()
+        parser.close()
+    except ET.ParseError as exc:
+        raise IngestError(f"{source}: not well-formed XML ({exc})") from None
+    yield from target.events
+
+
 def iter_log(stream: IO[bytes], source: str) -> Iterator[LogBlock | DataRow]:  # noqa: C901  (complex today; simplify when next touched)
     """Stream a WITSML ``<logs>`` document: a :class:`LogBlock` before the rows of each
     ``<log>``'s data, then its :class:`DataRow` items in file order.
 
-    Memory stays flat: each ``<data>`` element is cleared from its ``logData`` once read, and
-    each finished ``<log>`` from the root.
+    Memory stays flat: the parser's target (:class:`_LogTarget`) builds only the elements
+    read here, one at a time, and drops every other element and its text as it is parsed.
 
     Raises
     ------
     IngestError
         Not XML or malformed XML (with the line and column), a root other than ``<logs>``, a
-        depth-indexed log, data without ``mnemonicList``, or a row whose time cannot be read;
-        every message names ``source``.
+        depth-indexed log, data without ``mnemonicList``, a row whose time cannot be read or
+        lies outside 1970-2554, or an element the reader keeps longer than
+        :data:`MAX_ELEMENT_TEXT`; every message names ``source``.
     """
-    parser = ET.iterparse(stream, events=("start", "end"))
-    root: ET.Element | None = None
-    log: ET.Element | None = None
-    log_data: ET.Element | None = None
+    root_seen = False
+    in_log = in_data = False
     header: dict[str, str] = {}
     curves: list[LogCurve] = []
     lists: dict[str, tuple[str, ...]] = {}
     block: LogBlock | None = None
     version = "1.4.1.1"
-    depth = 0
     rows = 0
-    try:
-        for event, element in parser:
-            name = local_name(element.tag)
-            if event == "start":
-                depth += 1
-                if root is None:
-                    root = element
-                    if name != "logs":
-                        raise IngestError(f"{source}: not a WITSML log file (root element "
-                                          f"<{name}>, expected <logs>)")
-                    version = _version(element)
-                elif depth == 2 and name == "log":
-                    log, curves, lists, block = element, [], {}, None
-                    header = {"uid": element.get("uid", "")}
-                elif depth == 3 and name == "logData":
-                    # a log may hold several logData blocks, each with its own columns
-                    log_data, lists, block = element, {}, None
-                continue
-            depth -= 1
-            if depth == 3 and log_data is not None and name == "data":
-                if block is None:
-                    block = _block(header, curves, lists, source, version)
-                    yield block
-                rows += 1
-                yield _row(element.text or "", block, source, rows)
-                log_data.clear()  # the rows read so far: what keeps memory flat
-            elif depth == 3 and log_data is not None and name in ("mnemonicList", "unitList"):
-                lists[name] = tuple(cell.strip() for cell in (element.text or "").split(","))
-            elif depth == 2 and log is not None:
-                if name == "logCurveInfo":
-                    curves.append(_curve(element))
-                elif name in _HEADER_FIELDS:
-                    header[_HEADER_FIELDS[name]] = (element.text or "").strip()
-                elif name == "logData":
-                    log_data = None
-            elif depth == 1 and name == "log":
-                log = None
-                assert root is not None
-                root.clear()
-    except ET.ParseError as exc:
-        raise IngestError(f"{source}: not well-formed XML ({exc})") from None
-    if root is None:
+    for event, depth, name, element in _parse(stream, source):
+        if event == "start":
+            if depth == 1:
+                root_seen = True
+                if name != "logs":
+                    raise IngestError(f"{source}: not a WITSML log file (root element "
+                                      f"<{name}>, expected <logs>)")
+                version = _version(element)
+            elif depth == 2:
+                in_log, curves, lists, block = True, [], {}, None
+                header = {"uid": element.get("uid", "")}
+            else:
+                # a log may hold several logData blocks, each with its own columns
+                in_data, lists, block = True, {}, None
+            continue
+        if depth == 4 and in_data and name == "data":
+            if block is None:
+                block = _block(header, curves, lists, source, version)
+                yield block
+            rows += 1
+            yield _row(element.text or "", block, source, rows)
+        elif depth == 4 and in_data:
+            lists[name] = tuple(cell.strip() for cell in (element.text or "").split(","))
+        elif depth == 3 and in_log:
+            if name == "logCurveInfo":
+                curves.append(_curve(element))
+            elif name in _HEADER_FIELDS:
+                header[_HEADER_FIELDS[name]] = (element.text or "").strip()
+            elif name == "logData":
+                in_data = False
+        elif depth == 2:
+            in_log = False
+    if not root_seen:
         raise IngestError(f"{source}: empty file")
 
 
@@ -406,8 +508,8 @@ def _block(header: Mapping[str, str], curves: list[LogCurve], lists: Mapping[str
     label = f"log '{uid or header.get('name', '?')}'"
     index_type = header.get("index_type", "date time")
     if index_type.lower() not in ("date time", "datetime"):
-        raise IngestError(f"{source}: {label} is indexed by '{index_type}'; only time logs "
-                          "(indexType 'date time') can be imported")
+        raise IngestError(f"{source}: {label} is indexed by '{cut(index_type)}'; only time "
+                          "logs (indexType 'date time') can be imported")
     if "mnemonicList" in lists:
         mnemonics = lists["mnemonicList"]
         units = lists.get("unitList", ())
@@ -457,9 +559,8 @@ def _row(text: str, block: LogBlock, source: str, number: int) -> DataRow:
     stamp = cells[block.index_column]
     try:
         t = parse_time(stamp)
-    except ValueError:
-        raise IngestError(f"{source}: data row {number}: cannot read time '{stamp.strip()}' "
-                          "(ISO 8601 expected)") from None
+    except ValueError as exc:
+        raise IngestError(f"{source}: data row {number}: {exc}") from None
     return DataRow(t, cells)
 
 
@@ -537,8 +638,9 @@ def resolve_curves(block: LogBlock, source: str, *,
         if channel in overrides:
             mnemonic, unit_override = overrides[channel]
             if mnemonic.lower() not in columns:
+                known = cut(", ".join(block.mnemonics), 400)
                 raise IngestError(f"{source}: --curve {channel}={mnemonic}: the log has no "
-                                  f"curve '{mnemonic}' (curves: {', '.join(block.mnemonics)})")
+                                  f"curve '{mnemonic}' (curves: {known})")
             curve = by_mnemonic.get(mnemonic.lower()) or LogCurve(mnemonic, None, "", None, "")
             found_by = "--curve"
         elif channel in table:
@@ -554,12 +656,13 @@ def resolve_curves(block: LogBlock, source: str, *,
         unit = pint_unit(uom)
         if unit is None:
             raise IngestError(f"{source}: curve '{curve.mnemonic}' ({channel}) has no unit "
-                              f"('{uom}'); give one with --curve {channel}="
+                              f"('{cut(uom)}'); give one with --curve {channel}="
                               f"{curve.mnemonic}:UNIT")
         try:
             scale, offset = conversion(unit, CHANNEL_UNITS[channel][0])
         except ValueError as exc:
-            raise IngestError(f"{source}: curve '{curve.mnemonic}' ({channel}), uom '{uom}': "
+            raise IngestError(f"{source}: curve '{cut(curve.mnemonic)}' ({channel}), "
+                              f"uom '{cut(uom)}': "
                               f"{exc}; give the unit with --curve {channel}="
                               f"{curve.mnemonic}:UNIT") from None
         texts, numbers = _nulls(curve.null_value or block.null_value)
@@ -671,13 +774,13 @@ def block_samples(row: DataRow, curves: tuple[ResolvedCurve, ...], source: str
         try:
             value = float(text)
         except ValueError:
-            raise IngestError(f"{source}: row at {_iso(row.t)}, curve '{curve.mnemonic}': "
-                              f"'{text}' is not a number") from None
+            raise IngestError(f"{source}: row at {_iso(row.t)}, curve '{cut(curve.mnemonic)}': "
+                              f"'{cut(text)}' is not a number") from None
         if value in curve.null_numbers or math.isnan(value):
             continue
         if math.isinf(value):
-            raise IngestError(f"{source}: row at {_iso(row.t)}, curve '{curve.mnemonic}': "
-                              f"'{text}' is not a finite number")
+            raise IngestError(f"{source}: row at {_iso(row.t)}, curve '{cut(curve.mnemonic)}': "
+                              f"'{cut(text)}' is not a finite number")
         yield curve.channel, value * curve.scale + curve.offset
 
 
