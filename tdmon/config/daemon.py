@@ -8,6 +8,7 @@ file are relative to the file.
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import math
 import os
@@ -134,6 +135,33 @@ class MqttConfig(_Model):
         return _resolved_password(self.password, self.password_env, self.password_file)
 
 
+class ZenohTlsConfig(_Model):
+    """TLS of a Zenoh session's ``tls/`` endpoints (zenoh's ``transport/link/tls``; docs/
+    daemon.md, "Zenoh TLS and access control"). Paths relative to the config file."""
+
+    ca_file: Path | None = Field(default=None, description="root_ca_certificate: the CA that "
+                                 "signed the other side's certificate")
+    cert_file: Path | None = Field(default=None, description="this side's certificate "
+                                   "(listen_certificate and connect_certificate)")
+    key_file: Path | None = Field(default=None, description="its private key "
+                                  "(listen_private_key and connect_private_key)")
+    mutual: bool = Field(default=False, description="enable_mtls: each side shows a "
+                         "certificate signed by ca_file, or the link is refused")
+    verify_name: bool = Field(default=True, description="verify_name_on_connect: the "
+                              "endpoint's host name must be in the listener's certificate")
+
+    @model_validator(mode="after")
+    def _pairs(self) -> ZenohTlsConfig:
+        if (self.cert_file is None) != (self.key_file is None):
+            raise CrossFieldError("key_file" if self.key_file is None else "cert_file",
+                                  "missing key (give cert_file and key_file together)")
+        if self.mutual and (self.ca_file is None or self.cert_file is None):
+            raise CrossFieldError("ca_file" if self.ca_file is None else "cert_file",
+                                  "missing key (mutual TLS needs ca_file, cert_file and "
+                                  "key_file)")
+        return self
+
+
 class ZenohConfig(_Model):
     """A Zenoh session. Peer mode on explicit endpoints needs no router."""
 
@@ -141,6 +169,20 @@ class ZenohConfig(_Model):
     listen: list[str] = Field(default_factory=list)
     connect: list[str] = Field(default_factory=list)
     scouting: bool = False  # multicast and gossip scouting; off: explicit endpoints only
+    tls: ZenohTlsConfig | None = None
+    #: zenoh's own ``access_control`` table, passed as it is (``enabled``,
+    #: ``default_permission``, ``rules``, ``subjects``, ``policies``); zenoh checks it
+    access_control: dict[str, Any] | None = None
+
+    @model_validator(mode="after")
+    def _resolve_tls_files(self, info: ValidationInfo) -> ZenohConfig:
+        base = (info.context or {}).get("base_dir")
+        if base is not None and self.tls is not None:
+            for name in ("ca_file", "cert_file", "key_file"):
+                path = getattr(self.tls, name)
+                if path is not None and not path.is_absolute():
+                    object.__setattr__(self.tls, name, Path(base) / path)
+        return self
 
     @field_validator("listen", "connect")
     @classmethod
@@ -853,6 +895,7 @@ def parse_daemon_config(data: dict[str, Any], file: Path) -> DaemonConfig:  # no
             except ValueError as exc:
                 raise ConfigError(str(file), f"channels.{name}.unit", str(exc)) from exc
     _check_brokers(config, file)
+    _check_zenoh_files(config, file)
     for name in config.publish.names:
         if not name or "/" in name:
             raise ConfigError(str(file), "publish.names", f"'{name}' is not a message name")
@@ -976,8 +1019,41 @@ def _check_brokers(config: DaemonConfig, file: Path) -> None:
                 if path is not None and not config.resolve(path).is_file():
                     raise ConfigError(str(file), f"{key}.tls.{name}",
                                       f"no such file: {config.resolve(path)}")
+        warn_if_credentials_in_clear(key, mqtt)
     if clear_text_in_toml:
         warn_if_readable_by_others(file, "password")
+
+
+def _check_zenoh_files(config: DaemonConfig, file: Path) -> None:
+    """The Zenoh TLS files exist (zenoh's own message names none of our keys)."""
+    for key, zenoh in (("sources.zenoh", config.sources.zenoh),
+                       ("publish.zenoh", config.publish.zenoh)):
+        if isinstance(zenoh, ZenohConfig) and zenoh.tls is not None:
+            for name in ("ca_file", "cert_file", "key_file"):
+                path = getattr(zenoh.tls, name)
+                if path is not None and not path.is_file():
+                    raise ConfigError(str(file), f"{key}.tls.{name}", f"no such file: {path}")
+
+
+def _loopback(host: str) -> bool:
+    if host.strip().lower() in ("localhost", "localhost.localdomain", "ip6-localhost"):
+        return True
+    try:
+        return ipaddress.ip_address(host.strip().strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def warn_if_credentials_in_clear(key: str, mqtt: MqttConfig) -> bool:
+    """Log one warning when a user name or password goes to a broker off this machine without
+    TLS (anyone on the path reads them); True when it warned."""
+    credentials = mqtt.username is not None or any(
+        getattr(mqtt, name) is not None for name in ("password", "password_env", "password_file"))
+    if not credentials or mqtt.tls is not None or _loopback(mqtt.host):
+        return False
+    logger.warning("%s: the user name and password go to %s:%d in clear text (no [%s.tls]); "
+                   "anyone on the network path can read them", key, mqtt.host, mqtt.port, key)
+    return True
 
 
 def warn_if_readable_by_others(path: Path, key: str) -> bool:

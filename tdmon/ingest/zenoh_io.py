@@ -23,7 +23,7 @@ from typing import Any
 import orjson
 import zenoh
 
-from tdmon.config.daemon import ZenohConfig
+from tdmon.config.daemon import ZenohConfig, ZenohTlsConfig
 from tdmon.errors import IngestError
 from tdmon.ingest.types import RawMessage
 from tdmon.record.batch import Batch
@@ -33,17 +33,36 @@ from tdmon.record.sink import Sink
 BATCH = 256
 
 
+def _tls_keys(tls: ZenohTlsConfig) -> list[tuple[str, Any]]:
+    """zenoh's ``transport/link/tls`` keys of our ``[...zenoh.tls]`` table."""
+    keys: list[tuple[str, Any]] = [("enable_mtls", tls.mutual),
+                                   ("verify_name_on_connect", tls.verify_name)]
+    if tls.ca_file is not None:
+        keys.append(("root_ca_certificate", str(tls.ca_file)))
+    if tls.cert_file is not None and tls.key_file is not None:
+        for side in ("listen", "connect"):
+            keys += [(f"{side}_certificate", str(tls.cert_file)),
+                     (f"{side}_private_key", str(tls.key_file))]
+    return [(f"transport/link/tls/{key}", value) for key, value in keys]
+
+
 def zenoh_config(config: ZenohConfig) -> zenoh.Config:
-    """A zenoh.Config from ours; scouting off means only the explicit endpoints are used."""
+    """A zenoh.Config from ours; scouting off means only the explicit endpoints are used; TLS
+    and access control as docs/daemon.md ("Zenoh TLS and access control") describes."""
     conf = zenoh.Config()
-    try:
-        for key, value in (("mode", config.mode), ("listen/endpoints", config.listen),
-                           ("connect/endpoints", config.connect),
-                           ("scouting/multicast/enabled", config.scouting),
-                           ("scouting/gossip/enabled", config.scouting)):
+    keys: list[tuple[str, Any]] = [
+        ("mode", config.mode), ("listen/endpoints", config.listen),
+        ("connect/endpoints", config.connect), ("scouting/multicast/enabled", config.scouting),
+        ("scouting/gossip/enabled", config.scouting)]
+    if config.tls is not None:
+        keys += _tls_keys(config.tls)
+    if config.access_control is not None:
+        keys.append(("access_control", config.access_control))
+    for key, value in keys:
+        try:
             conf.insert_json5(key, orjson.dumps(value).decode())
-    except zenoh.ZError as exc:
-        raise IngestError(f"zenoh configuration rejected: {exc}") from exc
+        except zenoh.ZError as exc:
+            raise IngestError(f"zenoh configuration rejected ({key}): {exc}") from exc
     return conf
 
 
