@@ -47,6 +47,11 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                        help="connect to a router or peer here (repeatable)")
     fleet.add_argument("--mode", choices=["router", "peer", "client"],
                        help="Zenoh mode (default: router with --listen, else client)")
+    fleet.add_argument("--zenoh", type=Path, metavar="ZENOH.toml",
+                       help="the Zenoh session as a [sources.zenoh] table of a daemon file "
+                            "(mode, listen, connect, tls, access_control; docs/daemon.md, "
+                            "\"Zenoh TLS and access control\"); --listen, --connect and "
+                            "--mode replace its own")
     fleet.add_argument("--interval", type=quantity_arg("s", "2 s", positive=True),
                        default=1.0, help="refresh period (default 1 s)")
     fleet.add_argument("--duration", type=quantity_arg("s", "30 s", positive=True),
@@ -75,13 +80,21 @@ def _session_config(args: argparse.Namespace) -> Any:
 
     from tdmon.config.daemon import ZenohConfig
 
-    mode = args.mode or ("router" if args.listen else "client")
-    if mode == "client" and not args.connect:
+    base: dict[str, Any] = {}
+    if args.zenoh is not None:
+        from tdmon.config.common import load_model
+
+        base = load_model(ZenohConfig, args.zenoh, context={"base_dir": args.zenoh.parent}
+                          ).model_dump(exclude_unset=True)
+    listen = args.listen or base.get("listen", [])
+    connect = args.connect or base.get("connect", [])
+    mode = args.mode or base.get("mode") or ("router" if listen else "client")
+    if mode == "client" and not connect:
         raise TdmonError("tdmon fleet: give --listen ENDPOINT (to be the router the rigs "
                          "connect to) or --connect ENDPOINT (a router's)")
     try:
-        return ZenohConfig.model_validate({"mode": mode, "listen": args.listen,
-                                           "connect": args.connect})
+        return ZenohConfig.model_validate({**base, "mode": mode, "listen": listen,
+                                           "connect": connect})
     except ValidationError as exc:
         reason = exc.errors()[0]["msg"].removeprefix("Value error, ")
         raise TdmonError(f"--listen/--connect: {reason}") from None

@@ -118,12 +118,30 @@ def bounded_payload(payload: bytes, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> 
     }
 
 
+def bounded_topic(topic: str, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
+    """The topic fields of a ``raw``/``rejected`` message: ``topic`` whole when its UTF-8 is
+    at most ``max_bytes`` [bytes] (the payloads' bound), else its first ``max_bytes`` (whole
+    characters) with ``topic_bytes`` (its whole size [bytes]) and ``topic_truncated``
+    (``True``). MQTT allows topics of 64 KiB; a rig's are tens of bytes."""
+    if len(topic) * 4 <= max_bytes:  # UTF-8 takes at most 4 bytes a character
+        return {"topic": topic}
+    data = topic.encode("utf-8", "surrogatepass")
+    if len(data) <= max_bytes:
+        return {"topic": topic}
+    return {"topic": data[:max_bytes].decode("utf-8", "ignore"), "topic_bytes": len(data),
+            "topic_truncated": True}
+
+
+#: a topic this long [characters] or shorter is recorded whole whatever the bound (>= 4 KiB)
+_SHORT_TOPIC: Final = RECORDED_PAYLOAD_BYTES // 4
+
+
 def raw_message(raw: RawMessage, max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
-    """The ``raw`` daemon message (docs/architecture.md); payload bounded as in
-    :func:`bounded_payload`."""
-    if len(raw.payload) > max_bytes:
-        return {"source": raw.source, "topic": raw.topic, "receive_time": raw.receive_time,
-                **bounded_payload(raw.payload, max_bytes)}
+    """The ``raw`` daemon message (docs/architecture.md); payload and topic bounded as in
+    :func:`bounded_payload` and :func:`bounded_topic`."""
+    if len(raw.payload) > max_bytes or len(raw.topic) > _SHORT_TOPIC:
+        return {"source": raw.source, **bounded_topic(raw.topic, max_bytes),
+                "receive_time": raw.receive_time, **bounded_payload(raw.payload, max_bytes)}
     # the usual case, once per input message: no intermediate dict
     text, encoding = payload_text(raw.payload)
     return {
@@ -194,11 +212,12 @@ SAMPLE_ITEMS: Final = Items(message=sample_message, row=_SAMPLE_ROW,
 
 def rejected_message(rejected: Rejected,
                      max_bytes: int = RECORDED_PAYLOAD_BYTES) -> dict[str, Any]:
-    """The ``rejected`` daemon message; payload bounded as in :func:`bounded_payload`."""
+    """The ``rejected`` daemon message; payload and topic bounded as in
+    :func:`bounded_payload` and :func:`bounded_topic`."""
     return {
         "reason": rejected.reason,
         "source": rejected.source,
-        "topic": rejected.topic,
+        **bounded_topic(rejected.topic, max_bytes),
         "receive_time": rejected.receive_time,
         **bounded_payload(rejected.raw, max_bytes),
     }

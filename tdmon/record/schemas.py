@@ -61,6 +61,14 @@ _BOUNDED_PAYLOAD: Final[JsonSchema] = {
 }
 
 
+# Optional fields of a topic recorded only in part (tdmon.ingest.types.bounded_topic), as for
+# payloads: a topic longer than the recording's bound keeps its first bytes and its size.
+_BOUNDED_TOPIC: Final[JsonSchema] = {
+    "topic_bytes": {**_COUNT, "description": "size of the whole topic [bytes]"},
+    "topic_truncated": {"const": True, "description": "topic holds only the first bytes"},
+}
+
+
 def _object(
     name: str,
     title: str,
@@ -94,6 +102,7 @@ RAW: Final = _object(
         "payload": _TEXT,
         "payload_encoding": {"enum": list(PAYLOAD_ENCODINGS)},
         **_BOUNDED_PAYLOAD,
+        **_BOUNDED_TOPIC,
     },
     ("source", "topic", "receive_time", "payload", "payload_encoding"),
 )
@@ -123,6 +132,7 @@ REJECTED: Final = _object(
         "payload": _TEXT,
         "payload_encoding": {"enum": list(PAYLOAD_ENCODINGS)},
         **_BOUNDED_PAYLOAD,
+        **_BOUNDED_TOPIC,
     },
     ("reason", "source", "topic", "receive_time", "payload", "payload_encoding"),
 )

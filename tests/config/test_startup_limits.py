@@ -5,6 +5,7 @@ and the bound (``tdmon.config.limits``), never a traceback, a hang or an overflo
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -163,3 +164,27 @@ def test_tdmon_run_refuses_a_huge_well_file_in_one_line(tmp_path: Path) -> None:
     errors = [line for line in result.stderr.splitlines() if "error" in line]
     assert errors == [f"tdmon: error: {well}: larger than 1024 KiB, the most a TOML file of "
                       "tdmon may hold (a long survey belongs in a CSV file: [survey] file)"]
+
+
+# -- MQTT credentials without TLS (issue 32, fault 11) ----------------------------------------
+
+@pytest.mark.parametrize(("host", "tls", "warned"), [
+    ("10.20.0.5", False, True), ("broker.rig.example", False, True),
+    ("10.20.0.5", True, False), ("127.0.0.1", False, False), ("localhost", False, False),
+    ("::1", False, False),
+])
+def test_credentials_without_tls_off_this_machine_warn(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch,
+        host: str, tls: bool, warned: bool) -> None:
+    (tmp_path / "ca.crt").write_text("x")
+    path = tmp_path / "daemon.toml"
+    path.write_text(f'prefix = "rig/T1"\n[sources.mqtt]\nhost = "{host}"\nusername = "rig"\n'
+                    'password_env = "TDMON_TEST_PASSWORD"\n'
+                    + ('[sources.mqtt.tls]\nca_file = "ca.crt"\n' if tls else ""))
+    caplog.set_level(logging.WARNING, logger="tdmon.config.daemon")
+    monkeypatch.setenv("TDMON_TEST_PASSWORD", "secret")
+    load_daemon_config(path)
+    lines = [record.getMessage() for record in caplog.records]
+    expected = [f"sources.mqtt: the user name and password go to {host}:1883 in clear text "
+                "(no [sources.mqtt.tls]); anyone on the network path can read them"]
+    assert lines == (expected if warned else [])

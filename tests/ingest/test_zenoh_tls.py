@@ -118,13 +118,13 @@ def listener_factory() -> Iterator[list[Listener]]:
         listener.close()
 
 
-def _publish(endpoint: str, tls: ZenohTlsConfig, keys: list[str]) -> None:
-    """A rig's peer: connect, put each key a few times over 2 s (the link may take a moment
-    to come up), close."""
+def _publish(endpoint: str, tls: ZenohTlsConfig, keys: list[str], rounds: int = 10) -> None:
+    """A rig's peer: connect, put each key every 0.2 s ``rounds`` times (the link may take a
+    moment to come up), close."""
     config = ZenohConfig(mode="peer", connect=[endpoint], tls=tls)
     session = zenoh.open(zenoh_config(config))
     try:
-        for _attempt in range(10):
+        for _attempt in range(rounds):
             for key in keys:
                 session.put(key, b"1")
             time.sleep(0.2)
@@ -137,12 +137,12 @@ def test_mutual_tls_lets_in_only_a_peer_with_our_certificate(
         listener_factory: list[Listener]) -> None:
     listener = Listener(ZenohConfig(mode="peer", listen=[endpoint], tls=_tls(pki["daemon"])))
     listener_factory.append(listener)
-    _publish(endpoint, _tls(pki["rogue"]), ["rig/T9/hookload"])
+    _publish(endpoint, _tls(pki["rogue"]), ["rig/T9/hookload"], rounds=4)
     # the rogue trusts our CA (it knows who it talks to) but shows a certificate we did not sign
     rogue_trusting_us = _tls((pki["daemon"][0], pki["rogue"][1], pki["rogue"][2]))
-    _publish(endpoint, rogue_trusting_us, ["rig/T9/torque"])
+    _publish(endpoint, rogue_trusting_us, ["rig/T9/torque"], rounds=4)
     # without a certificate at all
-    _publish(endpoint, ZenohTlsConfig(ca_file=pki["daemon"][0]), ["rig/T9/rpm"])
+    _publish(endpoint, ZenohTlsConfig(ca_file=pki["daemon"][0]), ["rig/T9/rpm"], rounds=4)
     assert listener.received == []
     _publish(endpoint, _tls(pki["rig"]), ["rig/T1/hookload"])
     assert set(listener.received) == {"rig/T1/hookload"}
@@ -189,3 +189,34 @@ def test_daemon_file_tls_paths_relative_to_the_file_and_checked(tmp_path: Path) 
     (tmp_path / "certs" / "rig.key").unlink()
     with pytest.raises(Exception, match=r"sources\.zenoh\.tls\.key_file: no such file"):
         load_daemon_config(daemon)
+
+
+def test_the_fleet_router_reads_the_same_table(pki: dict[str, tuple[Path, Path, Path]],
+                                               tmp_path: Path) -> None:
+    """``tdmon fleet --zenoh FILE``: the table of ``[sources.zenoh]``, paths relative to it;
+    --listen replaces its endpoints and keeps the rest; the session it makes is the mutual
+    TLS listener a rig with our certificate reaches."""
+    import argparse
+
+    from tdmon.cli.fleet import _session_config
+
+    ca, cert, key = pki["daemon"]
+    (tmp_path / "zenoh.toml").write_text(
+        f'mode = "router"\nlisten = ["tls/127.0.0.1:1"]\n[tls]\nca_file = "{ca.name}"\n'
+        f'cert_file = "{cert.name}"\nkey_file = "{key.name}"\nmutual = true\n'
+        '[access_control]\nenabled = false\n')
+    (tmp_path / "zenoh.toml").replace(ca.parent / "zenoh.toml")
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    args = argparse.Namespace(zenoh=ca.parent / "zenoh.toml", listen=[endpoint], connect=[],
+                              mode=None)
+    config = _session_config(args)
+    assert (config.mode, config.listen) == ("router", [endpoint])
+    assert config.tls == _tls(pki["daemon"])
+    assert config.access_control == {"enabled": False}
+    listener = Listener(config)
+    try:
+        _publish(endpoint, _tls(pki["rig"]), ["rig/T1/alarm"])
+        _publish(endpoint, _tls(pki["rogue"]), ["rig/T9/alarm"], rounds=4)
+        assert set(listener.received) == {"rig/T1/alarm"}
+    finally:
+        listener.close()
