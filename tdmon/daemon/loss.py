@@ -8,6 +8,7 @@ alarms a sample reveals, and the counters go into the status message.
 from __future__ import annotations
 
 import asyncio
+import math
 import statistics
 import time
 from collections import deque
@@ -39,32 +40,87 @@ class _Sampling:
     rebase: bool = False  # the rig clock jumped: the next sample starts the timing again
 
 
+#: A forward jump in a topic's ``seq`` is held open this long [s of rig time] for the missing
+#: numbers to arrive before they are counted lost: a broker restarting, or a daemon restarted
+#: after SIGKILL, can deliver a topic's newer messages before its backlog (mosquitto did, with
+#: the backlog a few seconds behind).
+SEQ_HOLD_S = 30.0
+#: Jumps held open per topic at most; beyond, the oldest is judged at once (a hostile or
+#: broken counter cannot make the detector keep unbounded state).
+SEQ_GAPS_KEPT = 64
+
+
+@dataclass(slots=True)
+class _SeqGap:
+    """One forward jump of a topic's ``seq``: the numbers still missing (inclusive ranges),
+    and when the wait for them ends [s of rig time]."""
+
+    before: int  # the last number before the jump
+    after: int  # the number that revealed it
+    deadline: float
+    missing: list[list[int]]
+
+    def take(self, seq: int) -> bool:
+        """Take ``seq`` if it is one of the missing numbers; True if it was."""
+        for index, (low, high) in enumerate(self.missing):
+            if low <= seq <= high:
+                if low == high:
+                    del self.missing[index]
+                elif seq == low:
+                    self.missing[index][0] = seq + 1
+                elif seq == high:
+                    self.missing[index][1] = seq - 1
+                else:
+                    self.missing[index:index + 1] = [[low, seq - 1], [seq + 1, high]]
+                return True
+        return False
+
+    def count(self) -> int:
+        return sum(high - low + 1 for low, high in self.missing)
+
+
+@dataclass(slots=True)
+class _SeqState:
+    high: int
+    gaps: list[_SeqGap] = field(default_factory=list)
+
+
 class LossDetector:
     """Count missing messages from ``seq`` and silences in regular sampling.
 
-    ``seq`` (optional, per topic, from the publisher) should grow by one per message; a jump
-    of n + 1 means n messages never arrived (counted in ``seq_lost``, one alarm with n). A
-    counter that falls to below half its last value is a publisher that restarted: it is
-    taken as the new start. A smaller step back (a redelivery, an out-of-order message) is
-    ignored. A channel's sample that comes more than ``GAP_FACTOR`` times its median interval
+    ``seq`` (optional, per topic, from the publisher) should grow by one per message. A jump
+    forward is held open for :data:`SEQ_HOLD_S` of rig time: a missing number that arrives
+    in that time is late, not lost (``seq_late``); what is still missing then is counted in
+    ``seq_lost``, with one alarm per jump giving the number. A counter that falls below half
+    its highest value, to a number no open jump is waiting for, is a publisher that restarted:
+    its open jumps are judged at once and it is taken as the new start. Any other step back
+    (a redelivery) is ignored. :meth:`finish` judges every open jump (the end of the input).
+    A channel's sample that comes more than ``GAP_FACTOR`` times its median interval
     (and at least ``GAP_MIN_S``) after the previous one is a sampling gap (``sampling_gaps``,
     one alarm per gap with the estimated number of missing samples).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, hold: float = SEQ_HOLD_S) -> None:
+        self.hold = hold
         self.seq_lost = 0
         self.seq_gaps = 0
+        self.seq_late = 0
         self.sampling_gaps = 0
-        self._seq: dict[str, int] = {}
+        self._seq: dict[str, _SeqState] = {}
         self._sampling: dict[str, _Sampling] = {}
+        self._open = 0  # jumps held open, all topics
+        self._next_deadline = math.inf
+        self._clock = -math.inf  # the latest rig time seen [s]
 
     def observe(self, sample: Sample) -> list[dict[str, Any]]:
         """Take one decoded sample; the ``data_loss`` alarms it reveals (usually none)."""
         alarms: list[dict[str, Any]] = []
+        if sample.t > self._clock:
+            self._clock = sample.t
+            if sample.t >= self._next_deadline:
+                alarms += self._expire(sample.t)
         if sample.seq is not None:
-            alarm = self._check_seq(sample)
-            if alarm is not None:
-                alarms.append(alarm)
+            alarms += self._check_seq(sample)
         # the usual sample, the next of a known channel without a gap, without a method call
         # (once per sample)
         state = self._sampling.get(sample.channel)
@@ -89,21 +145,76 @@ class LossDetector:
         for state in self._sampling.values():
             state.rebase = True
 
-    def _check_seq(self, sample: Sample) -> dict[str, Any] | None:
+    def _check_seq(self, sample: Sample) -> list[dict[str, Any]]:
         seq = sample.seq
         assert seq is not None
-        last = self._seq.get(sample.topic)
-        if last is None or seq > last or seq < last // 2:
-            self._seq[sample.topic] = seq
-        if last is None or seq <= last + 1:
-            return None
-        missing = seq - last - 1
-        self.seq_lost += missing
-        self.seq_gaps += 1
-        return alarm_message(
-            sample.t, AlarmKind.DATA_LOSS, Severity.WARNING,
-            f"{missing} message(s) on {sample.topic} never arrived (seq {last} -> {seq})",
-            value=missing)
+        state = self._seq.get(sample.topic)
+        if state is None:
+            self._seq[sample.topic] = _SeqState(seq)
+            return []
+        high = state.high
+        if seq == high + 1:
+            state.high = seq
+            return []
+        alarms: list[dict[str, Any]] = []
+        if seq > high:
+            if len(state.gaps) >= SEQ_GAPS_KEPT:
+                alarms += self._judge(sample.topic, state, [state.gaps[0]], sample.t)
+            state.gaps.append(_SeqGap(high, seq, sample.t + self.hold,
+                                      [[high + 1, seq - 1]]))
+            self._open += 1
+            self._next_deadline = min(self._next_deadline, sample.t + self.hold)
+            state.high = seq
+            return alarms
+        for gap in state.gaps:
+            if gap.take(seq):
+                self.seq_late += 1
+                if not gap.missing:
+                    state.gaps.remove(gap)
+                    self._open -= 1
+                return alarms
+        if seq < high // 2:  # the publisher restarted its counter
+            alarms += self._judge(sample.topic, state, list(state.gaps), sample.t)
+            state.high = seq
+        return alarms
+
+    def _judge(self, topic: str, state: _SeqState, gaps: list[_SeqGap], t: float
+               ) -> list[dict[str, Any]]:
+        """Count ``gaps`` of ``topic`` lost (what is still missing of each) and close them."""
+        alarms = []
+        for gap in gaps:
+            state.gaps.remove(gap)
+            self._open -= 1
+            missing = gap.count()
+            self.seq_lost += missing
+            self.seq_gaps += 1
+            alarms.append(alarm_message(
+                t, AlarmKind.DATA_LOSS, Severity.WARNING,
+                f"{missing} message(s) on {topic} never arrived (seq {gap.before} -> "
+                f"{gap.after})", value=missing))
+        return alarms
+
+    def _expire(self, now: float) -> list[dict[str, Any]]:
+        """Judge the jumps whose hold ended by rig time ``now``."""
+        alarms = []
+        upcoming = math.inf
+        for topic, state in self._seq.items():
+            if not state.gaps:
+                continue
+            due = [gap for gap in state.gaps if gap.deadline <= now]
+            alarms += self._judge(topic, state, due, now)
+            upcoming = min([upcoming, *(gap.deadline for gap in state.gaps)])
+        self._next_deadline = upcoming
+        return alarms
+
+    def finish(self) -> list[dict[str, Any]]:
+        """The end of the input: every jump still open is judged now; its alarms."""
+        alarms = []
+        t = self._clock if self._open else 0.0
+        for topic, state in self._seq.items():
+            alarms += self._judge(topic, state, list(state.gaps), t)
+        self._next_deadline = math.inf
+        return alarms
 
     def _check_sampling(self, sample: Sample) -> dict[str, Any] | None:
         state = self._sampling.get(sample.channel)

@@ -347,6 +347,9 @@ class Pipeline:
         for frame in self.aligner.flush():
             self._run_steps(frame)
         log_ns = self._now_ns()
+        for alarm in self.loss.finish():  # seq jumps still held open: judged now
+            self._write("/tdmon/alarm", log_ns, alarm)
+        self.stats.seq_lost = self.loss.seq_lost
         for step in self.steps:
             try:
                 step.close(self._emitter(log_ns, None))

@@ -275,15 +275,67 @@ def _sample(topic: str, t: float, seq: int | None = None) -> Sample:
 def test_seq_gaps_are_counted_restarts_and_repeats_are_not() -> None:
     loss = LossDetector()
     alarms = []
-    for seq in [1, 2, 3, 7, 8, 8, 6, 9, 1, 2, 4]:
-        alarms += loss.observe(_sample("rig/a/torque", float(len(alarms) + seq), seq))
-    # 3 -> 7: 3 missing; 8 again, 6: ignored; 9 -> 1: a restart; 2 -> 4: 1 missing
+    for index, seq in enumerate([1, 2, 3, 7, 8, 8, 6, 9, 1, 2, 4]):
+        alarms += loss.observe(_sample("rig/a/torque", float(index), seq))
+    # 3 -> 7: 4, 5, 6 held open; 8 again: ignored; 6 late, within the hold: not lost;
+    # 9 -> 1: a restart, so 4 and 5 are judged lost now; 2 -> 4: 3 held open
     seq_alarms = [a for a in alarms if "never arrived" in a["message"]]
-    assert [a["value"] for a in seq_alarms] == [3, 1]
-    assert loss.seq_lost == 4 and loss.seq_gaps == 2
+    assert [a["value"] for a in seq_alarms] == [2]
+    assert seq_alarms[0]["message"] == "2 message(s) on rig/a/torque never arrived (seq 3 -> 7)"
+    assert loss.seq_late == 1
+    # the end of the input judges what is still held open
+    seq_alarms += loss.finish()
+    assert [a["value"] for a in seq_alarms] == [2, 1]
+    assert loss.seq_lost == 3 and loss.seq_gaps == 2
     assert all(a["kind"] == "data_loss" and a["severity"] == "warning" for a in seq_alarms)
     # per topic: another topic's counter is its own
     assert loss.observe(_sample("rig/a/hookload", 100.0, 50)) == []
+
+
+def test_newer_messages_before_the_backlog_are_not_a_loss() -> None:
+    """Fault 4 of issue 32: after a broker restart mosquitto delivered a topic's newer messages
+    (here 601-900) before its backlog (1-600), 0.5 s of rig time apart each."""
+    loss = LossDetector()
+    alarms = []
+    order = [*range(601, 901), *range(1, 601)]
+    for index, seq in enumerate(order):
+        alarms += loss.observe(_sample("rig/a/hookload", 1000.0 + seq * 0.5 + index * 1e-3, seq))
+    alarms += loss.finish()
+    assert alarms == [] and loss.seq_lost == 0
+    assert loss.seq_late == 0  # 1-600 came before any number after them: nothing was missing
+
+
+def test_a_backlog_after_newer_messages_fills_the_held_jump() -> None:
+    loss = LossDetector()
+    alarms = []
+    order = [*range(1, 101), *range(201, 261), *range(101, 201), *range(261, 400)]
+    for index, seq in enumerate(order):
+        alarms += loss.observe(_sample("rig/a/hookload", 1000.0 + index * 0.05, seq))
+    alarms += loss.finish()
+    assert alarms == [] and loss.seq_lost == 0 and loss.seq_late == 100
+
+
+def test_what_the_hold_does_not_bring_is_lost_and_alarmed_at_its_end() -> None:
+    loss = LossDetector(hold=30.0)
+    t = 0.0
+    for seq in [*range(1, 11), *range(21, 31)]:  # 11-20 never come
+        t += 1.0
+        assert loss.observe(_sample("rig/a/hookload", t, seq)) == []
+    for seq in [15, 16]:  # two come late, within the hold
+        t += 1.0
+        assert loss.observe(_sample("rig/a/torque", t, seq)) == []
+        assert loss.observe(_sample("rig/a/hookload", t, seq)) == []
+    # the jump was seen at t = 11 s: rig time 41 s ends the hold (another topic's sample too)
+    assert loss.observe(_sample("rig/a/torque", 40.9, 17)) == []
+    alarms = loss.observe(_sample("rig/a/torque", 41.0, 18))
+    assert [(a["t"], a["value"]) for a in alarms] == [(41.0, 8)]
+    assert alarms[0]["message"] == ("8 message(s) on rig/a/hookload never arrived "
+                                    "(seq 10 -> 21)")
+    assert loss.seq_lost == 8 and loss.seq_late == 2
+    # a number that comes after its jump was judged is not counted again
+    late = loss.observe(_sample("rig/a/hookload", 42.0, 11))
+    assert not [a for a in late if "never arrived" in a["message"]] and loss.seq_lost == 8
+    assert loss.finish() == []
 
 
 def test_a_sampling_gap_is_one_alarm_per_gap() -> None:
