@@ -29,6 +29,7 @@ from tdmon.daemon.steps.profile import profile_step
 from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
 from tdmon.ingest.decode import Decoder, SampleChecks
+from tdmon.ingest.loss_state import LOSS_STATE_FILE
 
 log = logging.getLogger(__name__)
 
@@ -173,6 +174,9 @@ async def build_daemon(
 
         pipeline = assemble_pipeline(config, well, steps, wiring.sinks, stats)
         wiring.pipeline = pipeline
+        if config.recorder.enabled and any(not source.finite for source in sources):
+            # a live daemon's loss counting goes on across its restarts (not a replay's)
+            pipeline.loss.keep_state(config.resolve(config.recorder.output) / LOSS_STATE_FILE)
         if stop_when_sources_done is None:
             stop_when_sources_done = bool(sources) and all(s.finite for s in sources)
         daemon = Daemon(

@@ -85,8 +85,12 @@ class AckWindow:
     """
 
     def __init__(self, recorders: Sequence[Recorder], batch: int = 500, idle_s: float = 0.05,
-                 idle_min: int = 16, max_age_s: float = 5.0, check_s: float = 0.05) -> None:
+                 idle_min: int = 16, max_age_s: float = 5.0, check_s: float = 0.05,
+                 before_ack: Callable[[], None] | None = None) -> None:
         self.recorders = recorders
+        #: called before acknowledgements go (the loss state is saved, so that what the
+        #: broker will not send again is in it)
+        self.before_ack = before_ack
         self.batch = batch
         self.idle_s = idle_s
         self.idle_min = idle_min
@@ -154,6 +158,8 @@ class AckWindow:
                 self.forced_flushes += 1
 
     def _ack(self, acks: list[Callable[[], None]]) -> None:
+        if acks and self.before_ack is not None:
+            self.before_ack()
         for ack in acks:
             try:
                 ack()
@@ -198,7 +204,7 @@ class Daemon:
         stop = stop or asyncio.Event()
         queue = Inbox(self.queue_size)
         self.queue = queue
-        self.acks = AckWindow(self.pipeline.recorders)
+        self.acks = AckWindow(self.pipeline.recorders, before_ack=self.pipeline.loss.save)
         self._accepting = True
         source_tasks = [
             asyncio.create_task(self._supervise_source(spec, queue), name=f"source {spec.name}")

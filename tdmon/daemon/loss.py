@@ -8,17 +8,22 @@ alarms a sample reveals, and the counters go into the status message.
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import statistics
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+from tdmon.ingest.loss_state import read_state, write_state
 from tdmon.ingest.types import Sample
 from tdmon.messages import alarm_message
 from tdmon.vocabulary import AlarmKind, Severity
+
+log = logging.getLogger(__name__)
 
 #: An interval this many times the channel's median interval is a sampling gap [-].
 GAP_FACTOR = 10.0
@@ -111,6 +116,7 @@ class LossDetector:
         self._open = 0  # jumps held open, all topics
         self._next_deadline = math.inf
         self._clock = -math.inf  # the latest rig time seen [s]
+        self._state_path: Path | None = None
 
     def observe(self, sample: Sample) -> list[dict[str, Any]]:
         """Take one decoded sample; the ``data_loss`` alarms it reveals (usually none)."""
@@ -138,6 +144,68 @@ class LossDetector:
         if alarm is not None:
             alarms.append(alarm)
         return alarms
+
+    # -- the state kept across restarts (tdmon.ingest.loss_state) ----------------------------
+
+    def keep_state(self, path: Path) -> None:
+        """Keep this detector's state in ``path`` (:meth:`save`), starting from what a previous
+        run left there: a restarted daemon then counts what never came while it was away."""
+        self._state_path = path
+        state = read_state(path)
+        if state is None:
+            return
+        try:
+            self._restore(state)
+        except (KeyError, TypeError, ValueError) as exc:
+            log.warning("%s: loss state not used (%s); counting loss afresh", path, exc)
+            self._seq, self._sampling, self._open = {}, {}, 0
+            self._next_deadline, self._clock = math.inf, -math.inf
+            return
+        log.info("%s: loss counting goes on from the last run (%d topics, %d jumps held "
+                 "open, %d channels)", path, len(self._seq), self._open, len(self._sampling))
+
+    def save(self) -> None:
+        """Write the state to the file :meth:`keep_state` named (nothing without one). The
+        daemon calls it before acknowledging messages to the broker and with every status,
+        so the file never lags behind what the broker will not send again."""
+        if self._state_path is None:
+            return
+        try:
+            write_state(self._state_path, self._snapshot())
+        except OSError as exc:
+            log.warning("%s: cannot save the loss state: %s", self._state_path, exc)
+
+    def _snapshot(self) -> dict[str, Any]:
+        return {
+            "clock": None if self._clock == -math.inf else self._clock,
+            "seq": {topic: {"high": state.high,
+                            "gaps": [[gap.before, gap.after, gap.deadline, gap.missing]
+                                     for gap in state.gaps]}
+                    for topic, state in self._seq.items()},
+            "sampling": {channel: {"last_t": state.last_t, "median": state.median,
+                                   "intervals": list(state.intervals)}
+                         for channel, state in self._sampling.items()},
+        }
+
+    def _restore(self, state: dict[str, Any]) -> None:
+        clock = state.get("clock")
+        self._clock = -math.inf if clock is None else float(clock)
+        self._seq = {}
+        for topic, saved in state["seq"].items():
+            gaps = [_SeqGap(int(before), int(after), float(deadline),
+                            [[int(low), int(high)] for low, high in missing])
+                    for before, after, deadline, missing in saved["gaps"][:SEQ_GAPS_KEPT]]
+            self._seq[str(topic)] = _SeqState(int(saved["high"]), gaps)
+        self._open = sum(len(state.gaps) for state in self._seq.values())
+        self._next_deadline = min((gap.deadline for state in self._seq.values()
+                                   for gap in state.gaps), default=math.inf)
+        self._sampling = {}
+        for channel, saved in state["sampling"].items():
+            median = saved["median"]
+            sampling = _Sampling(float(saved["last_t"]), median=None if median is None
+                                 else float(median))
+            sampling.intervals.extend(float(x) for x in saved["intervals"][-INTERVALS_KEPT:])
+            self._sampling[str(channel)] = sampling
 
     def reanchor(self) -> None:
         """The rig clock jumped: the next interval of every channel spans the jump, so it is

@@ -371,8 +371,10 @@ class Pipeline:
                     message)
 
     def emit_status(self, connections: dict[str, str]) -> None:
-        """Send the ``status`` message (a fleet's pipeline sends one per rig)."""
+        """Send the ``status`` message (a fleet's pipeline sends one per rig), and save the
+        loss detector's state (when it keeps one)."""
         self.emit("status", self.status_message(connections))
+        self.loss.save()
 
     def status_message(self, connections: dict[str, str], now: float | None = None
                        ) -> dict[str, Any]:
