@@ -49,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                        help="Zenoh mode (default: router with --listen, else client)")
     fleet.add_argument("--zenoh", type=Path, metavar="ZENOH.toml",
                        help="the Zenoh session as a [sources.zenoh] table of a daemon file "
-                            "(mode, listen, connect, tls, access_control; docs/daemon.md, "
+                            "(mode, listen, connect, tls, access_control; docs/configuration.md, "
                             "\"Zenoh TLS and access control\"); --listen, --connect and "
                             "--mode replace its own")
     fleet.add_argument("--interval", type=quantity_arg("s", "2 s", positive=True),

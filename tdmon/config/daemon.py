@@ -136,8 +136,8 @@ class MqttConfig(_Model):
 
 
 class ZenohTlsConfig(_Model):
-    """TLS of a Zenoh session's ``tls/`` endpoints (zenoh's ``transport/link/tls``; docs/
-    daemon.md, "Zenoh TLS and access control"). Paths relative to the config file."""
+    """TLS of a Zenoh session's ``tls/`` endpoints (zenoh's ``transport/link/tls``;
+    docs/configuration.md, "Zenoh TLS and access control"). Paths relative to the config file."""
 
     ca_file: Path | None = Field(default=None, description="root_ca_certificate: the CA that "
                                  "signed the other side's certificate")

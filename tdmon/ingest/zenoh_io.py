@@ -48,7 +48,7 @@ def _tls_keys(tls: ZenohTlsConfig) -> list[tuple[str, Any]]:
 
 def zenoh_config(config: ZenohConfig) -> zenoh.Config:
     """A zenoh.Config from ours; scouting off means only the explicit endpoints are used; TLS
-    and access control as docs/daemon.md ("Zenoh TLS and access control") describes."""
+    and access control as docs/configuration.md ("Zenoh TLS and access control") describes."""
     conf = zenoh.Config()
     keys: list[tuple[str, Any]] = [
         ("mode", config.mode), ("listen/endpoints", config.listen),

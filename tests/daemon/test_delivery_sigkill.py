@@ -183,6 +183,11 @@ def test_sigkill_mid_backlog_loses_no_acknowledged_sample(
     # a sample recorded twice is one the killed run had flushed but not yet acknowledged: the
     # broker sent it again, and it had at most its in-flight limit out unacknowledged
     assert twice <= _shipped_max_inflight()
+    # issue 32, fault 4: the restarted run counts no loss (the loss state kept beside the
+    # recordings is saved before every acknowledgement) and raises no alarm
+    assert not [m for path in files for m in read_messages(path, "/tdmon/alarm")
+                if m.message["kind"] == "data_loss"]
+    assert [m.message for m in read_messages(files[-1], "/tdmon/status")][-1]["seq_lost"] == 0
 
 
 def _shipped_max_inflight() -> int:
