@@ -204,7 +204,7 @@ class Daemon:
         stop = stop or asyncio.Event()
         queue = Inbox(self.queue_size)
         self.queue = queue
-        self.acks = AckWindow(self.pipeline.recorders, before_ack=self.pipeline.loss.save)
+        self.acks = AckWindow(self.pipeline.recorders, before_ack=self.pipeline.save_state)
         self._accepting = True
         source_tasks = [
             asyncio.create_task(self._supervise_source(spec, queue), name=f"source {spec.name}")

@@ -352,6 +352,11 @@ class FleetPipeline:
             gc.freeze()
         return silent
 
+    def save_state(self) -> None:
+        """Each rig's :meth:`Pipeline.save_state` (a fleet's rigs keep no loss state yet)."""
+        for rig in self.rigs.values():
+            rig.pipeline.save_state()
+
     def emit_status(self, connections: dict[str, str]) -> None:
         """Each rig's ``status`` on its own prefix (the connections are the fleet's)."""
         for rig in self.rigs.values():

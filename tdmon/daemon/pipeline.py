@@ -371,9 +371,14 @@ class Pipeline:
                     message)
 
     def emit_status(self, connections: dict[str, str]) -> None:
-        """Send the ``status`` message (a fleet's pipeline sends one per rig), and save the
-        loss detector's state (when it keeps one)."""
+        """Send the ``status`` message (a fleet's pipeline sends one per rig), and save what
+        must survive a restart (:meth:`save_state`)."""
         self.emit("status", self.status_message(connections))
+        self.save_state()
+
+    def save_state(self) -> None:
+        """Save what a restarted daemon goes on from: the loss detector's state, when it keeps
+        one (the daemon calls it before acknowledging messages too)."""
         self.loss.save()
 
     def status_message(self, connections: dict[str, str], now: float | None = None

@@ -225,6 +225,9 @@ class FakePipeline:
     def emit_status(self, connections: dict[str, str]) -> None:
         pass
 
+    def save_state(self) -> None:
+        pass
+
     def flush(self) -> None:
         pass
 
