@@ -117,10 +117,14 @@ class LossDetector:
         self._next_deadline = math.inf
         self._clock = -math.inf  # the latest rig time seen [s]
         self._state_path: Path | None = None
+        self._rebase_holds = False  # the rig clock jumped while jumps were held open
 
     def observe(self, sample: Sample) -> list[dict[str, Any]]:
         """Take one decoded sample; the ``data_loss`` alarms it reveals (usually none)."""
         alarms: list[dict[str, Any]] = []
+        if self._rebase_holds:
+            self._shift_holds(sample.t - self._clock)
+            self._clock = sample.t
         if sample.t > self._clock:
             self._clock = sample.t
             if sample.t >= self._next_deadline:
@@ -209,9 +213,11 @@ class LossDetector:
 
     def reanchor(self) -> None:
         """The rig clock jumped: the next interval of every channel spans the jump, so it is
-        neither a gap (a clock gone forward) nor ignored for ever (a clock gone back)."""
+        neither a gap (a clock gone forward) nor ignored for ever (a clock gone back); the
+        jumps held open keep what is left of their hold, counted on the new clock."""
         for state in self._sampling.values():
             state.rebase = True
+        self._rebase_holds = self._open > 0
 
     def _check_seq(self, sample: Sample) -> list[dict[str, Any]]:
         seq = sample.seq
@@ -274,6 +280,14 @@ class LossDetector:
             upcoming = min([upcoming, *(gap.deadline for gap in state.gaps)])
         self._next_deadline = upcoming
         return alarms
+
+    def _shift_holds(self, shift: float) -> None:
+        """Move every held jump's deadline by ``shift`` [s] (the rig clock jumped)."""
+        self._rebase_holds = False
+        for state in self._seq.values():
+            for gap in state.gaps:
+                gap.deadline += shift
+        self._next_deadline += shift
 
     def finish(self) -> list[dict[str, Any]]:
         """The end of the input: every jump still open is judged now; its alarms."""

@@ -362,6 +362,18 @@ def test_a_sampling_gap_is_one_alarm_per_gap() -> None:
 
 
 @pytest.mark.parametrize("jump", [3600.0, -3600.0])
+def test_a_held_seq_jump_keeps_its_hold_over_a_clock_jump(jump: float) -> None:
+    loss = LossDetector(hold=30.0)
+    for t, seq in [(1.0, 1), (2.0, 5)]:  # 2-4 held open until t = 32 s
+        loss.observe(_sample("rig/a/torque", t, seq))
+    loss.reanchor()
+    assert loss.observe(_sample("rig/a/torque", 3.0 + jump, 6)) == []
+    assert loss.observe(_sample("rig/a/torque", 31.9 + jump, 7)) == []
+    alarms = loss.observe(_sample("rig/a/torque", 33.0 + jump, 8))
+    assert [a["value"] for a in alarms] == [3] and loss.seq_lost == 3
+
+
+@pytest.mark.parametrize("jump", [3600.0, -3600.0])
 def test_a_clock_jump_is_neither_a_gap_nor_a_blind_spot(jump: float) -> None:
     loss = LossDetector()
     t = 0.0
