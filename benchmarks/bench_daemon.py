@@ -21,12 +21,14 @@ with at most 1000 unacknowledged; one sample per message, as the payload contrac
 
 Measures
 - throughput: N samples as fast as the publisher can send (8 channels); samples/s until the
-  daemon's status reports all N processed, and that none was rejected or dropped. The rows'
+  daemon's status reports all N processed, and that none was rejected or dropped; then the
+  seconds until the last row's ``model`` result reached the dashboard. The rows'
   rig times are ``--row-interval`` apart (default 0.1 s, a rig's 10 Hz) and end before the
   run starts: a backlog such as a broker delivers after an outage. The steps' time windows
   (e.g. the rig state's torque average over 5 s) then hold what they would on a rig; rows
   10 us apart, as before, put the whole run into one window (``--row-interval 1e-5``)
-- latency: 10 Hz x 8 channels, after the throughput (whose rig times lie before it); time
+- latency: 10 Hz x 8 channels, after the throughput and its last result (whose rig times lie
+  before it); time
   from publishing a row's hook load to receiving the daemon's ``model`` result for it
   (p50, p99, max) [ms]
 - soak: 10 Hz x 8 channels for --soak-seconds; the daemon's RSS sampled every 5 s
@@ -414,12 +416,31 @@ async def throughput(rig: Rig, samples: int,
     elapsed = (time.perf_counter() if now_in - base >= total else moved) - started
     cpu = cpu_s() - cpu_before
     processed = int(rig.status.get("samples_in", 0)) - base
+    results_s = await last_result(rig, round(first + (rows - 1) * interval, 6), started)
     return {"samples": total, "processed": processed, "seconds": round(elapsed, 2),
             "publish_seconds": round(sent_s, 2),
+            "results_seconds": None if results_s is None else round(results_s, 2),
             "samples_per_s": round(processed / elapsed),
             "daemon_cpu_us_per_sample": round(cpu / max(processed, 1) * 1e6, 1),
             "rejected": rig.status.get("rejected"), "dropped": rig.status.get("dropped"),
             "lost": total - processed}
+
+
+async def last_result(rig: Rig, t: float, started: float, timeout: float = 60.0
+                      ) -> float | None:
+    """Seconds from ``started`` (perf_counter) until the dashboard has the ``model`` result of
+    the row at rig time ``t`` (None: not within ``timeout``). The daemon's status counts a
+    sample once processed; its results may still be on their way, and the next measurement
+    should not wait behind them."""
+    deadline = time.monotonic() + timeout
+    checked = 0
+    while time.monotonic() < deadline:
+        models = rig.models
+        if any(round(m["t"], 6) == t for _, m in models[checked:]):
+            return time.perf_counter() - started
+        checked = len(models)
+        await asyncio.sleep(0.02)
+    return None
 
 
 async def soak(rig: Rig, daemon: Daemon, seconds: float) -> dict[str, Any]:
