@@ -20,10 +20,17 @@ transport takes them: Zenoh ``put`` in a loop, MQTT raw QoS 1 packets (:class:`R
 with at most 1000 unacknowledged; one sample per message, as the payload contract says.
 
 Measures
-- latency: 10 Hz x 8 channels; time from publishing a row's hook load to receiving the
-  daemon's ``model`` result for it (p50, p99, max) [ms]
 - throughput: N samples as fast as the publisher can send (8 channels); samples/s until the
-  daemon's status reports all N processed, and that none was rejected or dropped
+  daemon's status reports all N processed, and that none was rejected or dropped; then the
+  seconds until the last row's ``model`` result reached the dashboard. The rows'
+  rig times are ``--row-interval`` apart (default 0.1 s, a rig's 10 Hz) and end before the
+  run starts: a backlog such as a broker delivers after an outage. The steps' time windows
+  (e.g. the rig state's torque average over 5 s) then hold what they would on a rig; rows
+  10 us apart, as before, put the whole run into one window (``--row-interval 1e-5``)
+- latency: 10 Hz x 8 channels, after the throughput and its last result (whose rig times lie
+  before it); time
+  from publishing a row's hook load to receiving the daemon's ``model`` result for it
+  (p50, p99, max) [ms]
 - soak: 10 Hz x 8 channels for --soak-seconds; the daemon's RSS sampled every 5 s
 - with the recorder: samples and messages in the recording (read back from the files'
   summaries after the daemon stopped), and recorded bytes per input sample
@@ -380,18 +387,19 @@ async def latency(rig: Rig, seconds: float) -> dict[str, Any]:
 
 
 async def throughput(rig: Rig, samples: int,
-                     cpu_s: Callable[[], float] = lambda: math.nan) -> dict[str, Any]:
+                     cpu_s: Callable[[], float] = lambda: math.nan,
+                     interval: float = 0.1) -> dict[str, Any]:
     """``cpu_s``: the daemon's CPU time so far [s] (its CPU per sample is the steadier figure
-    on a shared machine)."""
+    on a shared machine); ``interval``: rig time between rows [s]."""
     await asyncio.sleep(0.3)
     base = int(rig.status.get("samples_in", 0))
     rows = samples // len(CHANNELS)
     # the rig's messages, encoded before the clock starts: the script plays a rig, whose own
-    # cost is not the daemon's. 10 us apart: a publisher faster than real time must not take
-    # the rig clock more than the daemon's future tolerance (10 s) ahead of the wall clock, or
-    # the clock guard rightly rejects the rows (at 1 ms apart 50 000 rows sent in 5 s ran 45 s
-    # ahead)
-    messages = [message for i in range(rows) for message in row(rig.next_t(1e-5), i)]
+    # cost is not the daemon's. Their rig times end before now: sent faster than real time,
+    # rows stamped from now on would take the rig clock beyond the daemon's future tolerance
+    # (10 s) and the clock guard would rightly reject them
+    first = time.time() - rows * interval - 1.0
+    messages = [message for i in range(rows) for message in row(first + i * interval, i)]
     started = time.perf_counter()
     cpu_before = cpu_s()
     await rig.send_many(messages)
@@ -408,12 +416,31 @@ async def throughput(rig: Rig, samples: int,
     elapsed = (time.perf_counter() if now_in - base >= total else moved) - started
     cpu = cpu_s() - cpu_before
     processed = int(rig.status.get("samples_in", 0)) - base
+    results_s = await last_result(rig, round(first + (rows - 1) * interval, 6), started)
     return {"samples": total, "processed": processed, "seconds": round(elapsed, 2),
             "publish_seconds": round(sent_s, 2),
+            "results_seconds": None if results_s is None else round(results_s, 2),
             "samples_per_s": round(processed / elapsed),
             "daemon_cpu_us_per_sample": round(cpu / max(processed, 1) * 1e6, 1),
             "rejected": rig.status.get("rejected"), "dropped": rig.status.get("dropped"),
             "lost": total - processed}
+
+
+async def last_result(rig: Rig, t: float, started: float, timeout: float = 60.0
+                      ) -> float | None:
+    """Seconds from ``started`` (perf_counter) until the dashboard has the ``model`` result of
+    the row at rig time ``t`` (None: not within ``timeout``). The daemon's status counts a
+    sample once processed; its results may still be on their way, and the next measurement
+    should not wait behind them."""
+    deadline = time.monotonic() + timeout
+    checked = 0
+    while time.monotonic() < deadline:
+        models = rig.models
+        if any(round(m["t"], 6) == t for _, m in models[checked:]):
+            return time.perf_counter() - started
+        checked = len(models)
+        await asyncio.sleep(0.02)
+    return None
 
 
 async def soak(rig: Rig, daemon: Daemon, seconds: float) -> dict[str, Any]:
@@ -477,10 +504,12 @@ def run_transport(transport: str, args: argparse.Namespace, folder: Path,
         while not rig.status and time.monotonic() < deadline:
             await asyncio.sleep(0.05)
         out: dict[str, Any] = {}
+        # the throughput first: its rows' rig times lie in the past, and a row older than
+        # the latency's would be out of order
+        out["throughput"] = await throughput(rig, samples, daemon.cpu_s, args.row_interval)
+        print(label, "throughput", out["throughput"], flush=True)
         out["latency"] = await latency(rig, args.latency_seconds)
         print(label, "latency", out["latency"], flush=True)
-        out["throughput"] = await throughput(rig, samples, daemon.cpu_s)
-        print(label, "throughput", out["throughput"], flush=True)
         if not args.skip_soak:
             out["soak"] = await soak(rig, daemon, args.soak_seconds)
             print(label, "soak", out["soak"], flush=True)
@@ -533,6 +562,8 @@ def main() -> int:
     parser.add_argument("--latency-seconds", type=float, default=30.0)
     parser.add_argument("--mqtt-samples", type=int, default=80_000)
     parser.add_argument("--zenoh-samples", type=int, default=400_000)
+    parser.add_argument("--row-interval", type=float, default=0.1,
+                        help="rig time between the throughput's rows [s] (default 0.1: 10 Hz)")
     parser.add_argument("--soak-seconds", type=float, default=600.0)
     parser.add_argument("--skip-soak", action="store_true")
     parser.add_argument("--recorder", choices=["on", "off", "both"], default="both",

@@ -38,6 +38,9 @@ log = logging.getLogger(__name__)
 BATCH = 256
 #: Results handed to paho at once, at most (:meth:`MqttPublisher.pump`).
 PUBLISH_BATCH = 64
+#: Seconds the broker has to acknowledge a batch of results (QoS 1/2) before the publisher
+#: gives up on the connection, opens a new one and sends the batch again.
+ACK_TIMEOUT = 10.0
 
 
 def tls_context(config: MqttConfig, base: Path | None = None) -> ssl.SSLContext | None:
@@ -453,6 +456,10 @@ class MqttPublisher(Sink):
     connection open with :meth:`connect` and runs :meth:`pump` on it. When the queue is full
     the oldest message is dropped and counted through ``on_drop``, never silently. The rigs of
     a fleet daemon share one publisher, each through its own prefix (:meth:`for_prefix`).
+
+    A batch the broker has not acknowledged within ``ack_timeout`` seconds is sent again on a
+    new connection (counted in ``timeouts``): a connection whose acknowledgements stopped
+    coming must not hold the results back for good.
     """
 
     def __init__(
@@ -464,6 +471,7 @@ class MqttPublisher(Sink):
         queue_size: int = 10_000,
         on_drop: Callable[[int], None] | None = None,
         base: Path | None = None,
+        ack_timeout: float = ACK_TIMEOUT,
     ) -> None:
         self.name = "mqtt-publish"
         self.config = config
@@ -481,6 +489,9 @@ class MqttPublisher(Sink):
         self._on_drop = on_drop
         self.dropped = 0
         self.published = 0
+        self.ack_timeout = ack_timeout
+        #: batches sent again on a new connection, their acknowledgement overdue
+        self.timeouts = 0
 
     def write_batch(self, batch: Batch) -> None:
         self.enqueue(self.prefix, batch)
@@ -532,15 +543,30 @@ class MqttPublisher(Sink):
                 await self._wake.wait()
                 continue
             batch = list(islice(queue, PUBLISH_BATCH))
-            outcomes = await asyncio.gather(
-                *(client.publish(topic, payload, qos=self.qos) for topic, payload in batch),
-                return_exceptions=True)
+            outcomes = await self._publish(client, batch)
             for outcome in outcomes:
                 if isinstance(outcome, BaseException):
                     # the rest go again on the next connection, in order
                     raise _translate(self.config, "publish failed", outcome) from outcome
                 queue.popleft()
                 self.published += 1
+
+    async def _publish(self, client: aiomqtt.Client, batch: list[tuple[str, bytes]]
+                       ) -> list[BaseException | None]:
+        """Publish ``batch`` at once; each call's outcome (None: sent). Raises
+        :class:`IngestError` when the batch is not through within ``ack_timeout``."""
+        try:
+            async with asyncio.timeout(self.ack_timeout):
+                # one deadline for the whole batch, not aiomqtt's per call
+                return await asyncio.gather(
+                    *(client.publish(topic, payload, qos=self.qos, timeout=math.inf)
+                      for topic, payload in batch),
+                    return_exceptions=True)
+        except TimeoutError:
+            self.timeouts += 1
+            raise IngestError(
+                f"{describe(self.config)}: {len(batch)} results not acknowledged within "
+                f"{self.ack_timeout:g} s; sending them again on a new connection") from None
 
     async def drain(self, timeout: float) -> bool:
         """Wait until everything queued is published (True) or ``timeout`` passes (False)."""
