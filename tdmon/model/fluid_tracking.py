@@ -29,11 +29,18 @@ from tdmon.model.fluid_state import (
     pump,
     u_tube,
 )
+from tdmon.model.hydraulics import WellHydraulics
 from tdmon.model.well import HoleGrid, Well
 
-__all__ = ["FluidTracker"]
+__all__ = ["FluidTracker", "hydraulics_configured"]
 
 Array = NDArray[np.float64]
+
+
+def hydraulics_configured(well: Well) -> bool:
+    """Whether the well's file has a ``[hydraulics]`` table with any key (the fluid terms
+    are then modelled; without it the loads are those of one mud, as before)."""
+    return well.hydraulics != WellHydraulics()
 
 
 class FluidTracker:

@@ -47,9 +47,8 @@ if TYPE_CHECKING:
     from tdmon.model.fluid_terms import FluidTerms
     from tdmon.model.fluid_tracking import FluidTracker
     from tdmon.model.torque_drag import WellModel
-    from tdmon.model.well import Well
 
-__all__ = ["FLUID_RESULT", "FluidEffect", "FluidStep", "fluid_active", "fluid_step_for"]
+__all__ = ["FLUID_RESULT", "FluidEffect", "FluidStep", "fluid_step_for"]
 
 FLUID_RESULT = "fluids"
 """The key of `FluidEffect` in ``frame.results`` for the steps after this one."""
@@ -61,13 +60,6 @@ LIMITS_EVERY = 10.0
 #: the state a curve's operation is modelled at: its direction of motion (+1 down)
 _CURVES: dict[Operation, int] = {Operation.PICK_UP: -1, Operation.SLACK_OFF: 1,
                                  Operation.ROTATING: 0}
-
-
-def fluid_active(well: Well) -> bool:
-    """Whether the well file asks for the fluid terms (a ``[hydraulics]`` table with any key)."""
-    from tdmon.model.hydraulics import WellHydraulics
-
-    return well.hydraulics != WellHydraulics()
 
 
 @dataclass(frozen=True, slots=True)
@@ -264,11 +256,12 @@ def hydraulics_message(t: float, bit_depth: float, speed: float, flow: float,
 def fluid_step_for(config: DaemonConfig, well_file: WellFile,
                    rig_state: RigStateStep | None) -> FluidStep | None:
     """The fluid step for the daemon's well file, or None when it has no ``[hydraulics]``."""
+    from tdmon.model.fluid_tracking import FluidTracker, hydraulics_configured
+
     well = well_file.well
-    if not fluid_active(well):
+    if not hydraulics_configured(well):
         return None
     from tdmon.model.fluid_force import HydraulicModel
-    from tdmon.model.fluid_tracking import FluidTracker
     from tdmon.model.torque_drag import WellModel
 
     model = WellModel(well)
