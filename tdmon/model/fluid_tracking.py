@@ -68,6 +68,7 @@ class FluidTracker:
         self.flow = 0.0
         self.density_in = self.mud_density
         self.version = 0  # counts changes of the state, for the callers' caches
+        self.pumped = 0.0  # the volume pumped so far [m^3]
         self._densities: tuple[int, float, tuple[Array, Array]] | None = None
 
     def _inside(self, bit_depth: float) -> float:
@@ -90,7 +91,9 @@ class FluidTracker:
             state = move_string(state, self.path, self.bit_depth, depth, fill_density=fill,
                                 closed=True)
         if self.t is not None and t > self.t and self.flow > 0.0:
-            state, _ = pump(state, self.path, depth, self.flow * (t - self.t), self.density_in)
+            volume = self.flow * (t - self.t)
+            state, _ = pump(state, self.path, depth, volume, self.density_in)
+            self.pumped += volume
         new_flow = max(float(flow), 0.0) if flow is not None and math.isfinite(flow) else 0.0
         if not self.closed and new_flow == 0.0 and (self.flow > 0.0 or depth != self.bit_depth):
             state = u_tube(state, self.path, depth)  # an open string settles with pumps off

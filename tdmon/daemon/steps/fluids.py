@@ -99,7 +99,7 @@ class FluidStep:
         self.method = method
         self.rig_state = rig_state
         self.pipe_radius = float(model.component_radius[-1])
-        self._limits: tuple[float, int, TripSpeedLimits] | None = None
+        self._limits: tuple[float, float, TripSpeedLimits] | None = None
         self._alarmed: int = 0  # the direction of motion alarmed and not yet back within
 
     def _speed(self, frame: Frame) -> float:
@@ -188,16 +188,16 @@ class FluidStep:
         return FluidEffect(curve_hookload, curve_torque, hookload, torque)
 
     def _trip_limits(self, bit_depth: float) -> TripSpeedLimits:
-        """The trip-speed limits near this bit depth (solved again every `LIMITS_EVERY` m or
-        when the fluids moved)."""
+        """The trip-speed limits near this bit depth: solved again when the bit has moved
+        `LIMITS_EVERY` m, and when the pumps stop (what they pumped changed the densities)."""
         cached = self._limits
-        version = self.tracker.version
+        pumped = self.tracker.pumped
         if cached is None or abs(cached[0] - bit_depth) >= LIMITS_EVERY or (
-                cached[1] != version and self.tracker.flow == 0.0):
+                cached[1] != pumped and self.tracker.flow == 0.0):
             outside, inside = self.tracker.densities()
             limits = self.hydraulic.trip_speed_limits(bit_depth, outside_density=outside,
                                                       inside_density=inside)
-            cached = (bit_depth, version, limits)
+            cached = (bit_depth, pumped, limits)
             self._limits = cached
         return cached[2]
 
