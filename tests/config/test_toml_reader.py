@@ -119,7 +119,7 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
 
 
 def test_scenario_words() -> None:
-    assert CHANNELS[:3] == ("hookload", "torque", "bit_depth") and len(CHANNELS) == 11
+    assert CHANNELS[:3] == ("hookload", "torque", "bit_depth") and len(CHANNELS) == 12
     assert "back_ream" in PHASE_KINDS and len(PHASE_KINDS) == 9
 
 
