@@ -32,7 +32,10 @@ from tdmon.model.fluid_state import (
 from tdmon.model.hydraulics import WellHydraulics
 from tdmon.model.well import HoleGrid, Well
 
-__all__ = ["FluidTracker", "hydraulics_configured"]
+__all__ = ["DENSITY_RESOLUTION", "FluidTracker", "hydraulics_configured"]
+
+DENSITY_RESOLUTION = 20.0
+"""A streamed mud density in within this of the one in use is taken as the same mud [kg/m^3]."""
 
 Array = NDArray[np.float64]
 
@@ -54,13 +57,17 @@ class FluidTracker:
     bit_depth : where the state starts until the first sample places it [m]
     keep_full : the fill policy while tripping out: the hole is kept full with the mud being
         pumped (True) or left to drop (False)
+    resolution : a streamed mud density in closer than this to the one in use is the same mud
+        [kg/m^3] (a mud balance reads to 0.1 ppg, 12 kg/m^3; the sensor's noise must not cut
+        the columns into a layer per sample)
     """
 
     def __init__(self, well: Well, grid: HoleGrid | None = None, *, bit_depth: float,
-                 keep_full: bool = True) -> None:
+                 keep_full: bool = True, resolution: float = DENSITY_RESOLUTION) -> None:
         self.path = FluidPath(well, grid)
         self.closed = well.hydraulics.float_valve
         self.keep_full = keep_full
+        self.resolution = resolution
         self.mud_density = float(well.fluid.density)
         self.bit_depth = self._inside(bit_depth)
         self.state: FluidState = initial_state(self.path, self.bit_depth)
@@ -103,7 +110,8 @@ class FluidTracker:
         self.bit_depth = depth
         self.t = t if self.t is None else max(self.t, t)
         self.flow = new_flow
-        if density_in is not None and math.isfinite(density_in) and density_in > 0.0:
+        if (density_in is not None and math.isfinite(density_in) and density_in > 0.0
+                and abs(density_in - self.density_in) >= self.resolution):
             self.density_in = float(density_in)
         return state
 

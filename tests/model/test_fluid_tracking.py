@@ -30,9 +30,10 @@ def _inside_excess_mass(tracker: FluidTracker, well: Well) -> float:
     md = grid.md
     middle = 0.5 * (md[:-1] + md[1:])
     tops = well.string.component_tops()
-    component = np.minimum(np.searchsorted(tops, BIT - middle), tops.size - 1)
+    bit = tracker.bit_depth
+    component = np.minimum(np.searchsorted(tops, bit - middle), tops.size - 1)
     bore = np.array([math.pi / 4 * c.inner_diameter**2 for c in well.string.components])
-    in_string = middle < BIT
+    in_string = middle < bit
     return float(np.sum(((inside - MUD) * bore[component] * np.diff(md))[in_string]))
 
 
@@ -107,3 +108,18 @@ def test_a_trip_out_without_fill_lowers_the_annulus(well: Well) -> None:
     outside, _ = tracker.densities()
     md = tracker.path.grid.md
     assert np.all(outside[md[1:] <= 40.0] == 0.0)  # air above the level
+
+
+def test_a_noisy_mud_density_in_stays_one_mud(well: Well) -> None:
+    """Mud density in read 1400 +- 15 kg/m3 while pumping and tripping: within the 20 kg/m3
+    resolution it is the well's mud, and no layer is cut per sample; a 1500 kg/m3 mud is new."""
+    tracker = FluidTracker(well, bit_depth=BIT)
+    noise = [0.0, 12.0, -15.0, 8.0, -3.0, 14.0, -9.0, 5.0]
+    for k, offset in enumerate(noise):
+        tracker.update(10.0 * k, BIT - 2.0 * k, 0.03, MUD + offset)
+    assert tracker.uniform()
+    assert tracker.state.outside_density.size == 1
+    tracker.update(80.0, BIT - 16.0, 0.03, 1500.0)
+    tracker.update(90.0, BIT - 18.0, 0.0)
+    assert tracker.density_in == 1500.0
+    assert _inside_excess_mass(tracker, well) == pytest.approx(0.3 * 100.0, rel=1e-6)

@@ -101,6 +101,7 @@ class FluidStep:
         self.pipe_radius = float(model.component_radius[-1])
         self._limits: tuple[float, float, TripSpeedLimits] | None = None
         self._alarmed: int = 0  # the direction of motion alarmed and not yet back within
+        self._last: tuple[tuple[Any, ...], dict[int, FluidForces], FluidEffect] | None = None
 
     def _speed(self, frame: Frame) -> float:
         """The block's speed [m/s] (> 0 down), from the rig-state detector; 0 when unknown."""
@@ -123,12 +124,21 @@ class FluidStep:
         flow = values.get("flow_in")
         self.tracker.update(frame.t, bit_depth, flow, values.get("mud_density"))
         speed = self._speed(frame)
+        if abs(speed) < STILL_SPEED:
+            speed = 0.0
         pumping = max(flow, 0.0) if flow is not None and math.isfinite(flow) else 0.0
-        spp = values.get("spp")
-        forces = self._forces(bit_depth, speed, pumping, spp)
-        effect = self._effect(frame, bit_depth, speed, forces)
+        spp = values.get("spp") if pumping > 0.0 else None
+        # a frame like the last (in slips, hanging, pumps off): the same forces and changes
+        key = (bit_depth, speed, pumping, spp, self.tracker.version, frame.state,
+               values.get("rpm"))
+        if self._last is not None and self._last[0] == key:
+            forces, effect = self._last[1], self._last[2]
+        else:
+            forces = self._forces(bit_depth, speed, pumping, spp)
+            effect = self._effect(frame, bit_depth, speed, forces)
+            self._last = (key, forces, effect)
         frame.results[FLUID_RESULT] = {"effect": effect}
-        moving = forces[1 if speed > 0.0 else -1] if abs(speed) >= STILL_SPEED else forces[0]
+        moving = forces[1 if speed > 0.0 else -1] if speed != 0.0 else forces[0]
         limits = self._trip_limits(bit_depth)
         emit("hydraulics", hydraulics_message(frame.t, bit_depth, speed, pumping, moving,
                                               limits, effect))
@@ -142,12 +152,11 @@ class FluidStep:
         def at(pipe_speed: float) -> FluidForces:
             return self.hydraulic.forces(
                 bit_depth, pipe_speed, flow_rate=flow,
-                standpipe_pressure=spp if flow > 0.0 and spp is not None
-                and math.isfinite(spp) else None,
+                standpipe_pressure=spp if spp is not None and math.isfinite(spp) else None,
                 outside_density=outside, inside_density=inside)
 
         rest = at(0.0)
-        if abs(speed) < STILL_SPEED or self.hydraulic.hydraulics.rheology is None:
+        if speed == 0.0 or self.hydraulic.hydraulics.rheology is None:
             return {0: rest, -1: rest, 1: rest}
         return {0: rest, -1: at(-abs(speed)), 1: at(abs(speed))}
 
@@ -207,9 +216,9 @@ class FluidStep:
         direction."""
         direction = 1 if speed > 0.0 else -1
         limit = limits.running_in if direction > 0 else limits.pulling_out
-        over = abs(speed) >= STILL_SPEED and math.isfinite(limit) and abs(speed) > limit
+        over = speed != 0.0 and math.isfinite(limit) and abs(speed) > limit
         if not over:
-            if self._alarmed and (abs(speed) < STILL_SPEED or direction == self._alarmed):
+            if self._alarmed and (speed == 0.0 or direction == self._alarmed):
                 self._alarmed = 0
             return
         if self._alarmed == direction:
