@@ -101,7 +101,7 @@ class FluidStep:
         self.pipe_radius = float(model.component_radius[-1])
         self._limits: tuple[float, float, TripSpeedLimits] | None = None
         self._alarmed: int = 0  # the direction of motion alarmed and not yet back within
-        self._last: tuple[tuple[Any, ...], dict[int, FluidForces], FluidEffect] | None = None
+        self._last: tuple[tuple[Any, ...], FluidForces, FluidEffect] | None = None
 
     def _speed(self, frame: Frame) -> float:
         """The block's speed [m/s] (> 0 down), from the rig-state detector; 0 when unknown."""
@@ -132,21 +132,23 @@ class FluidStep:
         key = (bit_depth, speed, pumping, spp, self.tracker.version, frame.state,
                values.get("rpm"))
         if self._last is not None and self._last[0] == key:
-            forces, effect = self._last[1], self._last[2]
+            moving, effect = self._last[1], self._last[2]
         else:
-            forces = self._forces(bit_depth, speed, pumping, spp)
-            effect = self._effect(frame, bit_depth, speed, forces)
-            self._last = (key, forces, effect)
+            terms, moving = self._forces(bit_depth, speed, pumping, spp)
+            effect = self._effect(frame, bit_depth, speed, terms)
+            self._last = (key, moving, effect)
         frame.results[FLUID_RESULT] = {"effect": effect}
-        moving = forces[1 if speed > 0.0 else -1] if speed != 0.0 else forces[0]
         limits = self._trip_limits(bit_depth)
         emit("hydraulics", hydraulics_message(frame.t, bit_depth, speed, pumping, moving,
                                               limits, effect))
         self._check_speed(frame.t, speed, limits, emit)
 
-    def _forces(self, bit_depth: float, speed: float, flow: float,
-                spp: float | None) -> dict[int, FluidForces]:
-        """The fluid's forces at rest (0) and moving up (-1) and down (+1) at ``|speed|``."""
+    def _forces(self, bit_depth: float, speed: float, flow: float, spp: float | None
+                ) -> tuple[dict[int, FluidTerms], FluidForces]:
+        """The fluid's terms at rest (0) and moving up (-1) and down (+1) at ``|speed|``, and
+        its forces at the frame's own speed."""
+        from tdmon.model.fluid_terms import FluidTerms
+
         outside, inside = self.tracker.densities()
 
         def at(pipe_speed: float) -> FluidForces:
@@ -155,14 +157,21 @@ class FluidStep:
                 standpipe_pressure=spp if spp is not None and math.isfinite(spp) else None,
                 outside_density=outside, inside_density=inside)
 
-        rest = at(0.0)
         if speed == 0.0 or self.hydraulic.hydraulics.rheology is None:
-            return {0: rest, -1: rest, 1: rest}
-        return {0: rest, -1: at(-abs(speed)), 1: at(abs(speed))}
+            rest = at(0.0)
+            return {0: rest.terms, -1: rest.terms, 1: rest.terms}, rest
+        up, down = at(-abs(speed)), at(abs(speed))
+        # at rest with the pumps off only the densities act: no march of the hydraulics
+        rest_terms = (FluidTerms(outside_density=outside, inside_density=inside)
+                      if flow == 0.0 else at(0.0).terms)
+        return {0: rest_terms, -1: up.terms, 1: down.terms}, down if speed > 0.0 else up
 
     def _change(self, operation: Operation, bit_depth: float, terms: FluidTerms,
                 psi: float | None = None) -> tuple[float, float]:
-        """Hook load [N] and torque [N m] with the fluid terms less without them."""
+        """Hook load [N] and torque [N m] with the fluid terms less without them (none when
+        the terms hold only the well's own mud, full to surface)."""
+        if terms.axial is None and terms.bit_force == 0.0 and self.tracker.uniform():
+            return 0.0, 0.0
         model, mu, method = self.model, self.mu, self.method
         hookload, torque = model.evaluate(operation, bit_depth, mu, method=method, psi=psi,
                                           fluid=terms)
@@ -171,11 +180,11 @@ class FluidStep:
         return hookload - dry_hookload, torque - dry_torque
 
     def _effect(self, frame: Frame, bit_depth: float, speed: float,
-                forces: dict[int, FluidForces]) -> FluidEffect:
+                terms: dict[int, FluidTerms]) -> FluidEffect:
         curve_hookload: dict[str, float] = {}
         curve_torque: dict[str, float] = {}
         for curve, direction in _CURVES.items():
-            load, torque = self._change(curve, bit_depth, forces[direction].terms)
+            load, torque = self._change(curve, bit_depth, terms[direction])
             curve_hookload[curve.value] = load
             curve_torque[curve.value] = torque
         state = RigState(frame.state)
@@ -188,9 +197,9 @@ class FluidStep:
             if rpm is not None and rpm > 0.0:
                 psi = math.atan2(abs(speed), rpm * self.pipe_radius)
                 direction = _CURVES[axial]
-                torque = self._change(axial, bit_depth, forces[direction].terms, psi)[1]
+                torque = self._change(axial, bit_depth, terms[direction], psi)[1]
         elif operation is Operation.STATIC:
-            hookload, torque = self._change(operation, bit_depth, forces[0].terms)
+            hookload, torque = self._change(operation, bit_depth, terms[0])
         elif operation is not None and operation.value in curve_hookload:
             hookload = curve_hookload[operation.value]
             torque = curve_torque[operation.value]
