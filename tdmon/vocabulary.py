@@ -169,6 +169,7 @@ class AlarmKind(StrEnum):
     CLOCK_JUMP = "clock_jump"  # the rig clock moved; the aligner re-anchored (docs/daemon.md)
     MODEL_COVERAGE = "model_coverage"  # string shorter than the bit depth, or a new well file
     WEIGHT_MISMATCH = "weight_mismatch"  # joint friction/weight estimate (calib/mismatch.py)
+    TRIP_SPEED = "trip_speed"  # surge/swab past the pore/fracture window (daemon/steps/fluids.py)
 
 
 ALARM_WORDS: Final[Mapping[AlarmKind, str]] = MappingProxyType({
@@ -207,6 +208,8 @@ ALARM_WORDS: Final[Mapping[AlarmKind, str]] = MappingProxyType({
                               "changed (a new run, a reload)",
     AlarmKind.WEIGHT_MISMATCH: "friction and weight estimated together find the string lighter "
                                "or heavier than the well file says",
+    AlarmKind.TRIP_SPEED: "trip speed fast enough for surge or swab to leave the pore/fracture "
+                          "window",
 })
 """What each alarm kind means, in a drilling engineer's words (the report's and the summary's
 ``meaning``). Every kind has its words: ``tests/test_vocabulary.py`` fails on a kind without."""

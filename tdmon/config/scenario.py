@@ -19,6 +19,7 @@ from tdmon.channels import CHANNEL_UNITS, check_channel, validate_prefix
 from tdmon.config.common import (
     UNITS_REQUIRED,
     CrossFieldError,
+    Density,
     Force,
     Length,
     Pressure,
@@ -46,9 +47,10 @@ __all__ = [
 
 CHANNELS: Final[tuple[str, ...]] = (
     "hookload", "torque", "bit_depth", "hole_depth", "block_position", "rpm", "flow_in", "spp",
-    "wob", "mud_temp_in", "mud_temp_out")
+    "wob", "mud_temp_in", "mud_temp_out", "mud_density")
 """Channels a scenario can sample, in the order the simulator seeds their random streams
-(changing the order changes every simulated replay)."""
+(changing the order changes every simulated replay). ``mud_density`` (the mud pumped in) is
+sent only for a well file with a ``[hydraulics]`` table."""
 
 PhaseKind = Literal["static", "circulate", "rotate", "slips", "trip_out", "trip_in", "ream",
                     "back_ream", "drill"]
@@ -235,6 +237,8 @@ class PhaseConfig(StrictModel):
     flow: Flow = Field(default=0.0, ge=0)
     wob: Force = Field(default=0.0, ge=0)
     slips_time: Seconds = Field(default=60.0, gt=0)
+    # the mud pumped in this phase (a pill, a slug); None: the well file's [fluid] density
+    density: Density | None = Field(default=None, gt=0)
 
     @model_validator(mode="after")
     def _complete(self) -> PhaseConfig:

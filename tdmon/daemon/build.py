@@ -101,6 +101,14 @@ def rig_steps(config: DaemonConfig, well_file: WellFile | None, model: LoadModel
         extra_steps.append(profile_step(config, well_file, hole_grid(well_file.well),
                                         calibration=calibration))
     steps = default_steps(config, model, rig_state) + extra_steps
+    if well_file is not None:
+        from tdmon.daemon.steps.fluids import fluid_step_for
+        from tdmon.daemon.steps.rig_state import RigStateStep
+
+        detector = steps[0] if isinstance(steps[0], RigStateStep) else None
+        fluid = fluid_step_for(config, well_file, detector)
+        if fluid is not None:  # after the rig state, before the monitor and the calibration
+            steps.insert(1, fluid)
     _read_through_the_sensor(steps, well_file)
     if well_file is not None:
         from tdmon.daemon.steps.coverage import coverage_step

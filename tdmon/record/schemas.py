@@ -321,6 +321,33 @@ PROFILE: Final = _object(
     anyOf=[{"required": ["temperature_C"]}, {"required": ["mu"]}],
 )
 
+_AT_BIT_AND_SHOE: Final[JsonSchema] = _sub({"bit": _OPTIONAL_NUMBER, "shoe": _OPTIONAL_NUMBER},
+                                           ("bit", "shoe"))
+
+HYDRAULICS: Final = _object(
+    "hydraulics",
+    "tdmon fluid forces at the current bit depth: surge or swab, trip-speed limits, the force "
+    "at the bit and what the fluid terms change in the frame's load (docs/hydraulics.md)",
+    {
+        "t": _TIME,
+        "bit_depth_m": _NUMBER,
+        "trip_speed_m_s": {**_NUMBER, "description": "block speed, > 0 running in"},
+        "flow_m3_s": _NUMBER,
+        "surge_Pa": _AT_BIT_AND_SHOE,
+        "density_kg_m3": _AT_BIT_AND_SHOE,
+        "trip_speed_limit_m_s": _sub({"running_in": _OPTIONAL_NUMBER,
+                                      "pulling_out": _OPTIONAL_NUMBER},
+                                     ("running_in", "pulling_out")),
+        "bit_force_N": _NUMBER,
+        "bit_pressure_drop_Pa": _OPTIONAL_NUMBER,
+        "fluid_hookload_N": _NUMBER,
+        "fluid_torque_Nm": _NUMBER,
+    },
+    ("t", "bit_depth_m", "trip_speed_m_s", "flow_m3_s", "surge_Pa", "density_kg_m3",
+     "trip_speed_limit_m_s", "bit_force_N", "bit_pressure_drop_Pa", "fluid_hookload_N",
+     "fluid_torque_Nm"),
+)
+
 #: Schema of every topic the daemon records, keyed by MCAP topic.
 TOPIC_SCHEMAS: Final[Mapping[str, JsonSchema]] = {
     TOPIC_PREFIX + name: schema
@@ -335,6 +362,7 @@ TOPIC_SCHEMAS: Final[Mapping[str, JsonSchema]] = {
         ("status", STATUS),
         ("well", WELL),
         ("profile", PROFILE),
+        ("hydraulics", HYDRAULICS),
     )
 }
 

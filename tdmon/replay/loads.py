@@ -23,9 +23,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
+from tdmon.model.fluid_terms import FluidTerms
 from tdmon.model.string import DrillString, StringComponent
 from tdmon.model.torque_drag import WellModel
 from tdmon.model.well import Well
+from tdmon.replay.fluids import FluidTruth
 from tdmon.replay.spec import Array, FrictionAnomaly, Scenario
 from tdmon.replay.timeline import Timeline
 from tdmon.vocabulary import (
@@ -88,8 +90,10 @@ def unfilled_string(well: Well, bit_depth: float, fill_level: float) -> DrillStr
 class Loads:
     """Surface hook load [N] and torque [N m] of any timeline state, from the model."""
 
-    def __init__(self, scenario: Scenario, mu: Array, model: WellModel) -> None:
+    def __init__(self, scenario: Scenario, mu: Array, model: WellModel,
+                 fluid: FluidTruth | None = None) -> None:
         self.scenario = scenario
+        self.fluid = fluid
         self.model = model
         self.mu = mu
         # psi needs the pipe's surface speed: the radius of the top component, which is most
@@ -118,9 +122,14 @@ class Loads:
         torque = np.empty(t.size)
         for k in range(t.size):
             i = int(index[k])
+            bit = float(where.bit_depth[k])
+            terms = None
+            if self.fluid is not None and timeline.state[i] != RigState.IN_SLIPS:
+                terms = self.fluid.forces(float(t[k]), bit, float(speed[k]),
+                                          float(timeline.flow[i])).terms
             hookload[k], torque[k] = self.one(
-                timeline.state[i], float(where.bit_depth[k]), float(speed[k]),
-                float(timeline.rpm[i]), float(timeline.wob[i]))
+                timeline.state[i], bit, float(speed[k]), float(timeline.rpm[i]),
+                float(timeline.wob[i]), terms)
         return hookload + self.break_over(timeline, index, t), torque
 
     def break_over(self, timeline: Timeline, index: NDArray[np.int64], t: Array) -> Array:
@@ -136,10 +145,11 @@ class Loads:
                                                      / rig.break_over_time)
         return extra
 
-    def one(self, state: RigState, bit: float, speed: float, rpm: float, wob: float) -> tuple[
-            float, float]:
+    def one(self, state: RigState, bit: float, speed: float, rpm: float, wob: float,
+            fluid: FluidTerms | None = None) -> tuple[float, float]:
         """Hook load [N] and torque [N m] in ``state`` at bit depth ``bit`` [m], bit speed
-        ``speed`` [m/s], rotation ``rpm`` [rad/s] and weight on bit ``wob`` [N]."""
+        ``speed`` [m/s], rotation ``rpm`` [rad/s] and weight on bit ``wob`` [N], with the
+        fluid's terms ``fluid`` (None: one mud, no viscous drag)."""
         if state == RigState.IN_SLIPS:
             return self.block_weight, 0.0
         method = self.scenario.method
@@ -150,7 +160,7 @@ class Loads:
         operation = OPERATION_FOR_STATE[state]
         hookload, torque = self.model_at(bit).evaluate(
             operation, bit, self.mu, method=method, wob=wob,
-            bit_torque=wob * self.scenario.rig.bit_torque_factor, psi=psi)
+            bit_torque=wob * self.scenario.rig.bit_torque_factor, psi=psi, fluid=fluid)
         for spot in self.scenario.tight_spots:
             if spot.md <= bit <= spot.md + spot.length:
                 if state in MOVING_UP:

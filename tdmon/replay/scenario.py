@@ -163,7 +163,8 @@ def _phase(config: PhaseConfig) -> Phase:
     """A validated phase; ``speed`` is the rate of penetration of a ``drill`` phase."""
     speed = config.rop if config.kind == "drill" else config.speed
     return Phase(kind=config.kind, duration=config.duration, to=config.to, speed=speed or 0.0,
-                 rpm=config.rpm, flow=config.flow, wob=config.wob, slips_time=config.slips_time)
+                 rpm=config.rpm, flow=config.flow, wob=config.wob, slips_time=config.slips_time,
+                 density=config.density)
 
 
 def _noise(config: NoiseConfig) -> NoiseSettings:

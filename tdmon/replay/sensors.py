@@ -95,6 +95,11 @@ def channel_truth(name: str, scenario: Scenario, timeline: Timeline, loads: Load
     per_segment = {"rpm": timeline.rpm, "flow_in": timeline.flow, "wob": timeline.wob}
     if name in per_segment:
         return per_segment[name][index]
+    if name == "spp" and loads.fluid is not None:
+        return loads.fluid.standpipe_pressure(t)
+    if name == "mud_density":  # the mud pumped in: a phase's pill, else the well's mud
+        density = timeline.density[index]
+        return np.where(np.isnan(density), scenario.well.fluid.density, density)
     if name == "spp":
         rig = scenario.rig
         return np.asarray(rig.spp_reference * (timeline.flow[index] / rig.flow_reference) ** 2)

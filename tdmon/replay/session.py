@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from tdmon.config.scenario import CHANNELS, FAULT_KINDS, PHASE_KINDS
 from tdmon.model.torque_drag import WellModel
+from tdmon.replay.fluids import fluid_truth
 from tdmon.replay.loads import Loads, friction_with_anomalies
 from tdmon.replay.sensors import ChannelSeries, InjectedFault, channel_truth, sensor_series
 from tdmon.replay.spec import (
@@ -153,7 +154,7 @@ def simulate_session(scenario: Scenario) -> Session:
     element_length = np.diff(grid.md)
     mu = friction_with_anomalies(element_md, np.asarray(scenario.friction, dtype=np.float64),
                                  scenario.anomalies)
-    loads = Loads(scenario, mu, model_check)
+    loads = Loads(scenario, mu, model_check, fluid_truth(scenario, timeline, model_check))
 
     channels: dict[str, ChannelSeries] = {}
     faults: list[InjectedFault] = []
@@ -164,6 +165,8 @@ def simulate_session(scenario: Scenario) -> Session:
         if name == "mud_temp_in" and scenario.mud_temp_in is None:
             continue
         if name == "mud_temp_out" and scenario.mud_temp_out is None:
+            continue
+        if name == "mud_density" and loads.fluid is None:
             continue
         tau = _sample_times(timeline.duration, interval)
         truth_values = channel_truth(name, scenario, timeline, loads, tau)

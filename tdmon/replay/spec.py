@@ -48,6 +48,8 @@ class Phase:
     flow : pump rate [m^3/s]
     wob : weight on bit while drilling [N]
     slips_time : duration of each connection in slips [s]
+    density : density of the mud pumped in this phase [kg/m^3] (a pill or a slug; None: the
+        well's mud)
     """
 
     kind: str
@@ -58,6 +60,7 @@ class Phase:
     flow: float = 0.0
     wob: float = 0.0
     slips_time: float = 60.0
+    density: float | None = None
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ linearly, and constant rotation, flow and weight on bit.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -53,7 +54,8 @@ class Position(NamedTuple):
 class Timeline:
     """Piecewise-linear rig motion: segment ``i`` runs from ``t0[i]`` to ``t1[i]`` [s] in
     ``state[i]`` with bit, hole and block moving linearly between their ``*0`` and ``*1`` values
-    [m]; rotation [rad/s], flow [m^3/s] and weight on bit [N] are constant in a segment."""
+    [m]; rotation [rad/s], flow [m^3/s], weight on bit [N] and the density of the mud pumped
+    in [kg/m^3] (NaN: the well's mud) are constant in a segment."""
 
     t0: Array
     t1: Array
@@ -67,6 +69,7 @@ class Timeline:
     rpm: Array
     flow: Array
     wob: Array
+    density: Array
 
     @property
     def duration(self) -> float:
@@ -108,7 +111,7 @@ class _Builder:
         self.hole = scenario.hole_depth
         self.block = scenario.block_position
         self.rows: list[tuple[float, float, RigState, float, float, float, float, float, float,
-                              float, float, float]] = []
+                              float, float, float, float]] = []
 
     @property
     def block_high(self) -> float:
@@ -116,14 +119,15 @@ class _Builder:
 
     def add(self, duration: float, state: RigState, *, bit: float | None = None,
             hole: float | None = None, block: float | None = None, rpm: float = 0.0,
-            flow: float = 0.0, wob: float = 0.0) -> None:
+            flow: float = 0.0, wob: float = 0.0, density: float | None = None) -> None:
         bit1 = self.bit if bit is None else bit
         hole1 = self.hole if hole is None else hole
         block1 = self.block if block is None else block
         if duration <= 0.0:
             return
         self.rows.append((self.t, self.t + duration, state, self.bit, bit1, self.hole, hole1,
-                          self.block, block1, rpm, flow, wob))
+                          self.block, block1, rpm, flow, wob,
+                          math.nan if density is None else density))
         self.t += duration
         self.bit, self.hole, self.block = bit1, hole1, block1
 
@@ -148,7 +152,7 @@ class _Builder:
             block = self.block - step if deeper else self.block + step
             self.add(step / phase.speed, state, bit=bit, block=block,
                      hole=bit if drilling else None, rpm=phase.rpm, flow=phase.flow,
-                     wob=phase.wob if drilling else 0.0)
+                     wob=phase.wob if drilling else 0.0, density=phase.density)
 
 
 def build_timeline(scenario: Scenario) -> Timeline:  # noqa: C901  (complex today; simplify when next touched)
@@ -178,7 +182,7 @@ def build_timeline(scenario: Scenario) -> Timeline:  # noqa: C901  (complex toda
         if timed_state is not None:
             rpm = phase.rpm if kind == "rotate" else 0.0
             flow = phase.flow if kind != "slips" else 0.0
-            builder.add(phase.duration, timed_state, rpm=rpm, flow=flow)
+            builder.add(phase.duration, timed_state, rpm=rpm, flow=flow, density=phase.density)
             continue
         if phase.to is None or phase.speed <= 0.0:
             raise ModelError(f"{where}: needs 'to' and a positive speed")
@@ -212,4 +216,4 @@ def build_timeline(scenario: Scenario) -> Timeline:  # noqa: C901  (complex toda
     return Timeline(t0=floats(0), t1=floats(1), state=tuple(RigState(s) for s in columns[2]),
                     bit0=floats(3), bit1=floats(4), hole0=floats(5), hole1=floats(6),
                     block0=floats(7), block1=floats(8), rpm=floats(9), flow=floats(10),
-                    wob=floats(11))
+                    wob=floats(11), density=floats(12))

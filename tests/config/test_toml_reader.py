@@ -98,10 +98,11 @@ def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
 
 def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     scenarios = sorted((REPO / "replays" / "scenarios").glob("*.toml"))
-    assert len(scenarios) == 12
+    assert len(scenarios) == 15
     prefixes = {load_scenario(path).scenario.prefix for path in scenarios}
     assert prefixes == {"sim/trip-out", "sim/trip-in", "sim/faults", "sim/drill",
-                        "sim/model-error", "sim/sheave", "sim/shallow"}
+                        "sim/model-error", "sim/sheave", "sim/shallow", "sim/fluids",
+                        "sim/fluids-pill", "sim/fluids-ream"}
     for path in sorted((REPO / "replays" / "expectations").glob("*.toml")):
         expectations = load_expectations(path)
         assert expectations.replay_path.exists(), path
@@ -112,12 +113,13 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
         assert load_daemon_config(path).prefix in {"rig/F4", "sim/trip-out", "sim/trip-in",
                                                     "sim/faults", "sim/drill",
                                                     "sim/model-error", "sim/sheave",
-                                                    "sim/shallow",
+                                                    "sim/shallow", "sim/fluids",
+                                                    "sim/fluids-pill", "sim/fluids-ream",
                                                     "rig"}, path  # rig: fleet-zenoh.toml's root
 
 
 def test_scenario_words() -> None:
-    assert CHANNELS[:3] == ("hookload", "torque", "bit_depth") and len(CHANNELS) == 11
+    assert CHANNELS[:3] == ("hookload", "torque", "bit_depth") and len(CHANNELS) == 12
     assert "back_ream" in PHASE_KINDS and len(PHASE_KINDS) == 9
 
 

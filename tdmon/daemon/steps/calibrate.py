@@ -22,8 +22,10 @@ from tdmon.calib.measurement import SensorEstimate
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
 from tdmon.calib.profile import FrictionProfile
+from tdmon.calib.rigstate import RigSample
 from tdmon.calib.windows import Window
 from tdmon.daemon.pipeline import Emit, Frame
+from tdmon.daemon.steps.fluids import FluidEffect
 from tdmon.daemon.steps.rig_state import RigStateStep
 from tdmon.model.friction import FrictionModel
 from tdmon.model.torque_drag import WellModel
@@ -34,6 +36,17 @@ __all__ = ["CalibrationStep"]
 def _send(outputs: Iterable[Output], emit: Emit) -> None:
     for topic, message in outputs:
         emit(topic, message)
+
+
+def without_fluid(sample: RigSample, effect: FluidEffect) -> RigSample:
+    """``sample`` with what the fluid terms add to its hook load and torque taken off (the
+    fluid step's `tdmon.daemon.steps.fluids.FluidEffect` for the frame's rig state), so that
+    the windows hold what friction and the string's weight explain."""
+    if effect.hookload == 0.0 and effect.torque == 0.0:
+        return sample
+    hookload = None if sample.hookload is None else sample.hookload - effect.hookload
+    torque = None if sample.torque is None else sample.torque - effect.torque
+    return replace(sample, hookload=hookload, torque=torque)
 
 
 class CalibrationStep:
@@ -83,6 +96,9 @@ class CalibrationStep:
         sample, detection = self.rig_state.last_sample, self.rig_state.last_detection
         if sample is None or detection is None or sample.t != frame.t:
             return
+        fluid = frame.results.get("fluids")
+        if fluid is not None:
+            sample = without_fluid(sample, fluid["effect"])
         block = self.state.samples.block_weight
         self.state, outputs = self.estimator.add_sample(self.state, sample, detection)
         if self.state.samples.block_weight is not block:  # a new in-slips sample

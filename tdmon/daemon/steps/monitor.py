@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from tdmon.calib.measurement import SensorEstimate
 from tdmon.daemon.pipeline import Emit, Frame
+from tdmon.daemon.steps.fluids import FluidEffect
 from tdmon.vocabulary import CURVE_FOR_STATE, ROTATING_STATES, Operation
 
 # The vocabulary's map as a plain dict keyed by state name: a frame carries its state as a
@@ -138,6 +139,20 @@ def as_read(loads: ModelledLoads, estimate: SensorEstimate, model_block_weight: 
                          tuple(read(v, -1) for v in loads.band_slack_off))
 
 
+def with_fluid(loads: ModelledLoads, effect: FluidEffect) -> ModelledLoads:
+    """``loads`` with what the fluid terms change on each curve (the fluid step's
+    `tdmon.daemon.steps.fluids.FluidEffect` of the frame: viscous drag at the trip speed,
+    densities along the string, the force at the bit while circulating); the band's curves
+    take their operation's change."""
+    hookload, torque = effect.curve_hookload, effect.curve_torque
+    up, down = hookload["pick_up"], hookload["slack_off"]
+    return ModelledLoads(loads.bit_depth, loads.pick_up + up, loads.slack_off + down,
+                         loads.rotating + hookload["rotating"],
+                         loads.torque_rotating + torque["rotating"], loads.band_mu,
+                         tuple(v + up for v in loads.band_pick_up),
+                         tuple(v + down for v in loads.band_slack_off))
+
+
 class MonitorStep:
     """Step: emit ``model`` for every frame with a fresh bit depth inside the model's reach.
 
@@ -162,6 +177,9 @@ class MonitorStep:
         if loads is None:
             self.skipped_out_of_range += 1
             return
+        fluid = frame.results.get("fluids")
+        if fluid is not None:
+            loads = with_fluid(loads, fluid["effect"])
         reading = self.sensor() if self.sensor is not None else None
         if reading is not None:
             loads = as_read(loads, *reading)
