@@ -25,7 +25,10 @@ from tdmon.record.report import write_report
 _MEASURE = """
 <script>
 window.addEventListener("load", () => {
-  const visible = (e) => { const r = e.getBoundingClientRect(); return r.width > 0 && r.height > 0; };
+  const visible = (e) => {
+    const r = e.getBoundingClientRect();
+    return r.width > 0 && r.height > 0;
+  };
   const text = (e) => (e ? e.textContent.trim() : "");
   const tables = [...document.querySelectorAll("table")].map((t) => ({
     body_rows: t.querySelectorAll("tbody tr, tr:not(thead tr)").length,
@@ -42,8 +45,9 @@ window.addEventListener("load", () => {
   const figures = [...document.querySelectorAll("h2")].find((h) => text(h).startsWith("Figures"));
   const headings = [];
   for (let e = figures.nextElementSibling; e && e.tagName !== "H2"; e = e.nextElementSibling) {
-    if (e.tagName === "FIGURE") headings.push({title: text(e.querySelector("h3")), shown: "figure"});
-    else if (e.tagName === "H3") {
+    if (e.tagName === "FIGURE") {
+      headings.push({title: text(e.querySelector("h3")), shown: "figure"});
+    } else if (e.tagName === "H3") {
       const next = e.nextElementSibling;
       headings.push({title: text(e), shown: next && next.classList.contains("note") && text(next)
                      ? "note" : "nothing"});
