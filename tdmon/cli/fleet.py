@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from tdmon.cli.arguments import quantity_arg
 from tdmon.errors import TdmonError
+from tdmon.record.rerun_web import DEFAULT_WEB_PORT
 
 if TYPE_CHECKING:
     from tdmon.daemon.fleet_board import FleetBoard
@@ -72,6 +73,12 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                        help=f"port of the live Rerun view (default {DEFAULT_RERUN_PORT})")
     fleet.add_argument("--rerun-file", type=Path, metavar="X.rrd",
                        help="write the Rerun view to this file")
+    fleet.add_argument("--web", action="store_true",
+                       help="serve the live Rerun view for a browser (implies --rerun): "
+                            "Rerun's web viewer on 127.0.0.1:--web-port; open the address "
+                            "it prints")
+    fleet.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
+                       help=f"port of the web viewer (default {DEFAULT_WEB_PORT})")
     fleet.set_defaults(func=_fleet)
 
 
@@ -101,25 +108,48 @@ def _session_config(args: argparse.Namespace) -> Any:
 
 
 def _fleet(args: argparse.Namespace) -> int:
-    import zenoh
-
     from tdmon.daemon.fleet_board import FleetBoard
-    from tdmon.ingest.zenoh_io import open_session
 
+    args.rerun = args.rerun or args.web
     if args.rerun:
-        from tdmon.cli.run import port_in_use
+        from tdmon.cli.run import check_web_port, port_in_use
 
         reason = port_in_use("127.0.0.1", args.rerun_port)
         if reason is not None:
             raise TdmonError(f"--rerun-port {args.rerun_port}: {reason}; choose another port")
+        if args.web:
+            check_web_port(args.web_port)
     config = _session_config(args)
     board = FleetBoard(hold=args.hold, stale=args.stale)
     inbox: queue.SimpleQueue[tuple[str, bytes, float]] = queue.SimpleQueue()
+    views = _views(args)
+    web = None
+    try:
+        if args.web and views is not None and views.grpc_uri:
+            from tdmon.record.rerun_web import WebViewer
+
+            web = WebViewer(views.grpc_uri, args.web_port)
+            print(f"tdmon: fleet: web view: {web.url}", file=sys.stderr, flush=True)
+        _listen(args, config, board, inbox, views)
+    finally:
+        if web is not None:
+            web.close()
+        if views is not None:
+            views.close()
+    return 0
+
+
+def _listen(args: argparse.Namespace, config: Any, board: FleetBoard,
+            inbox: queue.SimpleQueue[tuple[str, bytes, float]],
+            views: FleetViews | None) -> None:
+    """Subscribe on Zenoh and watch until the end (--duration, Ctrl-C or SIGTERM)."""
+    import zenoh
+
+    from tdmon.ingest.zenoh_io import open_session
 
     def on_sample(sample: zenoh.Sample) -> None:  # a zenoh thread: copy and hand over
         inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
 
-    views = _views(args)
     session = open_session(config)
     try:
         try:
@@ -137,10 +167,7 @@ def _fleet(args: argparse.Namespace) -> int:
             signal.signal(signal.SIGTERM, previous)
             subscriber.undeclare()
     finally:
-        if views is not None:
-            views.close()
         session.close()
-    return 0
 
 
 def _interrupt(signum: int, frame: Any) -> None:

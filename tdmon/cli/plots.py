@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -59,21 +59,45 @@ def plot_broomstick(well: Well, result: Broomstick, path: Path, method: str,
     rotating = np.atleast_2d(result.hookload["rotating"])[0]
     hook_axes.plot(units.force(rotating), depth, color="black", label="rotating off bottom")
 
-    if np.isfinite(result.hookload_limit).any():
-        hook_axes.plot(units.force(result.hookload_limit), depth, color="red", linewidth=1.5,
-                       label=f"tensile limit + block (SF {well.limits.safety_factor:g})")
-    if np.isfinite(result.makeup_torque_limit).any():
-        torque_axes.plot(units.torque(result.makeup_torque_limit), depth, color="red",
-                         linewidth=1.5, label="make-up torque")
+    hook_top = _axis_end(hook_axes)
+    torque_top = _axis_end(torque_axes)
+    _limit(hook_axes, units.force(result.hookload_limit), depth, hook_top,
+           f"tensile limit + block (SF {well.limits.safety_factor:g})", units.label("force"))
+    _limit(torque_axes, units.torque(result.makeup_torque_limit), depth, torque_top,
+           "make-up torque", units.label("torque"))
 
     hook_axes.set_xlabel(f"hook load [{units.label('force')}]")
     hook_axes.set_ylabel(f"bit depth [{units.label('depth')} MD]")
     hook_axes.invert_yaxis()
     hook_axes.grid(alpha=0.3)
-    hook_axes.legend(fontsize="small")
     torque_axes.set_xlabel(f"off-bottom rotating torque [{units.label('torque')}]")
     torque_axes.grid(alpha=0.3)
-    torque_axes.legend(fontsize="small")
+    for axes in (hook_axes, torque_axes):  # below the axes, where they cover no curve
+        axes.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09),
+                    ncol=2)
     figure.suptitle(f"{well.name or 'well'}: broomstick ({method}, block weight "
                     f"{units.force(well.block_weight):.0f} {units.label('force')})")
     save(figure, path)
+
+
+def _axis_end(axes: Any) -> float:
+    """The right end of an axis that shows the load curves drawn so far, with a margin."""
+    ends = [np.nanmax(np.asarray(line.get_xdata(), dtype=float)) for line in axes.get_lines()
+            if np.isfinite(np.asarray(line.get_xdata(), dtype=float)).any()]
+    return 1.1 * max(ends) if ends else 1.0
+
+
+def _limit(axes: Any, limit: Any, depth: Any, end: float, label: str, unit: str) -> None:
+    """A limit line over the load curves, the axis kept to the loads (a limit far beyond
+    them, e.g. the BHA's tensile limit at shallow bit depth, would squeeze the curves into a
+    fraction of the plot); the part beyond the axis is named in the legend."""
+    limit = np.asarray(limit, dtype=float)
+    if not np.isfinite(limit).any():
+        return
+    lowest = float(np.nanmin(limit))
+    if lowest > end:
+        axes.plot([], [], color="red", linewidth=1.5,
+                  label=f"{label}: {lowest:.0f} {unit} or more, beyond the axis")
+    else:
+        axes.plot(limit, depth, color="red", linewidth=1.5, label=label)
+    axes.set_xlim(right=end)

@@ -21,6 +21,7 @@ from tdmon.cli.arguments import (
     toward_zenoh_source,
 )
 from tdmon.errors import TdmonError
+from tdmon.record.rerun_web import DEFAULT_WEB_PORT
 
 if TYPE_CHECKING:
     from tdmon.config.daemon import DaemonConfig
@@ -46,6 +47,13 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                           "in place on a terminal, plain lines otherwise")
     add_units_option(run, "the Rerun views (default: $TDMON_UNITS, else the file's [display] "
                      "units)")
+    run.add_argument("--web", action="store_true",
+                     help="serve the live Rerun view for a browser: the recording on "
+                          "127.0.0.1:[rerun] port (as mode = 'live'; a file, if set, is "
+                          "written too) and Rerun's web viewer on 127.0.0.1:--web-port; "
+                          "open the address it prints")
+    run.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
+                     help=f"port of the web viewer (default {DEFAULT_WEB_PORT})")
     run.set_defaults(func=_run)
 
     pub = subparsers.add_parser(
@@ -135,6 +143,9 @@ def _run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     config = load_daemon_config(args.config)
+    if args.web:
+        config = served_live(config, args.config)
+        check_web_port(args.web_port)
     startup_checks(config, args.config)
     status = StatusLine(args.status_every) if args.status_every > 0 else None
 
@@ -156,13 +167,38 @@ def _run(args: argparse.Namespace) -> int:
         return stats
 
     # the Rerun views are built inside the daemon: they read the units from tdmon.display
-    with using(display_units(args, config.display.units)):
+    with using(display_units(args, config.display.units)), contextlib.ExitStack() as stack:
+        if args.web:
+            from tdmon.record.rerun_web import WebViewer
+
+            viewer = stack.enter_context(WebViewer(
+                f"rerun+http://127.0.0.1:{config.rerun.port}/proxy", args.web_port))
+            print(f"tdmon: web view: {viewer.url}", file=sys.stderr, flush=True)
         stats = asyncio.run(main())
     jumps = f", {stats.clock_jumps} clock jumps" if stats.clock_jumps else ""  # logged sparingly
     print(f"tdmon: stopped: {stats.samples_in} samples, {stats.rejected} rejected, "
           f"{stats.dropped} dropped, {stats.duplicates} duplicates, {stats.out_of_order} "
           f"out of order, {stats.frames} frames{jumps}", file=sys.stderr)
     return 0
+
+
+def served_live(config: DaemonConfig, file: Path) -> DaemonConfig:
+    """``config`` with its Rerun views served live (``--web``): mode 'live' on its port, its
+    .rrd file, if any, still written."""
+    from tdmon.errors import ConfigError
+
+    if config.is_fleet:
+        raise ConfigError(str(file), "rerun.mode", "a daemon of many rigs has no Rerun views; "
+                          "watch the fleet in a browser with 'tdmon fleet --web'")
+    return config.model_copy(update={"rerun": config.rerun.model_copy(update={"mode": "live"})})
+
+
+def check_web_port(port: int) -> None:
+    """The web viewer's port is free on 127.0.0.1 (else one line, exit 2)."""
+    reason = port_in_use("127.0.0.1", port)
+    if reason is not None:
+        raise TdmonError(f"--web-port {port}: cannot serve the web viewer on 127.0.0.1:{port}: "
+                         f"{reason}; choose another port")
 
 
 def interruptible() -> None:

@@ -9,6 +9,11 @@ An alarm is an event, not a condition with an end: the board counts an alarm as 
 while it is the rig's latest of its kind, of severity warning or critical, and raised less than
 ``hold`` seconds (rig time: replays show the same as live runs) before the rig's newest result.
 ``recorder_resumed`` closes ``recorder_failed``.
+
+The friction shown is the newest window estimate's; before the first one, a profile estimate's
+only when the windows informed some of its bins (one whose every bin holds the well file's
+prior is no result). A lag over :data:`OLD_DATA_LAG_S` is not a delay but data from another
+day (a replay put live): the table gives the data's date instead.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import Any
 
 from tdmon.vocabulary import AlarmKind, Severity
@@ -27,6 +33,10 @@ NAMES = frozenset({"state", "estimate", "alarm", "status"})
 CLOSES = {AlarmKind.RECORDER_RESUMED.value: AlarmKind.RECORDER_FAILED.value}
 
 _OPEN_SEVERITIES = frozenset({Severity.WARNING.value, Severity.CRITICAL.value})
+
+#: A rig's lag above this [s] means its data are from another day (a replay put live, a
+#: rig clock far off), not a slow feed: the LAG cell shows the data's date.
+OLD_DATA_LAG_S = 86_400.0
 
 
 def split_key(key: str) -> tuple[str, str] | None:
@@ -51,6 +61,7 @@ class RigView:
     mu_std: float | None = None
     operation: str | None = None
     friction_t: float | None = None
+    informed: tuple[int, int] | None = None  # a profile's (informed bins, bins)
     lag_s: float | None = None
     samples_in: int | None = None
     dropped: int | None = None
@@ -113,18 +124,26 @@ class FleetBoard:
     @staticmethod
     def _estimate(rig: RigView, message: dict[str, Any], t: float | None) -> None:
         """The newest window estimate is the rig's friction; a profile or mu(T) estimate only
-        until a window estimate comes (they describe the whole hole, not the last stand)."""
+        until a window estimate comes (they describe the whole hole, not the last stand), and
+        a profile only when the windows informed some of its bins."""
         mu = _number(message.get("mu"))
         if mu is None:
             return
-        if message.get("kind") != "window" and rig.operation is not None:
+        window = message.get("kind") == "window"
+        if not window and rig.operation is not None:
             return
         if rig.friction_t is not None and t is not None and t < rig.friction_t:
             return
+        flags = message.get("informed")
+        informed = None
+        if message.get("kind") == "profile" and isinstance(flags, list) and flags:
+            informed = (sum(bool(flag) for flag in flags), len(flags))
+            if informed[0] == 0:
+                return  # every bin is the prior: nothing learned yet
         rig.mu = mu
         rig.mu_std = _number(message.get("mu_std"))
-        rig.operation = (str(message.get("operation")) if message.get("kind") == "window"
-                         else None)
+        rig.operation = str(message.get("operation")) if window else None
+        rig.informed = informed
         rig.friction_t = t
 
     def rows(self) -> list[RigView]:
@@ -154,13 +173,26 @@ def row_cells(board: FleetBoard, rig: RigView, now: float) -> tuple[str, ...]:
             friction += f" ± {rig.mu_std:.3f}"
         if rig.operation:
             friction += f" {rig.operation}"
+        elif rig.informed is not None:
+            friction += f" profile, {rig.informed[0]}/{rig.informed[1]} bins informed"
     alarms = rig.open_alarms(board.hold)
     alarm_cell = "-" if not alarms else f"{len(alarms)}: " + ", ".join(
         f"{a.get('kind')}{'!' if a.get('severity') == Severity.CRITICAL.value else ''}"
         for a in alarms)
-    lag = "-" if rig.lag_s is None else duration_text(rig.lag_s)
+    lag = lag_text(rig)
     seen = duration_text(max(0.0, now - rig.received), decimals=0) + " ago"
     return (rig.prefix, state, depth, friction, alarm_cell, lag, seen)
+
+
+def lag_text(rig: RigView) -> str:
+    """The LAG cell: how old the rig's newest sample is, or the data's date (UTC) when that
+    is over :data:`OLD_DATA_LAG_S` (not a delay: data of another day)."""
+    if rig.lag_s is None:
+        return "-"
+    if rig.lag_s <= OLD_DATA_LAG_S or rig.rig_t is None:
+        return duration_text(rig.lag_s)
+    day = datetime.fromtimestamp(rig.rig_t, UTC).strftime("%Y-%m-%d")
+    return f"data of {day}"
 
 
 def duration_text(seconds: float, decimals: int = 1) -> str:

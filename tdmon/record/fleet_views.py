@@ -4,7 +4,9 @@ event log per rig, on the wall-clock timeline of the operations centre.
 Entities: ``fleet/<rig>/friction`` (the latest friction factor, with ``.../friction_high`` and
 ``.../friction_low`` at one standard deviation), ``fleet/<rig>/open_alarms`` (their number),
 ``fleet/<rig>/events`` (state changes and alarms as text). ``<rig>`` is the rig's prefix.
-Served live on 127.0.0.1 (a viewer connects with ``rerun --connect``) and/or written to an .rrd.
+Served live on 127.0.0.1 (a viewer connects with ``rerun --connect``, a browser through
+``tdmon fleet --web``) and/or written to an .rrd, with a blueprint on the ``time`` timeline:
+the rigs' friction and open alarms, and their events.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ class FleetViews:
                 server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=live_port)
                 self.grpc_uri = server.uri
                 sinks.append(server)
-            self._rec.set_sinks(*sinks)
+            self._rec.set_sinks(*sinks, default_blueprint=blueprint())
         except OSError as exc:
             raise RecordError(f"cannot write {rrd_path}: {exc.strerror or exc}") from exc
         except Exception as exc:  # the bindings raise plain RuntimeError/ValueError
@@ -76,3 +78,21 @@ class FleetViews:
             self._closed = True
             self._rec.flush()
             self._rec.disconnect()
+
+
+def blueprint() -> Any:
+    """The fleet's layout on the ``time`` timeline: every rig's friction (with its band) and
+    open alarms as series, and every rig's events as one log (rigs come and go: the views
+    take whatever lies under ``/fleet``)."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.TimeSeriesView(origin="/fleet", name="Friction factor (± 1 sd) and open "
+                                                    "alarms per rig"),
+            rrb.TextLogView(origin="/fleet", name="Events: state changes and alarms"),
+            row_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=False,
+    )

@@ -22,6 +22,7 @@ import html
 import json
 import math
 import os
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -87,9 +88,30 @@ def _num(value: Any) -> float:
 
 
 def _legend(axes: Any, **options: Any) -> None:
-    # a panel without labelled lines gets no legend (matplotlib warns)
+    """The legend beside the axes, where it covers no data; none for a panel without
+    labelled lines (matplotlib warns)."""
     if axes.get_legend_handles_labels()[0]:
-        axes.legend(**options)
+        axes.legend(**{"loc": "upper left", "bbox_to_anchor": (1.02, 1.0),
+                       "borderaxespad": 0.0, **options})
+
+
+def _leading_zeros_dropped(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` (in time order) from the first with a positive bit depth on: the rows before
+    it read 0 m because no bit depth had come in yet, and would stretch a depth range."""
+    ordered = sorted(rows, key=lambda r: _num(r.get("t")))
+    for index, row in enumerate(ordered):
+        if _num(row.get("bit_depth_m")) > 0.0:
+            return ordered[index:]
+    return ordered
+
+
+def bit_depth_span(data: ReportData) -> tuple[float, float] | None:
+    """The bit depths [m MD] the recording covers (rig states and model frames), without the
+    0 m rows before the first bit depth came in; None without any."""
+    depths = np.array([_num(r.get("bit_depth_m")) for rows in (data.states, data.models)
+                       for r in _leading_zeros_dropped(rows)])
+    depths = depths[np.isfinite(depths)]
+    return (float(depths.min()), float(depths.max())) if depths.size else None
 
 
 def write_estimates_csv(estimates: Sequence[dict[str, Any]], path: Path) -> int:
@@ -126,7 +148,7 @@ def _save(figure: Any, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     figure.tight_layout()
-    figure.savefig(path)
+    figure.savefig(path, bbox_inches="tight")  # the legend beside the axes included
     plt.close(figure)
     return path
 
@@ -160,7 +182,8 @@ def _shoe(data: ReportData) -> float | None:
 def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
     """Measured hook load against bit depth over the broomstick band."""
     title = "Hook load against bit depth"
-    models = [m for m in data.models if math.isfinite(_num(m.get("bit_depth_m")))]
+    models = [m for m in _leading_zeros_dropped(data.models)
+              if math.isfinite(_num(m.get("bit_depth_m")))]
     if not models:
         return Figure(title, None, "No hook-load figure: the recording holds no modelled loads "
                       "(no /tdmon/model messages: no well file, or no bit depth received).")
@@ -187,7 +210,7 @@ def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Fi
             state, "k"), label=f"measured, {state}", zorder=3)
     _depth_axis(axes, "Hook load against bit depth", f"Hook load [{units.label('force')}]",
                 f"Bit depth [{units.label('depth')} MD]")
-    _legend(axes, fontsize=7, loc="best")
+    _legend(axes, fontsize=7)
     caption = (
         f"Measured hook load [{units.label('force')}] against bit depth "
         f"[{units.label('depth')} MD], one dot per model frame coloured by rig state, over the "
@@ -200,7 +223,8 @@ def hookload_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Fi
 def torque_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
     """Measured surface torque against depth while rotating, with the modelled torque."""
     title = "Surface torque against bit depth"
-    models = [m for m in data.models if math.isfinite(_num(m["measured"].get("torque_Nm")))
+    models = [m for m in _leading_zeros_dropped(data.models)
+              if math.isfinite(_num(m["measured"].get("torque_Nm")))
               and math.isfinite(_num(m.get("bit_depth_m")))]
     states = _state_at(data.states, np.array([_num(m["t"]) for m in models]))
     # non-rotating samples read zero torque: drawn at 0 they would squash the curve, so only
@@ -260,52 +284,84 @@ def _informed(profile: dict[str, Any], n: int) -> tuple[np.ndarray, str | None]:
         profile["md_m"], flags, profile.get("uninformed_reason"))
 
 
+def _shown_depths(windows: Sequence[dict[str, Any]], md: np.ndarray | None,
+                  informed: np.ndarray | None) -> tuple[float, float] | None:
+    """The depth range [m MD] a friction figure shows: the windows' bit depths and the
+    profile's informed points, with a margin; None when neither exists."""
+    depths = [_num(e["bit_depth_m"]) for e in windows]
+    if md is not None and informed is not None:
+        depths += md[informed].tolist()
+    finite = [d for d in depths if math.isfinite(d)]
+    if not finite:
+        return None
+    low, high = min(finite), max(finite)
+    margin = max(50.0, 0.1 * (high - low))
+    return max(0.0, low - margin), high + margin
+
+
 def friction_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
-    """Window estimates of mu against bit depth, and the latest local friction profile."""
+    """Window estimates of mu against bit depth and the latest local friction profile, over
+    the depths the data cover (not the whole well); the legend lists only what is drawn."""
     title = "Friction factor against depth"
     windows = [e for e in data.estimates if e.get("kind") == EstimateKind.WINDOW
                and math.isfinite(_num(e.get("bit_depth_m")))]
     profile = _latest_profile(data)
-    if not windows and profile is None:
-        return Figure(title, None, "No friction figure: no window estimate and no friction "
-                      "profile in the recording (back-calculation off or no steady window).")
-    figure, axes = _figure(6.0, 6.0)
-    notes = []
+    md_m = mu = informed = None
+    reason = None
     if profile is not None:
-        md = units.depth(np.array(profile["md_m"], dtype=float))
+        md_m = np.array(profile["md_m"], dtype=float)
         mu = np.array([_num(v) for v in profile["mu"]])
-        informed, reason = _informed(profile, md.size)
+        informed, reason = _informed(profile, md_m.size)
+    span = _shown_depths(windows, md_m, informed)
+    if span is None:
+        why = ("no window estimate, and no point of the friction profile informed by data "
+               f"({reason})" if profile is not None and reason else
+               "no window estimate and no friction profile in the recording (back-calculation "
+               "off or no steady window)")
+        return Figure(title, None, f"No friction figure: {why}.")
+    figure, axes = _figure(7.5, 6.0)
+    notes = []
+    if profile is not None and md_m is not None and mu is not None and informed is not None:
+        inside = (md_m >= span[0]) & (md_m <= span[1])
+        md = units.depth(md_m)
         calibrated = bool(profile.get("mu_std"))
-        label = "local friction profile" if calibrated else "well file's friction"
-        shown = np.where(informed, mu, np.nan)
-        axes.plot(shown, md, color="k", lw=1.2, label=label)
-        if not informed.all():
-            axes.plot(np.where(~informed, mu, np.nan), md, color="0.65", lw=1.0, ls=":",
+        shown = np.where(informed & inside, mu, np.nan)
+        if np.isfinite(shown).any():
+            axes.plot(shown, md, color="k", lw=1.2, label="local friction profile"
+                      if calibrated else "well file's friction")
+            if calibrated:
+                std = np.array([_num(v) for v in profile["mu_std"]])
+                axes.fill_betweenx(md, shown - std, shown + std, color="k", alpha=0.15,
+                                   label="profile ± 1 sd")
+        prior = np.where(~informed & inside, mu, np.nan)
+        if np.isfinite(prior).any():
+            axes.plot(prior, md, color="0.65", lw=1.0, ls=":",
                       label="not informed by data (prior)")
+        if not informed.all():
             notes.append("Profile points the data did not inform are drawn grey (dotted): "
                          + (reason or f"{int((~informed).sum())} of {informed.size}"))
-        if calibrated:
-            std = np.array([_num(v) for v in profile["mu_std"]])
-            axes.fill_betweenx(md, shown - std, shown + std, color="k", alpha=0.15,
-                               label="± 1 sd")
     for i, operation in enumerate(sorted({str(e["operation"]) for e in windows})):
         chosen = [e for e in windows if e["operation"] == operation]
         axes.errorbar([_num(e["mu"]) for e in chosen],
                       units.depth(np.array([_num(e["bit_depth_m"]) for e in chosen])),
                       xerr=[_num(e.get("mu_std")) for e in chosen], fmt="o", ms=4,
-                      color=f"C{i}", capsize=2, label=f"window, {operation}")
+                      color=f"C{i}", capsize=2, label=f"window, {operation.replace('_', ' ')}")
     shoe = _shoe(data)
-    if shoe is not None:
+    shoe_shown = shoe is not None and span[0] <= shoe <= span[1]
+    if shoe is not None and shoe_shown:
         axes.axhline(float(units.depth(np.array([shoe]))[0]), color="0.4", lw=0.8, ls="--",
                      label="casing shoe")
+    low, high = (float(units.depth(np.array([d]))[0]) for d in span)
+    axes.set_ylim(low, high)
     _depth_axis(axes, title, "Friction factor mu [-]",
                 f"Depth [{units.label('depth')} MD] (bit depth for windows)")
     _legend(axes, fontsize=8)
     caption = (
-        f"Friction factor mu [-] against measured depth [{units.label('depth')} MD]: dots are "
+        f"Friction factor mu [-] against measured depth [{units.label('depth')} MD], "
+        f"{low:.0f} to {high:.0f} {units.label('depth')} (the depths the data cover): dots are "
         "window estimates at the bit depth of their window (bars ± 1 sd), by operation; the "
         "line is the latest local friction profile along the string (band ± 1 sd)"
-        + ("; dashed: the casing shoe" if shoe is not None else "") + "."
+        + ("; dashed: the casing shoe" if shoe_shown else "") + "."
         + "".join(f" {note[0].upper()}{note[1:]}." for note in notes))
     return Figure(title, _save(figure, path), caption)
 
@@ -370,7 +426,10 @@ def state_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figur
     lanes.set_yticks(range(len(names)), names, fontsize=7)
     lanes.set_title(f"Rig state from {_utc(t0)} UTC")
     lanes.grid(True, axis="x", alpha=0.3)
-    depth = units.depth(np.array([_num(s.get("bit_depth_m")) for s in states]))
+    # no line before the first bit depth came in (those states read 0 m)
+    known = {id(s) for s in _leading_zeros_dropped(states)}
+    depth = units.depth(np.array([_num(s.get("bit_depth_m")) if id(s) in known else math.nan
+                                  for s in states]))
     depth_axes.plot(times / 3600, depth, color="k", lw=1.0)
     depth_axes.invert_yaxis()
     depth_axes.set_ylabel(f"Bit depth [{units.label('depth')}]")
@@ -395,12 +454,18 @@ def _figure_pair() -> tuple[Any, tuple[Any, Any]]:
 # -- page -----------------------------------------------------------------------------------
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+def _table(header: Sequence[str] | None, rows: Sequence[Sequence[Any]],
+           empty: str = "none") -> str:
+    """An HTML table (``header`` None: a key-value table, no header row); a paragraph saying
+    ``empty`` instead of a table without rows."""
+    if not rows:
+        return f"<p class='note'>{html.escape(empty)}</p>"
+    head = "" if header is None else "<thead><tr>" + "".join(
+        f"<th>{html.escape(str(h))}</th>" for h in header) + "</tr></thead>"
     body = "".join(
         "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in rows
     )
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    return f"<table>{head}<tbody>{body}</tbody></table>"
 
 
 def _loads_rows(data: ReportData, units: UnitSystem) -> list[tuple[str, ...]]:
@@ -490,9 +555,9 @@ def _e(value: Any) -> str:
     return html.escape(str(value))
 
 
-def _run_section(paths: Sequence[str | os.PathLike[str]], facts: dict[str, Any],
-                 units: UnitSystem) -> list[str]:
-    well, span, depth = facts["well"], facts["time_range"], facts["depth_range_m"]
+def _run_section(paths: Sequence[str | os.PathLike[str]], data: ReportData,
+                 facts: dict[str, Any], units: UnitSystem) -> list[str]:
+    well, span, depth = facts["well"], facts["time_range"], bit_depth_span(data)
     rows = [("Well", well["name"] or "not recorded (no well file in the daemon file)")]
     if well["well_file"]:
         rows.append(("Well file", well["well_file"]))
@@ -501,8 +566,8 @@ def _run_section(paths: Sequence[str | os.PathLike[str]], facts: dict[str, Any],
     if span["first_t"] is not None:
         rows.append(("Rig time", f"{span['first_utc']} to {span['last_utc']} UTC "
                                  f"({span['duration_s'] / 60:.1f} min)"))
-    if depth["min"] is not None:
-        low, high = (float(units.depth(np.array([depth[k]]))[0]) for k in ("min", "max"))
+    if depth is not None:
+        low, high = (float(units.depth(np.array([d]))[0]) for d in depth)
         rows.append(("Bit depth", f"{low:.1f} to {high:.1f} {units.label('depth')} MD"))
     if well["backcalc_method"]:
         rows.append(("Friction back-calculation",
@@ -519,7 +584,7 @@ def _run_section(paths: Sequence[str | os.PathLike[str]], facts: dict[str, Any],
                      f"{section.get('name') or section['kind']}: {top:.0f} to {bottom:.0f} "
                      f"{units.label('depth')} MD"
                      + (f", friction {section['friction']}" if section.get("friction") else "")))
-    return ["<h2>Well and run</h2>", _table(("", ""), rows)]
+    return ["<h2>Well and run</h2>", _table(None, rows)]
 
 
 def _operations_section(facts: dict[str, Any]) -> list[str]:
@@ -590,36 +655,149 @@ def _page(
         "<style>body{font-family:sans-serif;max-width:1000px;margin:auto;padding:1em}"
         "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;"
         "padding:2px 8px;text-align:left}img{max-width:100%}figcaption{font-size:90%;"
-        "color:#333;margin-bottom:1.5em}.note{color:#555;font-style:italic}</style>"
-        "</head><body>",
+        "color:#333;margin-bottom:1.5em}.note{color:#555;font-style:italic}"
+        ".headline{font-size:110%;background:#f4f6fa;border-left:4px solid #369;"
+        "padding:0.5em 1em}</style></head><body>",
         f"<h1>tdmon post-well report: {heading}</h1>",
-        *_run_section(paths, facts, units),
+        *_headline_section(facts),
+        *_run_section(paths, data, facts, units),
         *_operations_section(facts),
         *_friction_section(facts),
         "<h2>mu(T) verdict</h2>", f"<p>{_e(facts['mu_t']['words'])}</p>",
         *_alarm_section(data, facts),
-        f"<h2>Figures (units: {units.name})</h2>",
+        *_figures_section(figures, units),
+        *_loads_section(data, units),
+        *_contents_section(data, windows),
+        "</body></html>",
     ]
-    for number, figure in enumerate(figures, start=1):
+    return "\n".join(parts)
+
+
+def _figures_section(figures: Sequence[Figure], units: UnitSystem) -> list[str]:
+    """The drawn figures, numbered in order; a figure without data is a note saying why,
+    unnumbered, so that the numbers do not skip."""
+    parts = [f"<h2>Figures (units: {units.name})</h2>"]
+    number = 0
+    for figure in figures:
         if figure.path is None:
             parts.append(f"<h3>{_e(figure.title)}</h3><p class='note'>{_e(figure.text)}</p>")
             continue
+        number += 1
         encoded = base64.b64encode(figure.path.read_bytes()).decode()
         parts.append(f"<figure><h3>{_e(figure.title)}</h3><img alt='{_e(figure.title)}' "
                      f"src='data:image/png;base64,{encoded}'><figcaption>Figure {number}. "
                      f"{_e(figure.text)}</figcaption></figure>")
-    parts += [
+    return parts
+
+
+def _loads_section(data: ReportData, units: UnitSystem) -> list[str]:
+    return [
         f"<h2>Loads per rig state (units: {units.name})</h2>",
         _table(("rig state", "model frames", f"bit depth [{units.label('depth')}]",
                 f"measured hook load [{units.label('force')}]",
                 f"hook load residual [{units.label('force')}]",
                 f"measured torque [{units.label('torque')}]",
-                f"torque residual [{units.label('torque')}]"), _loads_rows(data, units)),
+                f"torque residual [{units.label('torque')}]"), _loads_rows(data, units),
+               empty="No model frames in the recording (no well file, or no bit depth "
+                     "received): no loads to compare."),
+    ]
+
+
+def _contents_section(data: ReportData, windows: int) -> list[str]:
+    return [
         "<h2>Recording contents</h2>",
         f"<p>Window estimates in <a href='estimates.csv'>estimates.csv</a> ({windows} rows); "
         "these numbers as JSON in <a href='summary.json'>summary.json</a>. Generated "
         f"{_utc(datetime.now(UTC).timestamp())} UTC.</p>",
-        _table(("topic", "messages"), sorted(data.counts.items())),
-        "</body></html>",
+        _table(("topic", "messages"), sorted(data.counts.items()),
+               empty="The recording holds no messages."),
     ]
-    return "\n".join(parts)
+
+
+_PLANNED: Final = re.compile(r"^mu = ([0-9]*\.?[0-9]+)$")
+
+
+def _planned_number(section: dict[str, Any]) -> float | None:
+    """A hole section's planned friction factor when the well file gives one number."""
+    match = _PLANNED.match(str(section.get("friction") or ""))
+    return float(match.group(1)) if match else None
+
+
+def _passed(sections: Sequence[dict[str, Any]], kind: str,
+            deepest_bit_m: float | None) -> list[dict[str, Any]]:
+    """The well file's sections of ``kind`` (``all``: every kind) the string lay in: those
+    whose top is above the deepest bit depth of the windows."""
+    return [s for s in sections
+            if (kind == "all" or s.get("kind") == kind)
+            and (deepest_bit_m is None or _num(s.get("top_m")) < deepest_bit_m)]
+
+
+def _against_plan(mu: float, planned: Sequence[dict[str, Any]]) -> str:
+    """``against the planned 0.25 (56 % below)``, or the plan's words when it is not one
+    number, or that the well file plans none."""
+    texts = sorted({str(s["friction"]) for s in planned if s.get("friction")})
+    if not texts:
+        return "the well file plans no friction there"
+    numbers = {_planned_number(s) for s in planned if s.get("friction")}
+    if len(numbers) == 1 and None not in numbers:
+        plan = next(iter(numbers))
+        assert plan is not None
+        if plan <= 0.0:
+            return f"against the planned {plan:g}"
+        change = 100.0 * (mu - plan) / plan
+        side = "above" if change > 0 else "below"
+        return (f"against the planned {plan:g} ({abs(change):.0f} % {side})"
+                if round(abs(change)) else f"as planned ({plan:g})")
+    return "against the planned " + "; ".join(
+        f"{s.get('name') or s['kind']}: {s['friction']}" for s in planned if s.get("friction"))
+
+
+def headline(facts: dict[str, Any]) -> list[str]:
+    """Sentences of what was found against what was planned, per operation and hole section:
+    each friction row's median and windows against the planned friction of the sections the
+    string lay in, the sections no window reached, the weight caveat and the alarms."""
+    sections = facts["well"]["sections"]
+    rows = [r for r in facts["friction"] if r["windows"] > 0]
+    sentences = []
+    for row in rows:
+        operation = row["operation"].replace("_", "-")
+        deepest = row["bit_depth_max_m"]
+        planned = _passed(sections, row["section"], deepest)
+        where = ("the whole string" if row["section"] == "all" else row["section_words"])
+        bit_in = [s for s in planned if deepest is not None
+                  and _num(s.get("top_m")) <= deepest < _num(s.get("bottom_m"))]
+        if bit_in:
+            where += f" (bit in the {bit_in[0].get('name') or bit_in[0]['kind']})"
+        low, high = row["bit_depth_min_m"], row["bit_depth_max_m"]
+        depths = ("" if low is None else f", bit at {low:.0f} m MD" if round(low) == round(high)
+                  else f", bit at {low:.0f}-{high:.0f} m MD")
+        sentences.append(
+            f"{operation.capitalize()} friction {row['mu_median']:.3f} in {where}, "
+            f"{row['windows']} window{'s' if row['windows'] != 1 else ''}{depths}, "
+            f"{_against_plan(row['mu_median'], planned)}.")
+    if not rows:
+        sentences.append("No friction factor was back-calculated: the planned friction is "
+                         "not checked by this recording.")
+    deepest_bit = max((r["bit_depth_max_m"] for r in rows
+                       if r["bit_depth_max_m"] is not None), default=None)
+    unreached = [s for s in sections if rows and deepest_bit is not None
+                 and _num(s.get("top_m")) >= deepest_bit]
+    if unreached:
+        names = ", ".join(f"{s.get('name') or s['kind']}"
+                          + (f" (planned {s['friction']})" if s.get("friction") else "")
+                          for s in unreached)
+        sentences.append(f"No window reached {names}: its friction is not measured.")
+    if rows and facts["joint"]["status"] == "not_identifiable":
+        sentences.append("These friction factors assume the modelled string weight: weight "
+                         "and friction could not be separated in this recording.")
+    alarms = facts["alarm_summary"]
+    critical = sum(a["count"] for a in alarms if a["severity"] == "critical")
+    total = sum(a["count"] for a in alarms)
+    sentences.append("No alarm." if not total else f"{total} alarm{'s' if total != 1 else ''}"
+                     + (f", {critical} critical" if critical else "") + ".")
+    return sentences
+
+
+def _headline_section(facts: dict[str, Any]) -> list[str]:
+    return ["<p class='headline' id='headline'>" + " ".join(_e(s) for s in headline(facts))
+            + "</p>"]

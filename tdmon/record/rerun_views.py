@@ -552,7 +552,12 @@ def blueprint(units: UnitSystem | None = None) -> Any:
               for p in JOINT_PARAMETERS.others),
             rrb.TimeSeriesView(origin="/residual", name=f"Residuals [{force}, {torque}]"),
         ),
-        rrb.StateTimelineView(origin="/rig_state", name="Rig state"),
+        rrb.Horizontal(
+            rrb.StateTimelineView(origin="/rig_state", name="Rig state"),
+            rrb.TimeSeriesView(origin=f"/{names.bit_depth}", name=f"Bit depth [{depth}]"),
+            rrb.TimeSeriesView(origin="/friction_mu_T",
+                               name="mu(T) law's coefficients (live calibration)"),
+        ),
         rrb.TextLogView(origin="/alarms", name="Alarms"),
         name="Against time",
         row_shares=[3, 2, 1, 1],

@@ -12,9 +12,12 @@ time and the well's name. :func:`summary_tables` turns the outcomes into DataFra
                 the estimator's own mu_std; per recording (``level = "recording"``) and pooled
                 over every recording of a well (``level = "well"``)
 ``sections``    per hole section of the well file: the mean of the last friction profile over
-                the section's bins and the mean of their standard deviations (the bins of one
-                profile are correlated, so this is the cautious figure, not std / sqrt(bins));
-                pooled per well by inverse-variance weighting over recordings
+                the section's bins the windows informed and the mean of their standard
+                deviations (the bins of one profile are correlated, so this is the cautious
+                figure, not std / sqrt(bins)); ``informed`` counts those bins. A section no
+                window informed keeps its row with ``mu`` NaN and ``reason`` saying why: its
+                bins hold the well file's prior, not a result. Pooled per well by
+                inverse-variance weighting over the recordings that informed the section
 ``states``      rig-state time [s] and share per recording and per well
 ``alarms``      alarm count per kind and severity, per recording and per well
 
@@ -130,23 +133,42 @@ def _finite(value: Any) -> bool:
 def section_rows(profile: dict[str, Any] | None,
                  sections: Sequence[HoleSectionSpan]) -> list[dict[str, Any]]:
     """Friction per hole section from a profile estimate (``md_m``, ``mu_profile``,
-    ``mu_profile_std``): the mean over the bins whose centre lies in the section and the mean
-    of their standard deviations; a section without finite bins is left out."""
+    ``mu_profile_std``, ``informed``, ``uninformed_reason``).
+
+    Per section: ``bins`` (finite bins whose centre lies in it), ``informed`` (those the
+    windows informed), the mean friction and the mean standard deviation over the informed
+    bins, and for a section with none the commonest ``reason`` its bins give; its ``mu`` and
+    ``mu_std`` are then NaN: the bins hold the prior, which is no result. A profile without
+    ``informed`` (older recordings) counts every bin as informed. A section without finite
+    bins is left out.
+    """
     if not profile:
         return []
     md = profile.get("md_m") or []
     mu = profile.get("mu_profile") or []
     std = profile.get("mu_profile_std") or []
+    flags = profile.get("informed")
+    if not isinstance(flags, list) or len(flags) != len(md):
+        flags = [True] * len(md)
+    reasons = profile.get("uninformed_reason")
+    if not isinstance(reasons, list) or len(reasons) != len(md):
+        reasons = [None] * len(md)
     rows = []
     for section in sections:
-        inside = [(m, s) for depth, m, s in zip(md, mu, std, strict=False)
+        inside = [(m, s, bool(known), why)
+                  for depth, m, s, known, why in zip(md, mu, std, flags, reasons, strict=False)
                   if section.top <= depth < section.bottom and _finite(m) and _finite(s)]
         if not inside:
             continue
+        informed = [(m, s) for m, s, known, _ in inside if known]
+        why = Counter(str(w or "not informed") for _, _, known, w in inside if not known)
         rows.append({"section": section.name, "kind": section.kind, "top_m": section.top,
                      "bottom_m": section.bottom, "bins": len(inside),
-                     "mu": statistics.fmean(m for m, _ in inside),
-                     "mu_std": statistics.fmean(s for _, s in inside)})
+                     "informed": len(informed),
+                     "mu": statistics.fmean(m for m, _ in informed) if informed else math.nan,
+                     "mu_std": (statistics.fmean(s for _, s in informed) if informed
+                                else math.nan),
+                     "reason": "" if informed else why.most_common(1)[0][0]})
     return rows
 
 
@@ -166,14 +188,22 @@ def _friction(windows: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
 
 
 def _pooled_sections(sections: pd.DataFrame) -> pd.DataFrame:
-    """Inverse-variance mean of each hole section's friction over a well's recordings."""
-    weight = 1.0 / sections["mu_std"].clip(lower=1e-9) ** 2
-    frame = sections.assign(_w=weight, _wm=weight * sections["mu"])
+    """Inverse-variance mean of each hole section's friction over the well's recordings that
+    informed it; a section none informed keeps NaN and its recordings' reasons."""
+    import numpy as np
+
+    known = sections["informed"] > 0
+    weight = (1.0 / sections["mu_std"].clip(lower=1e-9) ** 2).where(known, 0.0)
+    frame = sections.assign(_w=weight, _wm=(weight * sections["mu"]).where(known, 0.0),
+                            _why=sections["reason"].where(~known, ""))
     grouped = frame.groupby(["well", "section", "kind", "top_m", "bottom_m"], sort=False)
     pooled = grouped.agg(recordings=("recording", "nunique"), bins=("bins", "sum"),
-                         _w=("_w", "sum"), _wm=("_wm", "sum"))
-    pooled["mu"] = pooled["_wm"] / pooled["_w"]
-    pooled["mu_std"] = 1.0 / pooled["_w"] ** 0.5
+                         informed=("informed", "sum"), _w=("_w", "sum"), _wm=("_wm", "sum"),
+                         reason=("_why", lambda why: "; ".join(sorted({w for w in why if w}))))
+    informed = pooled["_w"] > 0
+    pooled["mu"] = (pooled["_wm"] / pooled["_w"].where(informed)).astype(float)
+    pooled["mu_std"] = (1.0 / np.sqrt(pooled["_w"].where(informed))).astype(float)
+    pooled["reason"] = pooled["reason"].where(~informed, "")
     return pooled.drop(columns=["_w", "_wm"]).reset_index()
 
 
@@ -201,7 +231,7 @@ def summary_tables(outcomes: Sequence[RecordingOutcome]) -> dict[str, pd.DataFra
     sections = pd.DataFrame([{"well": o.well, "recording": o.label, **row}
                              for o in done for row in o.sections],
                             columns=["well", "recording", "section", "kind", "top_m",
-                                     "bottom_m", "bins", "mu", "mu_std"])
+                                     "bottom_m", "bins", "informed", "mu", "mu_std", "reason"])
     if not sections.empty:
         sections = pd.concat([sections.assign(level="recording", recordings=1),
                               _pooled_sections(sections).assign(level="well", recording="")],
@@ -264,6 +294,7 @@ table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 90%; }
 th, td { border: 1px solid #ccc; padding: 0.2em 0.6em; text-align: right; }
 th { background: #eee; } td:first-child, th:first-child { text-align: left; }
 tr.failed td { background: #fdd; }
+tr.uninformed td { color: #888; background: #f6f6f6; }
 """
 
 
@@ -295,10 +326,34 @@ def _recordings_html(recordings: pd.DataFrame) -> str:
     return f"<table>{head}{''.join(rows)}</table>"
 
 
+def _sections_html(sections: pd.DataFrame, leading: list[str]) -> str:
+    """Friction per hole section: informed rows with their figures, uninformed ones greyed
+    with the reason instead of the prior's number."""
+    if sections.empty:
+        return "<p>none</p>"
+    header = [*leading, "bins", "informed", "mu", "mu_std", "note"]
+    head = "<tr>" + "".join(f"<th>{html.escape(name)}</th>" for name in header) + "</tr>"
+    rows = []
+    for row in sections.to_dict("records"):
+        cells = [format(row[k], ".0f") if k in ("top_m", "bottom_m") else row[k]
+                 for k in leading]
+        cells += [row["bins"], row["informed"]]
+        if row["informed"] > 0:
+            cells += [format(row["mu"], ".3f"), format(row["mu_std"], ".3f"), ""]
+            css = ""
+        else:
+            cells += ["-", "-", f"not informed by data (prior only): {row['reason']}"]
+            css = ' class="uninformed"'
+        rows.append(f"<tr{css}>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells)
+                    + "</tr>")
+    return f"<table>{head}{''.join(rows)}</table>"
+
+
 def write_html(tables: dict[str, pd.DataFrame], path: Path, title: str = "tdmon batch") -> Path:
     """One self-contained page: the recordings (failures with their reason), then per well
-    the friction per operation and per hole section with their uncertainty, the rig-state
-    shares and the alarms."""
+    the friction per operation and per hole section with their uncertainty (a section no
+    window informed greyed, with the reason, not its prior), the rig-state shares and the
+    alarms."""
     recordings = tables["recordings"]
     failed = int((recordings["status"] != "ok").sum()) if not recordings.empty else 0
     parts = [f"<h1>{html.escape(title)}</h1>",
@@ -328,10 +383,13 @@ def write_html(tables: dict[str, pd.DataFrame], path: Path, title: str = "tdmon 
                   _table(of("friction", "recording"), ["recording", "operation", "section",
                                                        "n", "mu_mean", "mu_sd", "mu_se"], mu),
                   "<h3>Friction per hole section (last profile)</h3>",
-                  _table(of("sections", "well"), ["section", "kind", "top_m", "bottom_m",
-                                                  "recordings", "bins", "mu", "mu_std"], mu),
-                  _table(of("sections", "recording"), ["recording", "section", "bins", "mu",
-                                                       "mu_std"], mu),
+                  "<p>Over the profile's bins the windows informed (<i>informed</i> of "
+                  "<i>bins</i>); a section none informed holds the well file's prior, which "
+                  "is no result: greyed, with the reason.</p>",
+                  _sections_html(of("sections", "well"), ["section", "kind", "top_m",
+                                                          "bottom_m", "recordings"]),
+                  "<p>Per recording:</p>",
+                  _sections_html(of("sections", "recording"), ["recording", "section"]),
                   "<h3>Rig-state shares</h3>", _pivot(of("states", "recording"), "state",
                                                       "share", ".1%"),
                   "<h3>Alarms</h3>", _pivot(of("alarms", "recording"), "kind", "count", ".0f")]

@@ -4,6 +4,7 @@ hole sections from a profile, pooled figures, state shares, the tables written a
 from __future__ import annotations
 
 import math
+import re
 import statistics
 import sys
 from pathlib import Path
@@ -37,13 +38,19 @@ def _outcomes() -> list[RecordingOutcome]:
         windows=[_window(0.20), _window(0.24), _window(0.28), _window(0.9, low=True),
                  _window(0.30, "slack_off")],
         sections=[{"section": "casing", "kind": "cased", "top_m": 0.0, "bottom_m": 1000.0,
-                   "bins": 2, "mu": 0.20, "mu_std": 0.02}],
+                   "bins": 2, "informed": 2, "mu": 0.20, "mu_std": 0.02, "reason": ""},
+                  {"section": "open hole", "kind": "open", "top_m": 1000.0,
+                   "bottom_m": 2000.0, "bins": 3, "informed": 0, "mu": math.nan,
+                   "mu_std": math.nan, "reason": "no window reached this depth"}],
         state_seconds={"pick_up": 300.0, "in_slips": 100.0},
         alarms={("overpull", "warning"): 2})
     b = RecordingOutcome(
         recording="b.mcap", out="out/b.mcap", well="W1", windows=[_window(0.26)],
         sections=[{"section": "casing", "kind": "cased", "top_m": 0.0, "bottom_m": 1000.0,
-                   "bins": 2, "mu": 0.30, "mu_std": 0.04}],
+                   "bins": 2, "informed": 1, "mu": 0.30, "mu_std": 0.04, "reason": ""},
+                  {"section": "open hole", "kind": "open", "top_m": 1000.0,
+                   "bottom_m": 2000.0, "bins": 3, "informed": 0, "mu": math.nan,
+                   "mu_std": math.nan, "reason": "no window reached this depth"}],
         state_seconds={"pick_up": 100.0}, alarms={("overpull", "warning"): 1})
     broken = RecordingOutcome(recording="c.mcap", out=None, error="c.mcap: not an MCAP file")
     return [a, b, broken]
@@ -62,6 +69,24 @@ def test_section_rows_average_the_bins_inside_each_section() -> None:
     assert section_rows(None, SECTIONS) == []
 
 
+def test_section_rows_show_no_prior_as_a_result() -> None:
+    # the casing's first bin and every open-hole bin hold the prior (0.25, 0.30)
+    profile = {"md_m": [500.0, 900.0, 1100.0, 1500.0],
+               "mu_profile": [0.25, 0.18, 0.30, 0.30],
+               "mu_profile_std": [0.10, 0.02, 0.10, 0.10],
+               "informed": [False, True, False, False],
+               "uninformed_reason": ["too little bit travel", None,
+                                     "no window reached this depth",
+                                     "no window reached this depth"]}
+    casing, open_hole = section_rows(profile, SECTIONS)
+    assert (casing["bins"], casing["informed"]) == (2, 1)
+    assert casing["mu"] == pytest.approx(0.18) and casing["mu_std"] == pytest.approx(0.02)
+    assert casing["reason"] == ""
+    assert (open_hole["bins"], open_hole["informed"]) == (2, 0)
+    assert math.isnan(open_hole["mu"]) and math.isnan(open_hole["mu_std"])
+    assert open_hole["reason"] == "no window reached this depth"
+
+
 def test_friction_statistics_per_recording_and_pooled_per_well() -> None:
     tables = summary_tables(_outcomes())
     friction = tables["friction"].set_index(["level", "recording", "operation"])
@@ -77,11 +102,18 @@ def test_friction_statistics_per_recording_and_pooled_per_well() -> None:
 
 def test_sections_pool_by_inverse_variance() -> None:
     sections = summary_tables(_outcomes())["sections"]
-    pooled = sections[sections["level"] == "well"].iloc[0]
+    pooled = sections[sections["level"] == "well"].set_index("section")
+    casing = pooled.loc["casing"]
     w1, w2 = 1 / 0.02**2, 1 / 0.04**2
-    assert pooled["mu"] == pytest.approx((0.20 * w1 + 0.30 * w2) / (w1 + w2))
-    assert pooled["mu_std"] == pytest.approx(1 / math.sqrt(w1 + w2))
-    assert pooled["recordings"] == 2
+    assert casing["mu"] == pytest.approx((0.20 * w1 + 0.30 * w2) / (w1 + w2))
+    assert casing["mu_std"] == pytest.approx(1 / math.sqrt(w1 + w2))
+    assert casing["recordings"] == 2
+    assert (casing["bins"], casing["informed"]) == (4, 3)
+    # no recording informed the open hole: no figure, the reason instead
+    open_hole = pooled.loc["open hole"]
+    assert (open_hole["bins"], open_hole["informed"]) == (6, 0)
+    assert math.isnan(open_hole["mu"]) and math.isnan(open_hole["mu_std"])
+    assert open_hole["reason"] == "no window reached this depth"
 
 
 def test_states_alarms_and_failures() -> None:
@@ -115,6 +147,11 @@ def test_tables_written_as_parquet_or_csv_and_the_page(tmp_path: Path,
     page = write_html(tables, tmp_path / "summary.html").read_text()
     assert "3 recordings, 1 failed" in page and "c.mcap: not an MCAP file" in page
     assert "Well: W1" in page and "0.245" in page  # the pooled pick-up friction
+    # the open hole's rows are greyed with the reason, and no prior's figure is shown
+    uninformed = re.findall(r'<tr class="uninformed">(.*?)</tr>', page)
+    assert len(uninformed) == 3  # pooled, and one per recording
+    assert all("no window reached this depth" in row and "0.3" not in row
+               for row in uninformed)
 
 
 def test_output_names_are_distinct() -> None:

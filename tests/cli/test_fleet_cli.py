@@ -85,6 +85,27 @@ def test_the_board_keeps_state_friction_and_open_alarms() -> None:
     assert "silent" in render_table(board, now=70.0).splitlines()[1]  # 13 s without results
 
 
+def test_the_board_shows_no_prior_as_friction_and_dates_old_data() -> None:
+    board = FleetBoard(hold=HOLD, stale=10.0)
+    t = 1_709_251_200.0  # 2024-03-01 00:00 UTC
+    prior = {"t": t, "kind": "profile", "mu": 0.25, "mu_std": 0.1,
+             "informed": [False, False, False]}
+    board.update("rig/A/tdmon/estimate", prior, received=1.0)
+    rig = board.rigs["rig/A"]
+    assert rig.mu is None  # every bin the prior: no friction to show
+    board.update("rig/A/tdmon/estimate", {**prior, "t": t + 1, "mu": 0.21,
+                                          "informed": [True, False, True]}, received=2.0)
+    assert (rig.mu, rig.informed) == (0.21, (2, 3))
+    # the rig's data are 996 days older than the centre's clock: a date, not a lag
+    board.update("rig/A/tdmon/status", {"t": t + 86_086_630.0, "lag_s": 86_086_629.8},
+                 received=3.0)
+    cells = render_table(board, now=4.0).splitlines()[1]
+    assert "0.210 ± 0.100 profile, 2/3 bins informed" in cells
+    assert "data of 2024-03-01" in cells and " d " not in cells
+    board.update("rig/A/tdmon/status", {"t": t + 2, "lag_s": 3600.0}, received=5.0)
+    assert "60.0 min" in render_table(board, now=6.0)  # a real delay stays a duration
+
+
 def test_fleet_needs_somewhere_to_listen_or_connect(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["fleet", "--once"]) == 2
     assert "--listen" in capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -91,6 +92,25 @@ def test_broomstick_png_is_drawn(tmp_path, capsys):
                  str(picture)]) == 0
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert picture.stat().st_size > 20_000
+
+
+def test_broomstick_axes_keep_to_the_loads(tmp_path, capsys, monkeypatch):
+    import tdmon.cli.plots as plots
+
+    drawn = []
+    monkeypatch.setattr(plots, "save", lambda figure, path: drawn.append(figure))
+    assert main(["model", "broomstick", "--well", str(VOLVE), "--mu", "0.15,0.35",
+                 "--png", str(tmp_path / "broom.png")]) == 0
+    hook_axes = drawn[0].axes[0]
+    heaviest = max(max(line.get_xdata()) for line in hook_axes.get_lines()
+                   if line.get_label() == "pick-up, mu 0.35")
+    assert 1500 < heaviest < 2500  # kN: the F-4 tubing at 2574 m (see the test below)
+    # the axis ends a tenth past the heaviest pick-up, not at the tensile limit
+    assert hook_axes.get_xlim()[1] == pytest.approx(1.1 * heaviest, rel=1e-6)
+    labels = [t.get_text() for t in hook_axes.get_legend().get_texts()]
+    [beyond] = [re.fullmatch(r"tensile limit \+ block \(SF 1.25\): (\d+) kN or more, beyond "
+                             r"the axis", label) for label in labels if "tensile" in label]
+    assert beyond is not None and float(beyond.group(1)) > 1.1 * heaviest
 
 
 def test_volve_well_file_loads_and_is_plausible(capsys):

@@ -176,3 +176,34 @@ def test_uninformed_profile_bins_are_left_out_and_explained(tmp_path: Path) -> N
     assert values["/profile/note"] == (
         "Local friction: 1 of 3 points informed (variance ratio < 0.5); not informed: "
         "100 m no side force; 300 m no window reached this depth")
+
+
+def _view_origins(path: Path) -> set[str]:
+    reader = RrdReader(path)
+    origins: set[str] = set()
+    for chunk in reader.stream(store=reader.blueprints()[0]).to_chunks():
+        batch = chunk.to_record_batch()
+        for column in batch.schema.names:
+            if column.endswith(":space_origin"):
+                origins.update(str(v[0]) for v in batch.column(column).to_pylist() if v)
+    return origins
+
+
+def test_every_logged_entity_has_a_view(tmp_path: Path,
+                                         stream: list[RecordedMessage]) -> None:
+    extra = [("/tdmon/estimate", 10**18, {"t": 1e9, "kind": "mu_T", "operation": "pick_up",
+                                          "mu": 0.2, "mu_std": 0.01, "model": "linear",
+                                          "params": {"mu_0": 0.2, "slope_per_K": 0.001}}),
+             ("/tdmon/status", 10**18, {"t": 1e9, "samples_in": 10, "rejected": 0,
+                                        "dropped": 0, "lag_s": 0.1, "connections": {}})]
+    rrd = tmp_path / "all.rrd"
+    stats = build_rrd([*stream, *extra], rrd)
+    origins = _view_origins(rrd)
+    assert {"/friction_mu_T", "/bit_depth_m", "/rig_state"} <= origins
+    rows, _ = _rows(rrd)
+    logged = set(rows) | {f"/{e}" for e in stats.entities}
+    assert "/friction_mu_T/slope_per_K" in logged and "/bit_depth_m" in logged
+    # an entity is shown when a view's origin is it or one of its parents
+    unseen = sorted(entity for entity in logged if not any(
+        entity == origin or entity.startswith(origin.rstrip("/") + "/") for origin in origins))
+    assert unseen == []
