@@ -41,6 +41,11 @@ __all__ = ["STILL_SAMPLES", "TorqueZero", "torque_turning"]
 
 #: still-string torque samples the zero offset is the median of [-]
 STILL_SAMPLES: Final = 60
+#: most torque samples the level averages, whatever the window's length [-]: 5 s at 50 Hz,
+#: far above what a rig's torque channel sends; a faster feed (or a backlog of samples
+#: microseconds apart) averages its latest ones instead of making each frame's cost grow
+#: with the window
+RECENT_SAMPLES: Final = 256
 
 
 class TorqueZero(NamedTuple):
@@ -51,7 +56,8 @@ class TorqueZero(NamedTuple):
     still : the last still-string torque samples [N m]
     offset : their median, the sensor's zero offset [N m] (None: no still sample yet)
     spread : their scaled median absolute deviation [N m]
-    recent : the torque's own samples of the last ``average`` seconds, (time [s], value [N m])
+    recent : the torque's own samples of the last ``average`` seconds, at most
+        :data:`RECENT_SAMPLES` of them, (time [s], value [N m])
     peak : highest level since the string was last known still [N m]
     turning : the torque said the string turns on the previous frame
     """
@@ -113,11 +119,15 @@ def torque_turning(zero: TorqueZero, torque: float, sampled: float, known_still:
     recent = zero.recent
     if not recent or sampled > recent[-1][0]:
         start = sampled - average
-        recent = (*(item for item in recent if item[0] > start), (sampled, torque))
+        kept = recent[-(RECENT_SAMPLES - 1):]
+        recent = (*(item for item in kept if item[0] > start), (sampled, torque))
         if known_still:
             still, offset, spread = _learn(zero, torque)
     n = len(recent)
-    level = math.fsum(value for _, value in recent) / n
+    try:
+        level = math.fsum(value for _, value in recent) / n
+    except OverflowError:  # torques near the float limit (garbage): their sum is infinite
+        level = math.copysign(math.inf, sum(value for _, value in recent))
     peak = 0.0 if known_still else max(zero.peak, level)
     if offset is not None:
         margin = max(floor, sigmas * spread / math.sqrt(n))
