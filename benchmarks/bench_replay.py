@@ -393,7 +393,11 @@ def summary_memory(hours: list[float], repeat: int, sessions: Path) -> dict[str,
     for length in hours:
         src = sessions / f"session-{length:g}h.mcap"
         if not src.exists():
-            make_session(src, length * 3600)
+            # the programme comes in whole phases (~3.3 h at the least): cut to the length
+            whole = sessions / f"session-{length:g}h-whole.mcap"
+            if not whole.exists():
+                make_session(whole, length * 3600)
+            cut_session(whole, src, length * 3600)
         out = sessions / f"out-{length:g}h.mcap"
         command = [sys.executable, "-m", "tdmon", "replay", str(src), "--config", str(CONFIG),
                    "--out", str(out), "--no-progress", "--json"]
@@ -415,6 +419,38 @@ def summary_memory(hours: list[float], repeat: int, sessions: Path) -> dict[str,
                      "library_peak_MiB": round(max(lib_mib), 1)})
     return {"sessions": rows,
             "peak_ratio": round(rows[-1]["cli_peak_MiB"] / rows[0]["cli_peak_MiB"], 3)}
+
+
+def cut_session(src: Path, dst: Path, seconds: float) -> int:
+    """Copy the input messages of ``src``'s first ``seconds`` of log time to ``dst`` (with
+    their channels and schemas, zstd chunks); returns how many."""
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, int] = {}  # source channel id -> written channel id
+    count, end = 0, None
+    with src.open("rb") as stream, dst.open("wb") as out:
+        writer = Writer(out, compression=CompressionType.ZSTD, chunk_size=4 * 1024 * 1024)
+        writer.start()
+        for record in StreamReader(stream).records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel) and not record.topic.startswith("/truth"):
+                schema = schemas.get(record.schema_id)
+                schema_id = 0 if schema is None else writer.register_schema(
+                    schema.name, schema.encoding, schema.data)
+                channels[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schema_id, dict(record.metadata))
+            elif isinstance(record, Message) and record.channel_id in channels:
+                end = record.log_time + int(seconds * 1e9) if end is None else end
+                if record.log_time >= end:
+                    break
+                writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                   record.publish_time, sequence=record.sequence)
+                count += 1
+        writer.finish()
+    return count
 
 
 def _raw_count(path: Path) -> int | None:
