@@ -24,11 +24,20 @@ Two measurements, one process (project virtualenv):
    children, i.e. the recorder's process): first and last sample after the
    first 10 % of the run, and the peak. With ``--tracemalloc`` the Python heap is traced
    too (slows the run down by about 2x).
+3. **The command's summary** (``--summary-memory``, issue 33): ``tdmon replay --json`` (which
+   gathers its summary while replaying) on sessions of ``--summary-hours`` (default 1 and 24
+   h), each against the library replay (``tdmon.replay``, no summary) of the same session, in
+   turn, ``--repeat`` pairs; each in a process of its own, whose peak resident memory
+   (``ru_maxrss`` of the waited-for child) and wall time are taken. Targets: the command's
+   peak at the longest session at most 1.5x its peak at the shortest, and its wall time
+   within 10 % of the library replay's. ``--sessions DIR`` keeps the simulated sessions
+   (``session-<h>h.mcap``) and reuses them on the next run.
 
     .venv/bin/python benchmarks/bench_replay.py                 # ratio (3.3 h) and 7 days
     .venv/bin/python benchmarks/bench_replay.py --days 0 --hours 4 --repeat 3 --json out.json
     .venv/bin/python benchmarks/bench_replay.py --profile       # cProfile of one replay
     .venv/bin/python benchmarks/bench_replay.py --blas-threads 1  # single-threaded OpenBLAS
+    .venv/bin/python benchmarks/bench_replay.py --summary-memory --repeat 1 --sessions /tmp/s
 
 Not part of the test suite (a 7-day replay takes minutes).
 """
@@ -42,6 +51,7 @@ import gc
 import json
 import os
 import pstats
+import subprocess
 import sys
 import tempfile
 import threading
@@ -361,6 +371,94 @@ def long_session(days: float, sample: float, trace: bool, folder: Path) -> dict[
     }
 
 
+def _timed_process(command: list[str]) -> tuple[float, float]:
+    """Run ``command``; its wall time [s] and peak resident memory [MiB] (``ru_maxrss`` of the
+    child, from ``wait4``: its own, not this process's)."""
+    started = time.perf_counter()
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(process.pid, 0)
+    wall = time.perf_counter() - started
+    process.returncode = os.waitstatus_to_exitcode(status)
+    error = process.stderr.read().decode() if process.stderr is not None else ""
+    if process.returncode != 0:
+        raise RuntimeError(f"{command} failed ({process.returncode}): {error[-2000:]}")
+    return wall, usage.ru_maxrss / 1024  # ru_maxrss is in KiB on Linux
+
+
+def summary_memory(hours: list[float], repeat: int, sessions: Path) -> dict[str, Any]:
+    """``tdmon replay --json`` against the library replay, per session length (docstring, 3)."""
+    sessions.mkdir(parents=True, exist_ok=True)
+    library = ("import sys, tdmon; tdmon.replay(sys.argv[1], sys.argv[2], config=sys.argv[3])")
+    rows = []
+    for length in hours:
+        src = sessions / f"session-{length:g}h.mcap"
+        if not src.exists():
+            # the programme comes in whole phases (~3.3 h at the least): cut to the length
+            whole = sessions / f"session-{length:g}h-whole.mcap"
+            if not whole.exists():
+                make_session(whole, length * 3600)
+            cut_session(whole, src, length * 3600)
+        out = sessions / f"out-{length:g}h.mcap"
+        command = [sys.executable, "-m", "tdmon", "replay", str(src), "--config", str(CONFIG),
+                   "--out", str(out), "--no-progress", "--json"]
+        call = [sys.executable, "-c", library, str(src), str(out), str(CONFIG)]
+        cli_s, cli_mib, lib_s, lib_mib = [], [], [], []
+        for _ in range(repeat):  # in turn: a change of the machine's load hits both alike
+            wall, peak = _timed_process(command)
+            cli_s.append(wall)
+            cli_mib.append(peak)
+            wall, peak = _timed_process(call)
+            lib_s.append(wall)
+            lib_mib.append(peak)
+        rows.append({"hours": length, "messages": _raw_count(src),
+                     "cli_s": [round(x, 2) for x in cli_s],
+                     "library_s": [round(x, 2) for x in lib_s],
+                     "cli_over_library": [round(a / b, 3) for a, b in zip(cli_s, lib_s,
+                                                                          strict=True)],
+                     "cli_peak_MiB": round(max(cli_mib), 1),
+                     "library_peak_MiB": round(max(lib_mib), 1)})
+    return {"sessions": rows,
+            "peak_ratio": round(rows[-1]["cli_peak_MiB"] / rows[0]["cli_peak_MiB"], 3)}
+
+
+def cut_session(src: Path, dst: Path, seconds: float) -> int:
+    """Copy the input messages of ``src``'s first ``seconds`` of log time to ``dst`` (with
+    their channels and schemas, zstd chunks); returns how many."""
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, int] = {}  # source channel id -> written channel id
+    count, end = 0, None
+    with src.open("rb") as stream, dst.open("wb") as out:
+        writer = Writer(out, compression=CompressionType.ZSTD, chunk_size=4 * 1024 * 1024)
+        writer.start()
+        for record in StreamReader(stream).records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel) and not record.topic.startswith("/truth"):
+                schema = schemas.get(record.schema_id)
+                schema_id = 0 if schema is None else writer.register_schema(
+                    schema.name, schema.encoding, schema.data)
+                channels[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schema_id, dict(record.metadata))
+            elif isinstance(record, Message) and record.channel_id in channels:
+                end = record.log_time + int(seconds * 1e9) if end is None else end
+                if record.log_time >= end:
+                    break
+                writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                   record.publish_time, sequence=record.sequence)
+                count += 1
+        writer.finish()
+    return count
+
+
+def _raw_count(path: Path) -> int | None:
+    from tdmon.replay.driver import raw_message_count
+
+    return raw_message_count(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--hours", type=float, default=1.0,
@@ -374,6 +472,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="OPENBLAS_NUM_THREADS for this run (default: OpenBLAS's own)")
     parser.add_argument("--json", type=Path, help="write the figures here")
     parser.add_argument("--tmp", type=Path, help="folder for the generated files")
+    parser.add_argument("--summary-memory", action="store_true",
+                        help="only measurement 3: the command's peak memory and wall time "
+                             "against the library replay")
+    parser.add_argument("--summary-hours", default="1,24",
+                        help="session lengths for --summary-memory [h], comma-separated")
+    parser.add_argument("--sessions", type=Path,
+                        help="--summary-memory: keep the sessions here (reused when present)")
     args = parser.parse_args(argv)
     if args.blas_threads is not None:
         # must precede numpy's import (tdmon is imported lazily below): OpenBLAS's threads
@@ -386,6 +491,22 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, Any] = {"blas_threads": args.blas_threads}
     with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
         folder = Path(tmp)
+        if args.summary_memory:
+            hours = [float(h) for h in args.summary_hours.split(",")]
+            results["summary"] = r = summary_memory(hours, args.repeat, args.sessions or folder)
+            print("| rig time | messages | tdmon replay --json [s] | library replay [s] | "
+                  "ratio | peak RSS, command [MiB] | peak RSS, library [MiB] |\n"
+                  "|---|---|---|---|---|---|---|")
+            for row in r["sessions"]:
+                print(f"| {row['hours']:g} h | {row['messages']} | "
+                      f"{', '.join(map(str, row['cli_s']))} | "
+                      f"{', '.join(map(str, row['library_s']))} | "
+                      f"{', '.join(map(str, row['cli_over_library']))} | "
+                      f"{row['cli_peak_MiB']} | {row['library_peak_MiB']} |")
+            print(f"peak at {hours[-1]:g} h / peak at {hours[0]:g} h: {r['peak_ratio']}")
+            if args.json:
+                args.json.write_text(json.dumps(results, indent=2))
+            return 0
         if args.profile:
             src = folder / "session.mcap"
             make_session(src, args.hours * 3600)

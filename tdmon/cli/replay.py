@@ -175,7 +175,8 @@ def _replay(args: argparse.Namespace) -> int:  # noqa: C901  (complex today; sim
     from tdmon.config.daemon import load_daemon_config
     from tdmon.config.expectations import load_expectations
     from tdmon.display import using
-    from tdmon.record.digest import summarize
+    from tdmon.record.digest import DigestSink
+    from tdmon.record.reader import topic_counts
     from tdmon.replay.driver import check_replay_file, raw_message_count, replay
     from tdmon.replay.expectations import check_replay, find_expectations
 
@@ -205,18 +206,22 @@ def _replay(args: argparse.Namespace) -> int:  # noqa: C901  (complex today; sim
 
         bar = tqdm(total=raw_message_count(args.replay), unit="msg", file=sys.stderr,
                    desc=args.replay.name)
+    # the engineer's numbers (well, run, friction, alarms, mu(T) verdict) gathered as the replay
+    # makes them: the recording is not read again for them
+    digest = DigestSink()
     try:
         # the Rerun views are built inside the daemon: they read the units from tdmon.display
         with using(display_units(args, config.display.units)):
             result = asyncio.run(replay(args.replay, config, args.out, rrd=args.rrd, speed=speed,
                                         progress=bar.update if bar is not None else None,
+                                        extra_sinks=[digest],
                                         separate_writer=args.recorder == "process"))
     finally:
         if bar is not None:
             bar.close()
     summary = result.summary()
-    # the engineer's numbers (well, run, friction, alarms, mu(T) verdict) from the recording
-    summary.update(summarize([args.out]))
+    # the message count per topic from the recording's summary section (not its messages)
+    summary.update(digest.digester.digest([str(args.out)], topic_counts(args.out)))
     if result.interrupted:
         # the recording is finished but partial: expectations about the whole file do not apply
         expectations = None

@@ -1,17 +1,24 @@
 """The engineer's digest of flight recordings: which well and run, which operations, the
 friction per operation and hole section with its uncertainty, the alarms, the mu(T) verdict.
 
-One function, :func:`digest`, computes these numbers from the recorded messages; the HTML
-report states them in words and the summary JSON (``tdmon report``'s ``summary.json``,
-``tdmon replay --json``) carries them, so both say the same (docs/recording.md, "Summary").
-Everything is SI with the unit in the key; times are Unix seconds with a UTC string beside.
+One class, :class:`Digester`, computes these numbers message by message, in memory that does
+not grow with the session's length (per frame it keeps two numbers' extremes and the rig state's
+time and code; whole messages only of the window, mu(T) and joint estimates and the well);
+:func:`digest` feeds it the messages of recordings read from disk, and ``tdmon replay`` hands
+it the messages as the replay makes them (:class:`DigestSink`), so the summary needs no second
+reading of the recording. The HTML report states these numbers in words and the summary JSON
+(``tdmon report``'s ``summary.json``, ``tdmon replay --json``) carries them, so both say the
+same (docs/recording.md, "Summary"). Everything is SI with the unit in the key; times are Unix
+seconds with a UTC string beside.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
-from collections.abc import Sequence
+from array import array
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from itertools import pairwise
@@ -21,10 +28,13 @@ from typing import Any, Final
 import numpy as np
 
 from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameters, join_words
+from tdmon.record.batch import encode_message
 from tdmon.record.reader import read_messages, topic_counts
+from tdmon.record.sink import MessageSink
 from tdmon.vocabulary import ALARM_WORDS, AlarmKind, EstimateKind, Severity
 
-__all__ = ["ReportData", "alarm_meaning", "digest", "load", "mu_t_verdict", "summarize", "utc"]
+__all__ = ["DigestSink", "Digester", "ReportData", "alarm_meaning", "digest", "load",
+           "mu_t_verdict", "summarize", "utc"]
 
 _TOPICS: Final = ("/tdmon/model", "/tdmon/estimate", "/tdmon/state", "/tdmon/alarm",
                   "/tdmon/profile", "/tdmon/well")
@@ -34,8 +44,8 @@ _SECTION_WORDS: Final = {"cased": "cased hole", "open": "open hole", "all": "who
 _OPERATION_WORDS: Final = {"pick_up": "pick-up", "slack_off": "slack-off",
                            "rotating": "rotating off bottom", "on_bottom": "on bottom",
                            "reaming": "reaming", "back_reaming": "back-reaming"}
-
-
+#: The estimates the digest reads whole (a few per window, none per frame).
+_KEPT_ESTIMATES: Final = frozenset({EstimateKind.WINDOW, EstimateKind.MU_T, EstimateKind.JOINT})
 
 @dataclass
 class ReportData:
@@ -77,7 +87,9 @@ def utc(t: float | None) -> str | None:
 
 
 def _num(value: Any) -> float:
-    if isinstance(value, int | float) and not isinstance(value, bool):
+    # numpy numbers too: a message the replay hands over may hold them (its recording holds
+    # their Python values)
+    if isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool):
         return float(value)
     return math.nan
 
@@ -87,61 +99,165 @@ def _rounded(value: float, digits: int = 4) -> float | None:
 
 
 def digest(data: ReportData) -> dict[str, Any]:
-    """The engineer's numbers of a recording (JSON-ready, SI, no NaN).
+    """The engineer's numbers of recordings read with :func:`load` (:meth:`Digester.digest`)."""
+    digester = Digester()
+    for topic, messages in (("/tdmon/well", data.wells), ("/tdmon/state", data.states),
+                            ("/tdmon/model", data.models), ("/tdmon/estimate", data.estimates),
+                            ("/tdmon/alarm", data.alarms)):
+        for message in messages:
+            digester.add(topic, message)
+    return digester.digest(data.recordings, data.counts)
 
-    Keys: ``well`` (name, files, methods, hole sections, mu(T) law; from the ``well``
-    message), ``run`` (recordings), ``time_range``, ``depth_range_m`` (bit depth),
-    ``operations`` (share of rig time per rig state), ``friction`` (one row per operation and
-    hole section), ``alarm_summary`` (one row per kind and severity, most important first),
-    ``mu_t`` (the verdict), ``joint`` (friction and weight factor together) and ``notes``
-    (the daemon's notes, e.g. why the mu(T) calibration is off).
+
+def _as_recorded(message: dict[str, Any]) -> dict[str, Any]:
+    """``message`` as a recording gives it back: its JSON bytes (NaN and infinities as null,
+    numpy values as Python ones) read again."""
+    recorded: dict[str, Any] = json.loads(encode_message(message)[0])
+    return recorded
+
+
+class _AlarmGroup:
+    """The alarms of one kind and severity: count, first and last finite time, the latest."""
+
+    __slots__ = ("count", "first", "last", "latest_message", "latest_t")
+
+    def __init__(self, message: dict[str, Any]) -> None:
+        self.count = 0
+        self.first, self.last = math.inf, -math.inf
+        self.latest_t = -math.inf
+        self.latest_message = _as_recorded(message).get("message")
+
+    def add(self, message: dict[str, Any]) -> None:
+        self.count += 1
+        t = _num(message.get("t"))
+        if math.isfinite(t):
+            self.first, self.last = min(self.first, t), max(self.last, t)
+            if t > self.latest_t:  # the first of equal times stays, as ``max`` keeps it
+                self.latest_t = t
+                self.latest_message = _as_recorded(message).get("message")
+
+
+class Digester:
+    """The digest's figures gathered one message at a time; :meth:`digest` gives them.
+
+    Memory: per rig-state message a time and a code (12 bytes: the time shares are summed
+    over the messages in time order, as they were when read from a file); per model message
+    nothing but the running extremes of time and bit depth; the alarms per kind and severity
+    as a count, a time range and the latest's text; whole messages only of the well and of the
+    window, mu(T) and joint estimates (a few per window). Every figure is the one the
+    recording read back gives (:func:`_as_recorded`).
     """
-    well = data.wells[0] if data.wells else {}
-    return {
-        "well": {
-            "name": well.get("name"), "well_file": well.get("file", well.get("well_file")),
-            "daemon_file": well.get("daemon_file"), "method": well.get("method"),
-            "backcalc_method": well.get("backcalc_method"),
-            "mu_t_law": well.get("mu_t_law"), "sections": well.get("sections", []),
-        },
-        "run": {"recordings": list(data.recordings),
-                "messages": int(sum(data.counts.values()))},
-        "time_range": _time_range(data),
-        "depth_range_m": _depth_range(data),
-        "operations": _state_shares(data.states),
-        "friction": friction_rows(data.estimates),
-        "alarm_summary": alarm_rows(data.alarms),
-        "mu_t": mu_t_verdict(data.estimates, well),
-        "joint": joint_verdict(data.estimates),
-        "notes": [str(n) for n in well.get("notes", [])],
-    }
+
+    def __init__(self) -> None:
+        self.well: dict[str, Any] | None = None
+        self.estimates: list[dict[str, Any]] = []
+        self._t_range = [math.inf, -math.inf]
+        self._depth_range = [math.inf, -math.inf]
+        self._state_t = array("d")
+        self._state_code = array("I")
+        self._state_names: dict[str, int] = {}
+        self._alarms: dict[tuple[str, str], _AlarmGroup] = {}
+
+    def add(self, topic: str, message: dict[str, Any]) -> None:
+        """Take one message of ``topic`` (others than the digest's are ignored)."""
+        if topic == "/tdmon/state":
+            t = _num(message.get("t"))
+            if math.isfinite(t):
+                self._state_t.append(t)
+                self._state_code.append(self._state_names.setdefault(
+                    str(message.get("state")), len(self._state_names)))
+            self._extend(t, _num(message.get("bit_depth_m")))
+        elif topic == "/tdmon/model":
+            self._extend(_num(message.get("t")), _num(message.get("bit_depth_m")))
+        elif topic == "/tdmon/estimate":
+            if message.get("kind") in _KEPT_ESTIMATES:
+                self.estimates.append(_as_recorded(message))
+        elif topic == "/tdmon/alarm":
+            key = (str(message.get("kind")), str(message.get("severity")))
+            group = self._alarms.get(key)
+            if group is None:
+                group = self._alarms[key] = _AlarmGroup(message)
+            group.add(message)
+        elif topic == "/tdmon/well" and self.well is None:
+            self.well = _as_recorded(message)
+
+    def _extend(self, t: float, depth: float) -> None:
+        if math.isfinite(t):
+            times = self._t_range
+            times[0], times[1] = min(times[0], t), max(times[1], t)
+        if math.isfinite(depth):
+            depths = self._depth_range
+            depths[0], depths[1] = min(depths[0], depth), max(depths[1], depth)
+
+    def alarm_rows(self) -> list[dict[str, Any]]:
+        """The alarms taken so far, as :func:`alarm_rows` gives them."""
+        return _alarm_rows(self._alarms)
+
+    def digest(self, recordings: Sequence[str], counts: dict[str, int]) -> dict[str, Any]:
+        """The engineer's numbers (JSON-ready, SI, no NaN) of the messages taken so far;
+        ``recordings`` and ``counts`` (messages per topic) describe the run.
+
+        Keys: ``well`` (name, files, methods, hole sections, mu(T) law; from the ``well``
+        message), ``run`` (recordings), ``time_range``, ``depth_range_m`` (bit depth),
+        ``operations`` (share of rig time per rig state), ``friction`` (one row per operation
+        and hole section), ``alarm_summary`` (one row per kind and severity, most important
+        first), ``mu_t`` (the verdict), ``joint`` (friction and weight factor together) and
+        ``notes`` (the daemon's notes, e.g. why the mu(T) calibration is off).
+        """
+        well = self.well or {}
+        names = list(self._state_names)
+        return {
+            "well": {
+                "name": well.get("name"), "well_file": well.get("file", well.get("well_file")),
+                "daemon_file": well.get("daemon_file"), "method": well.get("method"),
+                "backcalc_method": well.get("backcalc_method"),
+                "mu_t_law": well.get("mu_t_law"), "sections": well.get("sections", []),
+            },
+            "run": {"recordings": list(recordings),
+                    "messages": int(sum(counts.values()))},
+            "time_range": _time_range(*self._t_range),
+            "depth_range_m": _depth_range(*self._depth_range),
+            "operations": _state_shares(zip(self._state_t, (names[c] for c in self._state_code),
+                                            strict=True)),
+            "friction": friction_rows(self.estimates),
+            "alarm_summary": self.alarm_rows(),
+            "mu_t": mu_t_verdict(self.estimates, well),
+            "joint": joint_verdict(self.estimates),
+            "notes": [str(n) for n in well.get("notes", [])],
+        }
 
 
-def _time_range(data: ReportData) -> dict[str, Any]:
-    times = np.array([_num(m.get("t")) for m in (*data.states, *data.models)])
-    times = times[np.isfinite(times)]
-    if not times.size:
+class DigestSink(MessageSink):
+    """A :class:`Digester` riding along a replay as a sink (``digester`` holds the figures)."""
+
+    topics = frozenset(_TOPICS) - {"/tdmon/profile"}
+
+    def __init__(self) -> None:
+        self.digester = Digester()
+
+    def write(self, topic: str, log_time_ns: int, message: dict[str, Any]) -> None:
+        self.digester.add(topic, message)
+
+
+def _time_range(first: float, last: float) -> dict[str, Any]:
+    if first > last:
         return {"first_t": None, "last_t": None, "first_utc": None, "last_utc": None,
                 "duration_s": None}
-    first, last = float(times.min()), float(times.max())
     return {"first_t": first, "last_t": last, "first_utc": utc(first), "last_utc": utc(last),
             "duration_s": round(last - first, 3)}
 
 
-def _depth_range(data: ReportData) -> dict[str, float | None]:
-    depth = np.array([_num(m.get("bit_depth_m")) for m in (*data.states, *data.models)])
-    depth = depth[np.isfinite(depth)]
-    if not depth.size:
+def _depth_range(shallowest: float, deepest: float) -> dict[str, float | None]:
+    if shallowest > deepest:
         return {"min": None, "max": None}
-    return {"min": round(float(depth.min()), 2), "max": round(float(depth.max()), 2)}
+    return {"min": round(shallowest, 2), "max": round(deepest, 2)}
 
 
-def _state_shares(states: Sequence[dict[str, Any]]) -> dict[str, float]:
+def _state_shares(states: Iterable[tuple[float, str]]) -> dict[str, float]:
     """Share of rig time in each state, from the rig-time intervals between state messages
-    (a state message is sent on a change and at least every second)."""
-    timed = sorted(((_num(s.get("t")), str(s.get("state"))) for s in states),
-                   key=lambda item: item[0])
-    timed = [item for item in timed if math.isfinite(item[0])]
+    (``(t, state)`` of each, t finite; a state message is sent on a change and at least every
+    second)."""
+    timed = sorted(states, key=lambda item: item[0])
     spent: dict[str, float] = {}
     for (t, state), (t_next, _) in pairwise(timed):
         spent[state] = spent.get(state, 0.0) + t_next - t
@@ -226,20 +342,22 @@ def friction_words(row: dict[str, Any]) -> str:
 def alarm_rows(alarms: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per alarm kind and severity: count, first and last time, the last message;
     critical first, then warnings, then information, more frequent first."""
-    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    digester = Digester()
     for alarm in alarms:
-        groups.setdefault((str(alarm.get("kind")), str(alarm.get("severity"))), []).append(alarm)
+        digester.add("/tdmon/alarm", alarm)
+    return digester.alarm_rows()
+
+
+def _alarm_rows(groups: dict[tuple[str, str], _AlarmGroup]) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
-    for (kind, severity), chosen in groups.items():
-        times = [t for t in (_num(a.get("t")) for a in chosen) if math.isfinite(t)]
-        first, last = (min(times), max(times)) if times else (None, None)
-        latest = max(chosen, key=lambda a: _num(a.get("t")) if math.isfinite(
-            _num(a.get("t"))) else -math.inf)
+    for (kind, severity), group in groups.items():
+        first, last = ((group.first, group.last) if group.first <= group.last
+                       else (None, None))
         rows.append({
-            "kind": kind, "severity": severity, "count": len(chosen),
+            "kind": kind, "severity": severity, "count": group.count,
             "meaning": alarm_meaning(kind),
             "first_t": first, "last_t": last, "first_utc": utc(first), "last_utc": utc(last),
-            "last_message": latest.get("message"),
+            "last_message": group.latest_message,
         })
     rows.sort(key=lambda r: (_SEVERITY_ORDER.get(r["severity"], 3), -r["count"], r["kind"]))
     return rows

@@ -14,6 +14,7 @@ import pytest
 from tdmon.cli import main
 from tdmon.config.daemon import load_daemon_config
 from tdmon.config.expectations import load_expectations
+from tdmon.record.digest import summarize
 from tdmon.record.reader import read_messages, topic_counts
 from tdmon.replay.driver import ReplayResult, replay
 from tdmon.replay.expectations import Check, check_replay, failed, find_expectations
@@ -147,6 +148,10 @@ def test_cli_replay_check_summary_and_rrd(tmp_path: Path,
     summary = json.loads(capsys.readouterr().out)
     assert code == 0
     assert summary["messages_in"] == summary["samples"] == 965
+    # the engineer's numbers, gathered while replaying, are those of the recording read back
+    read_back = summarize([out])
+    assert {key: summary[key] for key in read_back} == read_back
+    assert read_back["friction"] and read_back["alarm_summary"]
     inline = tmp_path / "inline.mcap"
     config = REPO / "config" / "daemon" / "replay-sim-trip-in.toml"
     assert main(["replay", str(path), "--config", str(config), "--out", str(inline),
