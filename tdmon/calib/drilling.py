@@ -26,15 +26,20 @@ from dataclasses import dataclass, replace
 from typing import Final, NamedTuple
 
 from tdmon.calib.measurement import SensorEstimate
+from tdmon.errors import FitError
+from tdmon.model.torque_drag import WellModel
+from tdmon.vocabulary import Operation
 
 __all__ = [
     "BIT_TORQUE_SOURCES",
+    "DrillingFriction",
     "DrillingState",
     "Tag",
     "WobEstimate",
     "bit_torque_pessier",
     "bit_torque_step",
     "downhole_wob",
+    "drilling_friction",
     "track",
 ]
 
@@ -223,3 +228,63 @@ def downhole_wob(hookload: float, off_bottom_load: float, estimate: SensorEstima
     wob = (string_load - off_bottom_load) / load_per_wob
     reading_std = estimate.uncertainty(string_load, motion) / estimate.factor(motion)
     return WobEstimate(wob, math.hypot(reading_std, weight_std) / abs(load_per_wob))
+
+
+class DrillingFriction(NamedTuple):
+    """Friction from a drilling window's torque: ``mu`` [-], ``mu_std`` [-] (its torque's
+    standard error and the bit torque's uncertainty through the slope), the string's torque
+    it matched [N m] and that slope [N m per unit friction]."""
+
+    mu: float
+    mu_std: float
+    string_torque: float
+    slope: float
+
+
+def drilling_friction(model: WellModel, bit_depth: float, wob: float, torque: float,
+                      torque_se: float, bit_torque: float, bit_torque_std: float = 0.0, *,
+                      method: str = "soft-string",
+                      bracket: tuple[float, float] = (0.0, 1.0)) -> DrillingFriction:
+    """The friction factor whose modelled drilling torque is the measured one.
+
+    Parameters
+    ----------
+    model : the prepared well
+    bit_depth : [m]
+    wob : weight on bit [N]
+    torque : the window's mean surface torque [N m] and ``torque_se`` its standard error
+    bit_torque : the bit's torque [N m] and ``bit_torque_std`` its uncertainty
+    method : torque-and-drag method
+    bracket : friction range of the solve [-]
+
+    Raises
+    ------
+    FitError
+        No friction in ``bracket`` gives the string's torque (``torque - bit_torque``).
+
+    Notes
+    -----
+    The surface torque on bottom is ``T = T_b + T_s(mu, W)`` (the bit torque the boundary
+    value of the torque balance, Johancsik et al. 1984), so friction solves
+    ``T_s(mu, W) = T - T_b``; ``T_s`` rises monotonically with ``mu``.
+    """
+    from scipy.optimize import brentq
+
+    target = torque - bit_torque
+
+    def string_torque(mu: float) -> float:
+        return model.evaluate(Operation.ON_BOTTOM, bit_depth, mu, method=method, wob=wob)[1]
+
+    low, high = (string_torque(m) - target for m in bracket)
+    if low * high > 0.0:
+        raise FitError(f"drilling torque less the bit's, {target / 1e3:.1f} kN m at "
+                       f"{bit_depth:.1f} m bit depth, cannot be matched by any friction factor "
+                       f"from {bracket[0]:g} to {bracket[1]:g} (the model gives "
+                       f"{(low + target) / 1e3:.1f} to {(high + target) / 1e3:.1f} kN m)")
+    mu = float(brentq(lambda m: string_torque(m) - target, *bracket, xtol=1e-6))
+    step = 1e-3
+    slope = (string_torque(min(mu + step, bracket[1]))
+             - string_torque(max(mu - step, bracket[0]))) / (
+        min(mu + step, bracket[1]) - max(mu - step, bracket[0]))
+    std = math.hypot(torque_se, bit_torque_std) / slope if slope > 0.0 else math.inf
+    return DrillingFriction(mu, std, target, slope)
