@@ -671,6 +671,11 @@ def _on_bottom(bit: float | None, hole: float | None, wob: float | None,
     return off_bottom is not None and off_bottom <= thresholds.on_bottom
 
 
+#: The states a string sliding ahead (turned by a mud motor, not from surface) is classed as:
+#: its samples, while the hole deepens under the bit, carry an unknown weight on the bit.
+_SLIDING_STATES: Final = frozenset({RigState.STATIC, RigState.CIRCULATING, RigState.SLACK_OFF})
+
+
 def drilling_ahead(prior: DetectorState, t: float, bit: float | None, hole: float | None,
                    thresholds: RigStateThresholds) -> tuple[bool, float, float, float]:
     """Whether the hole deepens under the bit now: (drilling ahead, the deepest hole depth
@@ -783,7 +788,7 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
         steady = abs(hookload - prior_hookload) <= step
     if steady and state in MOVING_STATES and velocity is None:
         steady = False
-    if steady and ahead and state != RigState.DRILLING:
+    if steady and ahead and state in _SLIDING_STATES:
         steady = False  # the hole deepens without rotation (sliding): the bit carries weight
     hang_load, hang_since, hang_run = _hang(prior, same, state, t, hookload, thresholds)
     if steady and hang_load is not None:
