@@ -759,6 +759,8 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     bit, hole = _trusted(sample.bit_depth, "bit_depth", frozen), _finite(sample.hole_depth)
     on_bottom = _on_bottom(bit, hole, _trusted(sample.wob, "wob", frozen), thresholds)
     ahead, deepest, level, deepened = drilling_ahead(prior, t, bit, hole, thresholds)
+    # a string pulled up off the new bottom (back-reaming, a pick-up) has left it
+    ahead = ahead and not (velocity is not None and velocity < -thresholds.moving_speed)
     on_bottom = on_bottom or ahead
     # on bottom by the depths, or reading weight near the hole depth (coarse hole depths)
     wob_reading = _finite(sample.wob)
