@@ -14,12 +14,17 @@ from tdmon.calib.drilling import (
     bit_torque_pessier,
     bit_torque_step,
     downhole_wob,
+    drilling_friction,
     track,
 )
+from tdmon.calib.joint import JointSettings, _linearise, drilling_measurements
 from tdmon.calib.measurement import SensorEstimate
 from tdmon.calib.rigstate import RigStateThresholds, detect_series
+from tdmon.calib.windows import Window
+from tdmon.errors import FitError
 from tdmon.model.hookload_sensor import HookloadSensor, SensorLocation
 from tdmon.model.torque_drag import Operation, WellModel
+from tdmon.vocabulary import RigState
 
 TH = RigStateThresholds(block_weight=400e3)
 RPM_120 = 120 * 2 * math.pi / 60
@@ -129,3 +134,38 @@ def test_the_weight_at_the_bit_recovers_the_models_own(model_open: WellModel) ->
     reading = float(sensor.reading(on_bottom, -1)) + 7e3
     estimate = SensorEstimate(sensor, block, 0.0, offset=7e3, efficiency=0.96)
     assert downhole_wob(reading, off_bottom, estimate).wob == pytest.approx(wob, rel=1e-9)
+
+
+def _drilling_window(hookload: float, torque: float, wob: float | None,
+                     bit_torque: float | None) -> Window:
+    return Window(RigState.DRILLING, 0.0, 30.0, 30, 3000.0, 2999.9, 3000.1, hookload, 2e3,
+                  torque=torque, torque_se=100.0, rpm=12.0, wob=wob, bit_torque=bit_torque)
+
+
+def test_friction_from_the_models_own_drilling_torque(model_open: WellModel) -> None:
+    # the model's surface torque on bottom at friction 0.3, 100 kN and a 2 kN m bit
+    torque = model_open.evaluate(Operation.ON_BOTTOM, 3000.0, 0.3, wob=100e3,
+                                 bit_torque=2e3)[1]
+    solved = drilling_friction(model_open, 3000.0, 100e3, torque, 150.0, 2e3, 200.0)
+    assert solved.mu == pytest.approx(0.3, abs=1e-5)
+    assert solved.string_torque == pytest.approx(torque - 2e3)
+    # the uncertainty: the torque's and the bit torque's through the slope dT/dmu
+    assert solved.mu_std == pytest.approx(250.0 / solved.slope)
+    with pytest.raises(FitError, match="cannot be matched"):
+        drilling_friction(model_open, 3000.0, 100e3, 1e3, 150.0, 2e3)
+
+
+def test_what_a_drilling_window_offers_the_joint_estimate(model_open: WellModel) -> None:
+    window = _drilling_window(1.0e6, 18e3, 80e3, 2e3)
+    hookload, torque = drilling_measurements(window)
+    assert (hookload.operation, hookload.kind, hookload.motion, hookload.wob) == (
+        "on_bottom", "drilling_hookload", -1, 80e3)
+    assert (torque.kind, torque.value, torque.wob) == ("drilling_torque", 16e3, 80e3)
+    assert drilling_measurements(_drilling_window(1.0e6, 18e3, 80e3, None)) == (hookload,)
+    assert drilling_measurements(_drilling_window(1.0e6, 18e3, None, 2e3)) == ()
+    # the weight factor scales the string, not the weight on the bit:
+    # reading = B + w F_0 - W with F_0 the rotating top force
+    block = model_open.well.block_weight
+    f0 = model_open.evaluate(Operation.ROTATING, 3000.0, 0.25)[0] - block
+    linear = _linearise(model_open, hookload, 3000.0, block, 0.0, JointSettings(), "soft-string")
+    assert linear(np.array([0.25, 1.05])).predicted == pytest.approx(block + 1.05 * f0 - 80e3)
