@@ -29,12 +29,16 @@ CHANNEL_UNITS: Final[Mapping[str, tuple[str, str]]] = MappingProxyType({
     "flow_in": ("m**3/s", "m^3/s"),
     "spp": ("Pa", "Pa"),
     "wob": ("N", "N"),
+    "downhole_wob": ("N", "N"),
+    "downhole_torque": ("N*m", "N m"),
     "mud_temp_in": ("degC", "degC"),
     "mud_temp_out": ("degC", "degC"),
     "mud_density": ("kg/m**3", "kg/m^3"),
 })
 """Canonical channels and their internal (SI) unit: (unit text, display string). The
-temperatures are kept in degrees Celsius, the unit of the friction laws' temperature."""
+temperatures are kept in degrees Celsius, the unit of the friction laws' temperature.
+``wob`` is the rig's surface weight on bit; ``downhole_wob`` and ``downhole_torque`` an MWD
+tool's readings at the bit (optional; docs/drilling.md)."""
 
 CHANNELS: Final[tuple[str, ...]] = tuple(CHANNEL_UNITS)
 """The canonical channel names, in the order of `CHANNEL_UNITS`."""

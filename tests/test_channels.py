@@ -20,12 +20,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_channels_and_their_si_units() -> None:
     assert CHANNELS == ("hookload", "torque", "bit_depth", "hole_depth", "block_position", "rpm",
-                        "flow_in", "spp", "wob", "mud_temp_in", "mud_temp_out", "mud_density")
+                        "flow_in", "spp", "wob", "downhole_wob", "downhole_torque",
+                        "mud_temp_in", "mud_temp_out", "mud_density")
     # each internal unit is what pint converts to: 1 kN is 1000 N, 1 ft 0.3048 m, 60 rpm 2 pi
     assert conversion("kN", CHANNEL_UNITS["hookload"][0]) == pytest.approx((1000.0, 0.0))
     assert conversion("ft", CHANNEL_UNITS["bit_depth"][0]) == pytest.approx((0.3048, 0.0))
     assert conversion("rpm", CHANNEL_UNITS["rpm"][0])[0] == pytest.approx(2 * 3.141592653589793
                                                                           / 60)
+    # the MWD's torque at the bit in the surface torque's unit: 1 kN m is 1000 N m
+    assert conversion("kN*m", CHANNEL_UNITS["downhole_torque"][0]) == pytest.approx((1000.0, 0.0))
     assert conversion("degF", CHANNEL_UNITS["mud_temp_in"][0]) == pytest.approx(
         (5 / 9, -32 * 5 / 9))
     # the decoder names the same objects (it used to own them)

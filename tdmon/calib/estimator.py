@@ -44,6 +44,7 @@ from tdmon.calib.alarms import Alarm, friction_jump, limit_alarms, profile_anoma
 from tdmon.calib.backcalc import FrictionEstimate, back_calculate_window, shoe_depth
 from tdmon.calib.blockweight import BlockWeightWindow, add_block_weight
 from tdmon.calib.cased import CasedFriction, add_cased, wait_for_cased
+from tdmon.calib.drilling import DrillingState, drilling_friction, track
 from tdmon.calib.estimator_state import (
     CalibrationSettings,
     EstimatorState,
@@ -234,14 +235,46 @@ class FrictionEstimator:
             block = add_block_weight(block, sample.hookload)
         accumulator, window = add_sample(samples.accumulator, sample, detection,
                                          self.settings.windows)
+        drilling = self._track_drilling(samples.drilling, sample, detection)
         if (accumulator is samples.accumulator and block is samples.block_weight
-                and window is None and slips is samples.slips):
+                and window is None and slips is samples.slips
+                and drilling is samples.drilling):
             return state, outputs
-        state = EstimatorState(SampleState(accumulator, block, slips), state.windows)
+        state = EstimatorState(SampleState(accumulator, block, slips, drilling), state.windows)
         if window is None:
             return state, outputs
+        if window.state == RigState.DRILLING:
+            window = replace(window, bit_torque=drilling.bit_torque)
         state, more = self.update(state, window)
         return state, outputs + more
+
+    def _track_drilling(self, prior: DrillingState, sample: RigSample, detection: Detection
+                        ) -> DrillingState:
+        """The tags and the bit torque of the last one after this sample (docs/drilling.md)."""
+        state = detection.state
+        if not (prior.drilling or state in (RigState.DRILLING, RigState.ROTATING_OFF_BOTTOM)
+                or prior.off_bottom_samples):
+            return prior  # tripping, in slips: nothing to follow
+        change = 0.0
+        settling = state == RigState.DRILLING and (
+            not prior.drilling or sample.t - prior.since <= self.settings.tag_settle)
+        if settling and sample.wob is not None and sample.bit_depth is not None:
+            change = self._string_torque_change(sample.bit_depth, sample.wob)
+        return track(prior, sample.t, state, detection.steady, sample.bit_depth,
+                     sample.hole_depth, sample.hookload, sample.torque,
+                     string_torque_change=change, settle=self.settings.tag_settle)
+
+    def _string_torque_change(self, bit_depth: float, wob: float) -> float:
+        """What ``wob`` [N] on the bit changes of the string's torque at ``bit_depth`` [m], at
+        the prior friction [N m] (0 where the model does not reach)."""
+        mu, method = self.settings.prior_mu, self.settings.method
+        try:
+            on = self.model.evaluate(Operation.ON_BOTTOM, bit_depth, mu, method=method,
+                                     wob=wob)[1]
+            off = self.model.evaluate(Operation.ROTATING, bit_depth, mu, method=method)[1]
+        except ModelError:
+            return 0.0
+        return on - off
 
     def _slips_done(self, state: EstimatorState, run: SlipsRun, t: float
                     ) -> tuple[EstimatorState, tuple[Output, ...]]:
@@ -331,6 +364,9 @@ class FrictionEstimator:
         corrected = corrected_window(window, sensor, self.model.well.block_weight)
         if window.state in WEIGHT_CHECK_STATES:
             w = self._weight_check(w, corrected, out)
+        if window.state == RigState.DRILLING:
+            w = self._joint(w, block, window, sensor, out)
+            return self._drilling_window(w, window, out), out
         if window.state not in ESTIMATED_STATES:
             return self._joint(w, block, window, sensor, out), out
         try:
@@ -355,6 +391,34 @@ class FrictionEstimator:
         w = self._feed_profile(w, corrected, out)
         w = self._feed_mu_t(w, corrected, estimate, out)
         return w, out
+
+    def _drilling_window(self, w: WindowState, window: Window, out: list[Output]
+                         ) -> WindowState:
+        """Friction from a drilling window's torque less the bit's (docs/drilling.md), as a
+        ``window`` estimate of operation ``drilling``; nothing without a weight on bit, a bit
+        torque or a torque that moves."""
+        if (window.wob is None or window.bit_torque is None or window.torque is None
+                or window.torque_se is None or "torque_stuck" in window.flags):
+            return w
+        try:
+            solved = drilling_friction(self.model, window.bit_depth, window.wob,
+                                       window.torque, window.torque_se, window.bit_torque,
+                                       method=self.settings.method,
+                                       bracket=self.settings.bracket)
+        except (FitError, ModelError) as exc:
+            out.append(_alarm(Alarm(window.t_end, AlarmKind.WINDOW_REJECTED, Severity.INFO,
+                                    f"{window.state} window rejected: {exc}")))
+            return replace(w, rejected=count(w.rejected, "not_bracketed"))
+        scatter = self._scatter_of(w, window)
+        out.append(Output("estimate", estimate_message(
+            window.t_end, EstimateKind.WINDOW, RigState.DRILLING, solved.mu,
+            math.hypot(solved.mu_std, scatter), bit_depth_m=window.bit_depth, section="all",
+            samples=window.n, t_start=window.t_start,
+            low_confidence=bool(window.low_confidence), flags=list(window.flags),
+            measured=window.torque, measured_se=window.torque_se, quantity="torque",
+            mu_std_measurement=solved.mu_std, scatter_std=scatter, wob_N=window.wob,
+            bit_torque_Nm=window.bit_torque)))
+        return w
 
     def _resolution(self, window: Window, sensor: SensorEstimate) -> Resolution | None:
         """Whether the window's load can show friction above the sensor's uncertainty (None:

@@ -15,6 +15,7 @@ from typing import Any, Final, NamedTuple
 from tdmon.calib.alarms import JumpSettings
 from tdmon.calib.blockweight import BlockWeightWindow, BuoyancyCheck
 from tdmon.calib.cased import CasedFriction
+from tdmon.calib.drilling import DrillingState
 from tdmon.calib.joint import JointSettings, JointState
 from tdmon.calib.mismatch import Mismatch
 from tdmon.calib.mu_calibration import MuTCalibrator
@@ -57,6 +58,8 @@ class CalibrationSettings:
     learn_block_weight : feed the in-slips block weight back into the rig-state threshold
     block_weight_tolerance : relative deviation from the configured block weight reported [-]
     joint : the joint friction and weight-factor estimate (its prior, drift, mismatch alarm)
+    tag_settle : a tag's bit torque is the mean torque step of its first this many seconds
+        on bottom [s] (`tdmon.calib.drilling.track`)
     """
 
     windows: WindowSettings = field(default_factory=WindowSettings)
@@ -73,6 +76,7 @@ class CalibrationSettings:
     learn_block_weight: bool = True
     block_weight_tolerance: float = 0.05
     joint: JointSettings = field(default_factory=JointSettings)
+    tag_settle: float = 30.0
 
 
 class Output(NamedTuple):
@@ -85,6 +89,7 @@ class Output(NamedTuple):
 #: an empty window and no in-slips hook load, shared: values never changed once made
 _NO_WINDOW: Final = WindowAccumulator()
 _NO_BLOCK_WEIGHT: Final = BlockWeightWindow()
+_NO_DRILLING: Final = DrillingState()
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,11 +103,13 @@ class SampleState:
         detector's threshold)
     slips : the connection in slips going on: its readings by the block's motion (None: the
         string is on the hook)
+    drilling : the tags and the bit torque of the last one (`tdmon.calib.drilling`)
     """
 
     accumulator: WindowAccumulator = _NO_WINDOW
     block_weight: BlockWeightWindow = _NO_BLOCK_WEIGHT
     slips: SlipsRun | None = None
+    drilling: DrillingState = _NO_DRILLING
 
 
 @dataclass(frozen=True)

@@ -73,6 +73,7 @@ __all__ = [
     "JointSettings",
     "JointState",
     "Measurement",
+    "drilling_measurements",
     "identifiability",
     "initial_joint",
     "mean_and_covariance",
@@ -250,7 +251,9 @@ class Measurement(NamedTuple):
     ``slack_off``, ``static``, ``rotating_hookload``, ``rotating_torque``, and in slips
     ``in_slips``, ``in_slips_hoisting``, ``in_slips_lowering``) and the travelling block's
     motion (+1 hoisting, -1 lowering, 0 still). An in-slips reading's operation is
-    ``in_slips``: the hook carries the travelling equipment alone."""
+    ``in_slips``: the hook carries the travelling equipment alone. A drilling window's
+    (``drilling_hookload``, ``drilling_torque``: its torque less the bit's) is ``on_bottom``
+    with the weight on bit ``wob`` [N]."""
 
     operation: str
     quantity: int
@@ -258,6 +261,7 @@ class Measurement(NamedTuple):
     se: float
     kind: str
     motion: int = 0
+    wob: float = 0.0  # on bottom: the weight on the bit [N] (docs/drilling.md)
 
 
 #: The operation of an in-slips reading (the hook carries no string).
@@ -289,6 +293,8 @@ def measurements(window: Window, last_motion: str | None = None) -> tuple[Measur
             return ()
         kind = "static" if last_motion is None else "static_released"
         return (Measurement(Operation.STATIC, 0, window.hookload, window.hookload_se, kind),)
+    if state == RigState.DRILLING:
+        return drilling_measurements(window)
     if state != RigState.ROTATING_OFF_BOTTOM:
         return ()
     out = [Measurement(Operation.STATIC, 0, window.hookload, window.hookload_se,
@@ -297,6 +303,24 @@ def measurements(window: Window, last_motion: str | None = None) -> tuple[Measur
             and math.isfinite(window.torque) and "torque_stuck" not in window.flags):
         out.append(Measurement(Operation.ROTATING, 1, window.torque, window.torque_se,
                                "rotating_torque"))
+    return tuple(out)
+
+
+def drilling_measurements(window: Window) -> tuple[Measurement, ...]:
+    """What a drilling window offers (docs/drilling.md, "Drilling windows"): its hook load on
+    bottom with its weight on bit, the block lowering at the rate of penetration, and its
+    surface torque less the bit torque (without a bit torque, the hook load alone; without a
+    weight on bit, nothing)."""
+    wob = window.wob
+    if wob is None or not math.isfinite(wob):
+        return ()
+    out = [Measurement(Operation.ON_BOTTOM, 0, window.hookload, window.hookload_se,
+                       "drilling_hookload", MOTION_OF_STATE[RigState.DRILLING], wob)]
+    bit = window.bit_torque
+    if (bit is not None and window.torque is not None and window.torque_se is not None
+            and math.isfinite(window.torque) and "torque_stuck" not in window.flags):
+        out.append(Measurement(Operation.ON_BOTTOM, 1, window.torque - bit, window.torque_se,
+                               "drilling_torque", 0, wob))
     return tuple(out)
 
 
@@ -358,7 +382,8 @@ def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float,
             value, slope = model_block, 0.0
         else:
             value, gradient = model.evaluate_gradient(m.operation, bit_depth, mu,
-                                                      quantity_index=m.quantity, method=method)
+                                                      quantity_index=m.quantity, method=method,
+                                                      wob=m.wob)
             slope = float(gradient.sum())  # uniform friction: the per-element gradient's sum
         if torque:
             f = value
@@ -366,12 +391,14 @@ def _linearise(model: WellModel, m: Measurement, bit_depth: float, block: float,
             jacobian[layout.weight] = f
             variance = m.se**2 + (tau * w * slope) ** 2 + (settings.weight_model_std * w * f) ** 2
             return _Linear(w * f, jacobian, max(variance, 1.0), f)
-        f = value - model_block  # the string's top force at w = 1
+        # the string's top force at w = 1; on bottom the weight on the bit is a force of its
+        # own, which the weight factor does not scale (rotating: F = w F_0 - W)
+        f = value - model_block + m.wob
         b = fixed_or(x, layout.block, block)
         o = fixed_or(x, layout.offset, 0.0)
         e = min(max(fixed_or(x, layout.sheave, sensor.efficiency), 0.8), 1.0)
         factor = sensor.factor(m.motion, e)
-        load = b + w * f
+        load = b + w * f - m.wob
         jacobian[layout.mu] = factor * w * slope
         jacobian[layout.weight] = factor * f
         if layout.block is not None:

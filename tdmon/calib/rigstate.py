@@ -71,6 +71,7 @@ __all__ = [
     "classify",
     "detect",
     "detect_series",
+    "drilling_ahead",
     "in_slips_limit",
 ]
 
@@ -139,6 +140,12 @@ class RigStateThresholds:
     wob_follow : on bottom, a fall of the hook load (weight set on the bit) the weight on bit
         must follow [N] (50 kN: several deviations of a hook load's noise above its on-bottom
         highest, below the weight a bit drills with)
+    drilling_ahead_time : the bit is on bottom, whatever the weight on bit reads, while it lies
+        within ``on_bottom`` of the hole depth and the hole depth deepened within this long
+        [s] (docs/drilling.md; 120 s: a hole depth sent in 0.1 m steps at 3 m/h, the slowest
+        rate of penetration a drilling interval is judged at)
+    drilling_ahead_step : the hole deepens when its depth lies this much below the last
+        deepening's [m] (a hole depth sent in 0.1 m steps deepens at every step)
     """
 
     block_weight: float = 0.0
@@ -171,6 +178,8 @@ class RigStateThresholds:
     frozen_resolution: Mapping[str, float] = field(
         default_factory=lambda: dict(FROZEN_RESOLUTION))
     wob_follow: float = 50e3
+    drilling_ahead_time: float = 120.0
+    drilling_ahead_step: float = 0.05
 
 
 HANGING_STATES: frozenset[RigState] = frozenset(
@@ -249,6 +258,9 @@ class DetectorState:
     frozen: frozenset[str] = _NO_CHANNELS  # the channels frozen now
     frozen_channels: tuple[FrozenChannel, ...] = ()  # and what the alarm says of them
     torque: TorqueZero = _NO_TORQUE  # the torque's zero offset and rotation evidence
+    hole_depth: float = -math.inf  # the deepest hole depth read [m]
+    hole_level: float = -math.inf  # the hole depth at its last deepening [m]
+    hole_deepened: float = -math.inf  # when that was [s]
 
 
 @dataclass(frozen=True, slots=True)
@@ -659,6 +671,38 @@ def _on_bottom(bit: float | None, hole: float | None, wob: float | None,
     return off_bottom is not None and off_bottom <= thresholds.on_bottom
 
 
+#: The states a string sliding ahead (turned by a mud motor, not from surface) is classed as:
+#: its samples, while the hole deepens under the bit, carry an unknown weight on the bit.
+_SLIDING_STATES: Final = frozenset({RigState.STATIC, RigState.CIRCULATING, RigState.SLACK_OFF})
+
+
+def drilling_ahead(prior: DetectorState, t: float, bit: float | None, hole: float | None,
+                   thresholds: RigStateThresholds) -> tuple[bool, float, float, float]:
+    """Whether the hole deepens under the bit now: (drilling ahead, the deepest hole depth
+    read [m], the hole depth at its last deepening [m], when that was [s]).
+
+    The bit drills ahead while it lies within ``on_bottom`` of the deepest hole depth read
+    and the hole deepened within ``drilling_ahead_time`` (docs/drilling.md, "Rig state"): the
+    hole deepens only under a bit cutting rock, whatever the surface weight on bit reads (a
+    driller's zero set off the hook load drifts, and a soft formation drills at a few kN).
+    A deepening is a hole depth ``drilling_ahead_step`` or more below the last deepening's,
+    read with the bit within ``on_bottom`` of it (the bit made that hole); the first hole depth
+    read starts the record. So a noisy hole-depth channel, whose deepest reading runs ahead
+    of the bit, does not put a bit off bottom on bottom.
+    """
+    deepest, level, deepened = prior.hole_depth, prior.hole_level, prior.hole_deepened
+    if hole is not None:
+        if not math.isfinite(level):
+            level = hole
+        elif (hole >= level + thresholds.drilling_ahead_step and bit is not None
+              and hole - bit <= thresholds.on_bottom):
+            level, deepened = hole, t
+        deepest = max(deepest, hole)
+    ahead = (bit is not None and deepest - bit <= thresholds.on_bottom
+             and t - deepened <= thresholds.drilling_ahead_time)
+    return ahead, deepest, level, deepened
+
+
 def _trusted(value: float | None, channel: str, frozen: frozenset[str]) -> float | None:
     """A channel's finite value, None when missing or judged frozen."""
     value = _finite(value)
@@ -714,6 +758,10 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
                    or (flow is None and spp is not None and spp > thresholds.circulating_pressure))
     bit, hole = _trusted(sample.bit_depth, "bit_depth", frozen), _finite(sample.hole_depth)
     on_bottom = _on_bottom(bit, hole, _trusted(sample.wob, "wob", frozen), thresholds)
+    ahead, deepest, level, deepened = drilling_ahead(prior, t, bit, hole, thresholds)
+    # a string pulled up off the new bottom (back-reaming, a pick-up) has left it
+    ahead = ahead and not (velocity is not None and velocity < -thresholds.moving_speed)
+    on_bottom = on_bottom or ahead
     # on bottom by the depths, or reading weight near the hole depth (coarse hole depths)
     wob_reading = _finite(sample.wob)
     near_bottom = bit is not None and hole is not None and (
@@ -742,6 +790,8 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
         steady = abs(hookload - prior_hookload) <= step
     if steady and state in MOVING_STATES and velocity is None:
         steady = False
+    if steady and ahead and state in _SLIDING_STATES:
+        steady = False  # the hole deepens without rotation (sliding): the bit carries weight
     hang_load, hang_since, hang_run = _hang(prior, same, state, t, hookload, thresholds)
     if steady and hang_load is not None:
         steady = (t - hang_since >= thresholds.settle_time
@@ -751,7 +801,7 @@ def detect(prior: DetectorState, sample: RigSample, thresholds: RigStateThreshol
     # positional, in the order of the fields (once per frame: the keywords cost a third)
     new = DetectorState(t, bit_depth, bit_time, block_position, block_time, block_loaded,
                         velocity, hookload, state, since, run, hang_load, hang_since, hang_run,
-                        runs, frozen, frozen_channels, zero)
+                        runs, frozen, frozen_channels, zero, deepest, level, deepened)
     return new, Detection(state, bool(steady), velocity, suspect, frozen_channels)
 
 

@@ -80,6 +80,9 @@ class Window:
     rejected : why the window must not be used (None when usable)
     suspect : channels judged frozen that its samples' state rested on (sorted; the window
         is then fed to no estimate)
+    wob : a drilling window's mean surface weight on bit [N] (None otherwise)
+    bit_torque : a drilling window's bit torque [N m] (the estimator's, from the last tag;
+        None: not known)
     """
 
     state: RigState
@@ -98,6 +101,8 @@ class Window:
     flags: tuple[str, ...] = ()
     rejected: str | None = None
     suspect: tuple[str, ...] = ()
+    wob: float | None = None
+    bit_torque: float | None = None
 
     @property
     def low_confidence(self) -> bool:
@@ -215,7 +220,17 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
         hookload=mean if hookload.size else 0.0, hookload_se=se if hookload.size else 0.0,
         torque=torque, torque_se=torque_se, rpm=rpm, velocity=velocity, flags=tuple(flags),
         rejected=rejected, suspect=tuple(sorted(suspect)),
+        wob=_drilling_wob(state, kept),
     )
+
+
+def _drilling_wob(state: RigState, kept: list[tuple[RigSample, float | None]]) -> float | None:
+    """A drilling window's mean surface weight on bit [N] (None: another state, or a sample
+    without it)."""
+    if state != RigState.DRILLING:
+        return None
+    wob = [s.wob for s, _ in kept if s.wob is not None and math.isfinite(s.wob)]
+    return _mean(wob) if wob and len(wob) == len(kept) else None
 
 
 def close(acc: WindowAccumulator, settings: WindowSettings

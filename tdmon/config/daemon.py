@@ -573,6 +573,9 @@ class RigStateConfig(_Model):
     circulating_flow: CubicMetersPerSecond = Field(default=100 / 60_000, ge=0)
     on_bottom: Meters = Field(default=0.5, ge=0)
     steady_frames: int = Field(default=3, ge=1)
+    # drilling ahead: the bit within on_bottom of a hole depth that deepened within this long
+    # is on bottom whatever the weight on bit reads (docs/drilling.md)
+    drilling_ahead_time: Seconds = Field(default=120.0, gt=0)
     # rotation needs the surface torque above its still-string zero offset by at least this
     # (and 4 standard deviations of its level), whenever a torque channel is there
     rotating_torque: NewtonMetres = Field(default=100.0, ge=0)
@@ -614,6 +617,19 @@ class MonitorConfig(_Model):
     band_mu: list[FrictionFactor] = Field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4])
     method: Literal["aadnoy", "soft-string"] = "aadnoy"
     grid_step: Meters = Field(default=10.0, gt=0)
+    # drilling (docs/drilling.md): the bit torque drilling without a downhole torque, before
+    # the first tag's torque step is known: mu_b W D_b / 3 (Pessier and Fear 1992) with the
+    # bit's diameter and its specific coefficient of sliding friction (both, or neither)
+    bit_diameter: Meters | None = Field(default=None, gt=0)
+    bit_friction: float | None = Field(default=None, gt=0, lt=2)
+    # the bit torque of a tag is the mean torque step of its first this many seconds on bottom
+    tag_settle: Seconds = Field(default=30.0, gt=0)
+
+    @model_validator(mode="after")
+    def _bit_model(self) -> MonitorConfig:
+        if (self.bit_diameter is None) != (self.bit_friction is None):
+            raise ValueError("the bit torque model needs both bit_diameter and bit_friction")
+        return self
 
     @field_validator("band_mu")
     @classmethod

@@ -21,6 +21,7 @@ from tdmon.vocabulary import RigState
 
 __all__ = [
     "AlarmExpectation",
+    "DrillingExpectation",
     "EstimatesExpectation",
     "Expectations",
     "ForbiddenAlarms",
@@ -128,6 +129,17 @@ class AlarmExpectation(StrictModel):
         return self
 
 
+class DrillingExpectation(StrictModel):
+    """What the drilling frames' ``model`` messages must show (docs/drilling.md): the weight
+    at the bit from the hook load near the scenario's, the drilling curve's hook-load
+    residual centred on zero."""
+
+    wob: Force = Field(gt=0, description="the weight on the bit the scenario drills with")
+    wob_abs: Force = Field(gt=0, description="median |estimated - wob| at most this")
+    residual_abs: Force = Field(gt=0, description="|median hook-load residual| at most this")
+    min_frames: int = Field(default=10, ge=1)
+
+
 class EstimatesExpectation(StrictModel):
     minimum: dict[str, int] = Field(default_factory=dict,
                                     description="at least this many estimates of each kind")
@@ -147,6 +159,7 @@ class Expectations(StrictModel):
     states: StatesExpectation | None = None
     friction: list[FrictionExpectation] = Field(default_factory=list)
     joint: list[JointExpectation] = Field(default_factory=list)
+    drilling: DrillingExpectation | None = None
     estimates: EstimatesExpectation = Field(default_factory=EstimatesExpectation)
     alarm: list[AlarmExpectation] = Field(default_factory=list)
     forbidden: ForbiddenAlarms = Field(default_factory=ForbiddenAlarms)

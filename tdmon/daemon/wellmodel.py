@@ -48,7 +48,32 @@ def grid_model(
         *(sweep.hookload["pick_up"][1 + i] for i in range(n)),
         *(sweep.hookload["slack_off"][1 + i] for i in range(n)),
     ]
-    return GridLoadModel(sweep.bit_depth, np.vstack(rows), band_mu)
+    slopes = wob_slopes(prepared, sweep.bit_depth, mu, method)
+    return GridLoadModel(sweep.bit_depth, np.vstack(rows), band_mu, slopes)
+
+
+#: The weight on bit the on-bottom slopes are taken at [N] (a bit's usual weight: the torque
+#: is nearly linear in the weight up to it, docs/drilling.md).
+REFERENCE_WOB = 100e3
+
+
+def wob_slopes(prepared: object, depths: NDArray[np.float64], mu: float, method: str
+               ) -> NDArray[np.float64]:
+    """The on-bottom hook load's [-] and surface torque's [m] change per newton on the bit,
+    per bit depth of ``depths``, at ``mu`` (a ``tdmon.model.torque_drag.WellModel``): the
+    change from rotating off bottom to on bottom with :data:`REFERENCE_WOB` and no bit
+    torque, over that weight."""
+    from tdmon.model.torque_drag import Operation, WellModel
+
+    assert isinstance(prepared, WellModel)
+    slopes = np.empty((2, depths.size))
+    for i, depth in enumerate(depths.tolist()):
+        hook_off, torque_off = prepared.evaluate(Operation.ROTATING, depth, mu, method=method)
+        hook_on, torque_on = prepared.evaluate(Operation.ON_BOTTOM, depth, mu, method=method,
+                                               wob=REFERENCE_WOB)
+        slopes[0, i] = (hook_on - hook_off) / REFERENCE_WOB
+        slopes[1, i] = (torque_on - torque_off) / REFERENCE_WOB
+    return slopes
 
 
 def grid_model_for_well(config: DaemonConfig, well: object | None = None) -> GridLoadModel:

@@ -83,9 +83,13 @@ DEFAULT_ITEMS: Final[Mapping[str, WitsItem]] = MappingProxyType({item.code: item
     WitsItem("0132", "MDIA", "Mud Density In (avg)", "mud_density", "KGM3", "PPG"),
     WitsItem("0133", "MTOA", "Mud Temperature Out (avg)", "mud_temp_out", "DEGC", "DEGF"),
     WitsItem("0134", "MTIA", "Mud Temperature In (avg)", "mud_temp_in", "DEGC", "DEGF"),
+    # record 09 ("MWD Mechanical"): the MWD tool's averages at the bit
+    WitsItem("0915", "MWBA", "Downhole Wt-on-Bit (avg)", "downhole_wob", "KDN", "KLB"),
+    WitsItem("0917", "MTQA", "Downhole Torque (avg)", "downhole_torque", "KNM", "KFLB"),
 )})
-"""Record 01 ("General Time-Based") items tdmon reads, by code. Item numbers, mnemonics and
-both unit sets as in the WITS specification's record 1 layout (docs/wits0.md)."""
+"""Record 01 ("General Time-Based") items tdmon reads, and record 09's ("MWD Mechanical")
+downhole weight on bit and torque, by code. Item numbers, mnemonics and both unit sets as in
+the WITS specification's record layouts (docs/wits0.md)."""
 
 WITS_UNITS: Final[Mapping[str, tuple[float, str]]] = MappingProxyType({
     # length

@@ -257,6 +257,64 @@ def torque_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figu
     return Figure(title, _save(figure, path), caption)
 
 
+def drilling_figure(data: ReportData, path: Path, units: UnitSystem = _SI) -> Figure:
+    """The drilling page (docs/drilling.md): weights on bit, drilling torque against the
+    drilling curve, friction from the drilling windows, each against bit depth."""
+    from tdmon.record.drilling_page import drilling_series, drilling_windows
+
+    title = "Drilling: weight on bit, torque and friction against bit depth"
+    series = drilling_series(data.models)
+    if series.t.size == 0:
+        return Figure(title, None, "No drilling figure: the recording holds no drilling frame.")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, (wob, torque, friction) = plt.subplots(1, 3, figsize=(11, 6), dpi=110, sharey=True)
+    depth = units.depth(series.bit_depth)
+    estimated, std = series.wob_estimated, np.nan_to_num(series.wob_estimated_std)
+    wob.fill_betweenx(depth, units.force(estimated - std), units.force(estimated + std),
+                      color="C0", alpha=0.25, lw=0)
+    wob.scatter(units.force(estimated), depth, s=4, color="C0",
+                label="from the hook load (+/- 1 sd)")
+    wob.scatter(units.force(series.wob_surface), depth, s=4, color="k", label="surface")
+    if np.isfinite(series.wob_downhole).any():
+        wob.scatter(units.force(series.wob_downhole), depth, s=4, color="C3",
+                    label="downhole (MWD)")
+    _depth_axis(wob, "Weight on bit", f"Weight on bit [{units.label('force')}]",
+                f"Bit depth [{units.label('depth')} MD]")
+    _legend(wob, fontsize=7)
+    torque.scatter(units.torque(series.torque_measured), depth, s=4, color="C3",
+                   label="measured")
+    torque.plot(units.torque(series.torque_modelled), depth, "-", color="k", lw=1.0,
+                label="drilling curve (model)")
+    torque.set_title("Drilling torque")
+    torque.set_xlabel(f"Surface torque [{units.label('torque')}]")
+    torque.grid(True, alpha=0.3)
+    _legend(torque, fontsize=7)
+    window_depth, mu, mu_std = drilling_windows(data.estimates)
+    if mu.size:
+        friction.errorbar(mu, units.depth(window_depth), xerr=mu_std, fmt="o", color="C2",
+                          ms=4, label="drilling windows")
+        _legend(friction, fontsize=7)
+    friction.set_title("Friction from drilling")
+    friction.set_xlabel("Friction factor [-]")
+    friction.grid(True, alpha=0.3)
+    residual = series.hookload_residual[np.isfinite(series.hookload_residual)]
+    centre = (f"{float(units.force(np.array([np.median(residual)]))[0]):+.1f} "
+              f"{units.label('force')}" if residual.size else "not known")
+    caption = (
+        f"{series.t.size} drilling frames. Left: the weight on bit [{units.label('force')}] at "
+        "the surface (the rig's), from the hook load through the measurement model with one "
+        "standard deviation (band), and the MWD's where sent. Middle: the surface torque "
+        f"[{units.label('torque')}] measured and the drilling curve (the model's torque at the "
+        "frame's weight on bit plus the bit torque). Right: friction from each drilling "
+        f"window's torque less the bit's ({mu.size} windows, +/- 1 sd). Median hook-load "
+        f"residual against the drilling curve: {centre}.")
+    return Figure(title, _save(figure, path), caption)
+
+
 def _latest_profile(data: ReportData) -> dict[str, Any] | None:
     """The last friction profile: a ``profile`` message with ``mu`` (it may carry per-bin
     ``informed``), else the last ``profile`` estimate."""
@@ -505,6 +563,7 @@ _MAKERS: Final[tuple[tuple[str, Callable[..., Figure]], ...]] = (
     ("friction_vs_depth.png", friction_figure),
     ("mu_T.png", mu_t_figure),
     ("rig_state.png", state_figure),
+    ("drilling.png", drilling_figure),
 )
 
 

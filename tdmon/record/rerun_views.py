@@ -339,7 +339,25 @@ class RerunViews(MessageSink):
         residual = message.get("residual") or {}
         self._scalar(f"residual/{hookload}", TIME, t_ns, self._force(residual.get("hookload_N")))
         self._scalar(f"residual/{torque}", TIME, t_ns, self._torque(residual.get("torque_Nm")))
+        drilling = message.get("drilling")
+        if drilling:
+            self._on_drilling(t_ns, drilling)
         self._update_string(t_ns)
+
+    def _on_drilling(self, t_ns: int, drilling: Message) -> None:
+        """A drilling frame's weights on bit and bit torque (docs/drilling.md), against time
+        and bit depth: the drilling page."""
+        wob = self.names.drilling_wob
+        for key, name in (("wob_surface_N", "surface"), ("wob_estimated_N", "estimated"),
+                          ("wob_downhole_N", "downhole")):
+            self._both(f"{wob}/{name}", t_ns, self._force(drilling.get(key)))
+        estimated, std = _finite(drilling.get("wob_estimated_N")), _finite(
+            drilling.get("wob_estimated_std_N"))
+        if estimated is not None and std is not None:
+            self._both(f"{wob}/estimated_low", t_ns, self._force(estimated - std))
+            self._both(f"{wob}/estimated_high", t_ns, self._force(estimated + std))
+        self._both(f"{self.names.drilling_bit_torque}", t_ns,
+                   self._torque(drilling.get("bit_torque_Nm")))
 
     def _on_state(self, t_ns: int, message: Message) -> None:
         bit_depth = _finite(message.get("bit_depth_m"))
@@ -508,6 +526,8 @@ class _Names:
     temperature_profile: str
     depth_timeline: str
     depth_steps_per_m: float
+    drilling_wob: str = "drilling/wob_kN"
+    drilling_bit_torque: str = "drilling/bit_torque_kNm"
 
     @classmethod
     def of(cls, units: UnitSystem) -> _Names:
@@ -516,7 +536,9 @@ class _Names:
                    torque=f"torque_{units.key('torque')}",
                    bit_depth=f"bit_depth_{units.key('depth')}",
                    temperature_profile=f"profile/temperature_{units.key('temperature')}",
-                   depth_timeline=timeline, depth_steps_per_m=steps)
+                   depth_timeline=timeline, depth_steps_per_m=steps,
+                   drilling_wob=f"drilling/wob_{units.key('force')}",
+                   drilling_bit_torque=f"drilling/bit_torque_{units.key('torque')}")
 
     def depth_index(self, bit_depth_m: float) -> int:
         """The bit depth [m] as a step of the "against bit depth" timeline."""
@@ -584,6 +606,21 @@ def blueprint(units: UnitSystem | None = None) -> Any:
         name="Well",
         column_shares=[3, 2],
     )
+    drilling = rrb.Vertical(
+        rrb.TimeSeriesView(origin=f"/vs_depth/{names.drilling_wob}",
+                           name=f"Weight on bit vs bit depth [{force}]: surface, from the hook "
+                                "load (+/- 1 sd), downhole (MWD)"),
+        rrb.Horizontal(
+            rrb.TimeSeriesView(origin=f"/vs_depth/{names.torque}",
+                               name=f"Torque vs bit depth [{torque}]: measured, model/drilling"),
+            rrb.TimeSeriesView(origin="/vs_depth/friction",
+                               name="Friction vs bit depth (drilling: from the drilling torque)"),
+        ),
+        rrb.TimeSeriesView(origin=f"/{names.drilling_wob}",
+                           name=f"Weight on bit [{force}] against time"),
+        name=f"Drilling (select timeline {names.depth_timeline})",
+        row_shares=[3, 2, 2],
+    )
     samples = "SI" if units.name == "si" else "field units"
     inputs = rrb.Vertical(
         rrb.TimeSeriesView(origin="/samples", name=f"Decoded samples ({samples})"),
@@ -592,7 +629,7 @@ def blueprint(units: UnitSystem | None = None) -> Any:
         name="Inputs",
     )
     return rrb.Blueprint(
-        rrb.Tabs(against_time, against_depth, well, inputs),
+        rrb.Tabs(against_time, against_depth, drilling, well, inputs),
         rrb.TimePanel(timeline=TIME),
         collapse_panels=False,
     )

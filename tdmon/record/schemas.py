@@ -150,17 +150,22 @@ STATE: Final = _object(
     ("t", "state", "steady", "bit_depth_m"),
 )
 
+_OPTIONAL_SOURCE: Final[JsonSchema] = {"enum": [None, "downhole", "surface", "tag", "model"]}
+
 MODEL: Final = _object(
     "model",
     "tdmon modelled loads at the current bit depth, with the broomstick band",
     {
         "t": _TIME,
         "bit_depth_m": _NUMBER,
+        # "drilling" on drilling frames only: the drilling curve (docs/drilling.md), null
+        # without a weight on bit (or, for the torque, a bit torque)
         "hookload_N": _sub(
-            {"pick_up": _NUMBER, "slack_off": _NUMBER, "rotating": _NUMBER},
+            {"pick_up": _NUMBER, "slack_off": _NUMBER, "rotating": _NUMBER,
+             "drilling": _OPTIONAL_NUMBER},
             ("pick_up", "slack_off", "rotating"),
         ),
-        "torque_Nm": _sub({"rotating": _NUMBER}, ("rotating",)),
+        "torque_Nm": _sub({"rotating": _NUMBER, "drilling": _OPTIONAL_NUMBER}, ("rotating",)),
         "band": _sub(
             {"mu": _NUMBERS, "pick_up_N": _NUMBERS, "slack_off_N": _NUMBERS},
             ("mu", "pick_up_N", "slack_off_N"),
@@ -173,6 +178,15 @@ MODEL: Final = _object(
         "residual": _sub(
             {"hookload_N": _OPTIONAL_NUMBER, "torque_Nm": _OPTIONAL_NUMBER},
             ("hookload_N", "torque_Nm"),
+        ),
+        # drilling frames only: the weights on bit and the bit torque (docs/drilling.md)
+        "drilling": _sub(
+            {"wob_N": _OPTIONAL_NUMBER, "wob_source": _OPTIONAL_SOURCE,
+             "wob_surface_N": _OPTIONAL_NUMBER, "wob_downhole_N": _OPTIONAL_NUMBER,
+             "wob_estimated_N": _OPTIONAL_NUMBER, "wob_estimated_std_N": _OPTIONAL_NUMBER,
+             "bit_torque_Nm": _OPTIONAL_NUMBER, "bit_torque_source": _OPTIONAL_SOURCE},
+            ("wob_N", "wob_source", "wob_surface_N", "wob_downhole_N", "wob_estimated_N",
+             "wob_estimated_std_N", "bit_torque_Nm", "bit_torque_source"),
         ),
     },
     ("t", "bit_depth_m", "hookload_N", "torque_Nm", "band", "measured", "residual"),

@@ -26,6 +26,10 @@ daemon configuration and states, all optional:
   one expectation only (in file order), so two events cannot be met by the same alarm.
   ``known_issue`` = "why": the expectation is checked and reported but does not fail the run
   (a daemon limitation on record: reported in the summary, never failing the run);
+* ``[drilling]``: the drilling frames' ``model`` messages (docs/drilling.md): the weight at
+  the bit from the hook load (``wob_estimated_N``) within ``wob_abs`` of ``wob`` (median abs
+  error) and the drilling curve's hook-load residual's median within ``residual_abs`` of zero,
+  over at least ``min_frames`` frames;
 * ``[estimates] minimum``: at least so many estimates of each kind (``window``, ``profile``,
   ``mu_T``);
 * ``[forbidden]``: daemon alarm ``kinds`` that must not occur at all;
@@ -52,6 +56,7 @@ from typing import Any
 from tdmon.calib.parameters import JOINT_PARAMETERS, EstimatedParameter
 from tdmon.config.expectations import (
     AlarmExpectation,
+    DrillingExpectation,
     Expectations,
     ForbiddenAlarms,
     FrictionExpectation,
@@ -81,10 +86,12 @@ VOLVE_ACTIVITY_STATES: dict[str, frozenset[RigState]] = {
     "drilling": frozenset({RigState.DRILLING}),
 }
 
-#: The ``/truth/friction`` field holding the true friction factor of a window's operation.
+#: The ``/truth/friction`` field holding the true friction factor of a window's operation
+#: (a drilling window's friction is the rotating string's, from its torque).
 _TRUTH_FRICTION: dict[str, str] = {Operation.PICK_UP: "mu_pick_up",
                                    Operation.SLACK_OFF: "mu_slack_off",
-                                   Operation.ROTATING: "mu_rotating"}
+                                   Operation.ROTATING: "mu_rotating",
+                                   RigState.DRILLING: "mu_rotating"}
 
 
 def find_expectations(replay: str | os.PathLike[str]) -> Path | None:
@@ -142,6 +149,8 @@ class _Recorded:
     #: per estimated parameter with a simulated truth, (t, true value)
     truth_parameters: dict[str, list[tuple[float, float | None]]] = field(default_factory=dict)
     activities: list[tuple[float, str]] = field(default_factory=list)
+    #: the drilling frames' ``drilling`` and ``residual`` fields of the model messages
+    drilling: list[tuple[dict[str, Any], dict[str, Any]]] = field(default_factory=list)
 
 
 def _non_finite(value: Any) -> bool:
@@ -200,6 +209,8 @@ def _read(replay: Path, recording: Path) -> _Recorded:  # noqa: C901  (complex t
             data.estimates.append(message)
         elif item.topic == "/tdmon/alarm":
             data.alarms.append(message)
+        elif item.topic == "/tdmon/model" and "drilling" in message:
+            data.drilling.append((message["drilling"], message["residual"]))
     data.non_finite = recorded_nulls
     data.truth_states.sort()
     data.activities.sort()
@@ -448,6 +459,34 @@ def _median_text(parameter: EstimatedParameter, value: float) -> str:
     return f"{parameter.label} {value:.4f}"
 
 
+def _drilling(spec: DrillingExpectation, data: _Recorded) -> list[Check]:
+    """The weight at the bit from the hook load and the drilling curve's residual."""
+    wobs = [d["wob_estimated_N"] for d, _ in data.drilling
+            if d.get("wob_estimated_N") is not None]
+    residuals = [r["hookload_N"] for _, r in data.drilling if r.get("hookload_N") is not None]
+    checks = []
+    if len(wobs) < spec.min_frames:
+        checks.append(Check("drilling weight at the bit", False, f"{len(wobs)} frames",
+                            f">= {spec.min_frames} drilling frames with an estimate"))
+    else:
+        error = statistics.median(abs(w - spec.wob) for w in wobs)
+        checks.append(Check(
+            "drilling weight at the bit", error <= spec.wob_abs,
+            f"median {statistics.median(wobs) / 1e3:.1f} kN of {len(wobs)} frames, median |error| "
+            f"{error / 1e3:.1f} kN", f"within {spec.wob_abs / 1e3:g} kN of "
+            f"{spec.wob / 1e3:g} kN"))
+    if len(residuals) < spec.min_frames:
+        checks.append(Check("drilling hook-load residual", False, f"{len(residuals)} frames",
+                            f">= {spec.min_frames} drilling frames with a residual"))
+    else:
+        centre = statistics.median(residuals)
+        checks.append(Check(
+            "drilling hook-load residual", abs(centre) <= spec.residual_abs,
+            f"median {centre / 1e3:+.1f} kN of {len(residuals)} frames",
+            f"|median| <= {spec.residual_abs / 1e3:g} kN"))
+    return checks
+
+
 def _alarm(spec: AlarmExpectation, data: _Recorded, used: set[int]) -> Check:
     kinds = set(spec.kinds)
     at = None if spec.at is None else data.start + spec.at
@@ -529,6 +568,8 @@ def check_replay(expectations: Expectations, recording: str | os.PathLike[str], 
         checks.extend(_state_agreement(expectations.states, data))
     checks.extend(_friction(f, data) for f in expectations.friction)
     checks.extend(_joint(j, data) for j in expectations.joint)
+    if expectations.drilling is not None:
+        checks.extend(_drilling(expectations.drilling, data))
     kinds = Counter(str(e.get("kind")) for e in data.estimates)
     for kind, minimum in expectations.estimates.minimum.items():
         checks.append(Check(f"{kind} estimates", kinds[kind] >= minimum, str(kinds[kind]),

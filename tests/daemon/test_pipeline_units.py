@@ -272,9 +272,11 @@ class TestMonitor:
         import dataclasses
 
         names = [f.name for f in dataclasses.fields(ModelledLoads)]
-        args = (1.0, 2.0, 3.0, 4.0, 5.0, (0.1,), (6.0,), (7.0,))
+        args = (1.0, 2.0, 3.0, 4.0, 5.0, (0.1,), (6.0,), (7.0,), -0.98, -0.02)
         loads = ModelledLoads(*args)
         assert dataclasses.astuple(loads) == args
+        # without the on-bottom slopes: the rotating model's (docs/drilling.md)
+        assert dataclasses.astuple(ModelledLoads(*args[:8]))[8:] == (-1.0, 0.0)
         assert loads == ModelledLoads(**dict(zip(names, args, strict=True)))
         assert hash(loads) == hash(dataclasses.replace(loads))
         with pytest.raises(dataclasses.FrozenInstanceError):

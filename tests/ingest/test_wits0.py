@@ -35,12 +35,29 @@ def _frames(out: list[WitsFrame | FrameError]) -> list[WitsFrame]:
 
 
 def test_default_items_are_record_01_and_0115_is_not_a_channel() -> None:
-    assert all(code.startswith("01") for code in DEFAULT_ITEMS)
+    # record 01, and record 09's MWD weight on bit and torque at the bit
+    assert all(code.startswith("01") or code in ("0915", "0917") for code in DEFAULT_ITEMS)
     mapped = item_map()
     assert "0115" not in mapped and "0105" not in mapped and "0106" not in mapped
     assert {spec.channel for spec in mapped.values()} == {
         "bit_depth", "hole_depth", "block_position", "hookload", "wob", "torque", "rpm", "spp",
-        "flow_in", "mud_density", "mud_temp_out", "mud_temp_in"}
+        "flow_in", "mud_density", "mud_temp_out", "mud_temp_in", "downhole_wob",
+        "downhole_torque"}
+
+
+def test_record_09_downhole_weight_and_torque_by_hand() -> None:
+    # MWBA 1.8 KDN = 18 kN, MTQA 4.25 KNM = 4250 N m; field units 4.0 KLB, 3.1 KFLB
+    frame_bytes = b"&&\r\n09151.8\r\n09174.25\r\n!!\r\n"
+    [frame] = _frames(FrameParser().feed(frame_bytes))
+    values = {item.channel: item.value for item in decode_frame(frame, item_map(), 1.0).items}
+    assert values == {"downhole_wob": pytest.approx(18e3), "downhole_torque": pytest.approx(4250.0)}
+    field_bytes = b"&&\r\n09154.0\r\n09173.1\r\n!!\r\n"
+    [frame] = _frames(FrameParser().feed(field_bytes))
+    values = {item.channel: item.value
+              for item in decode_frame(frame, item_map("field"), 1.0).items}
+    lbf, ft = 0.45359237 * 9.80665, 0.3048
+    assert values["downhole_wob"] == pytest.approx(4000.0 * lbf, rel=1e-12)
+    assert values["downhole_torque"] == pytest.approx(3100.0 * lbf * ft, rel=1e-12)
 
 
 @pytest.mark.parametrize("sizes", [[len(FRAME)], [1] * len(FRAME), [3, 7, 11, 200], [50, 5]])

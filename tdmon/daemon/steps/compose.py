@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tdmon.daemon.pipeline import Step
-from tdmon.daemon.steps.monitor import LoadModel, MonitorStep
+from tdmon.daemon.steps.monitor import DrillingMonitor, LoadModel, MonitorStep
 from tdmon.daemon.steps.rig_state import (
     RigStateStep,
     StringWeight,
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["calibration_steps_for", "default_steps", "joint_settings"]
+__all__ = ["calibration_steps_for", "default_steps", "drilling_monitor", "joint_settings"]
 
 
 def default_steps(config: DaemonConfig, model: LoadModel | None,
@@ -37,8 +37,16 @@ def default_steps(config: DaemonConfig, model: LoadModel | None,
     monitor when a model is available."""
     steps: list[Step] = [rig_state or RigStateStep(rig_state_thresholds(config.rig_state))]
     if model is not None:
-        steps.append(MonitorStep(model))
+        steps.append(MonitorStep(model, drilling=drilling_monitor(config)))
     return steps
+
+
+def drilling_monitor(config: DaemonConfig) -> DrillingMonitor:
+    """The monitor's drilling with ``[monitor]``'s bit model and tag settling."""
+    monitor = config.monitor
+    bit = (None if monitor.bit_diameter is None or monitor.bit_friction is None
+           else (monitor.bit_diameter, monitor.bit_friction))
+    return DrillingMonitor(bit, monitor.tag_settle)
 
 
 def joint_settings(cal: CalibrationConfig, well: Well) -> JointSettings:

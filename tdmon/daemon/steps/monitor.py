@@ -19,6 +19,12 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from tdmon.calib.drilling import (
+    DrillingState,
+    bit_torque_pessier,
+    downhole_wob,
+    track,
+)
 from tdmon.calib.measurement import SensorEstimate
 from tdmon.daemon.pipeline import Emit, Frame
 from tdmon.daemon.steps.fluids import FluidEffect
@@ -42,6 +48,10 @@ class ModelledLoads:
     band_mu: tuple[float, ...]
     band_pick_up: tuple[float, ...]
     band_slack_off: tuple[float, ...]
+    # on bottom: the change of the rotating hook load [-] and torque [m] per newton on the bit
+    # (no bit torque), the slopes of the drilling curve (docs/drilling.md)
+    hookload_per_wob: float = -1.0
+    torque_per_wob: float = 0.0
 
 
 class LoadModel(Protocol):
@@ -60,18 +70,26 @@ class GridLoadModel:
     """Loads precomputed on a bit-depth grid, linearly interpolated.
 
     ``curves`` rows: pick-up, slack-off, rotating hook load and rotating torque at the design
-    ``mu``, then pick-up for each band mu, then slack-off for each band mu.
+    ``mu``, then pick-up for each band mu, then slack-off for each band mu. ``wob_slopes``
+    (optional) rows: the on-bottom hook load's and torque's change per newton of weight on
+    bit [-], [m] (`ModelledLoads.hookload_per_wob`, ``torque_per_wob``; without them -1 and 0).
     """
 
     def __init__(self, depths: NDArray[np.float64], curves: NDArray[np.float64],
-                 band_mu: Sequence[float]) -> None:
+                 band_mu: Sequence[float], wob_slopes: NDArray[np.float64] | None = None
+                 ) -> None:
         if depths.ndim != 1 or depths.size < 2 or np.any(np.diff(depths) <= 0):
             raise ValueError("grid depths must be increasing, at least two")
         if curves.shape != (4 + 2 * len(band_mu), depths.size):
             raise ValueError("curves do not match the grid and band")
+        if wob_slopes is not None:
+            if wob_slopes.shape != (2, depths.size):
+                raise ValueError("the weight-on-bit slopes do not match the grid")
+            curves = np.vstack([curves, wob_slopes])
+        self._slopes = wob_slopes is not None
         self.depths = depths
         self._depth_list = depths.tolist()
-        self.curves = curves
+        self.curves = curves  # with the slopes' two rows last when given
         self.band_mu = tuple(float(m) for m in band_mu)
         # every curve's value per grid depth as Python floats: interpolating a dozen values in
         # Python is several times faster than slicing, scaling and adding NumPy columns, and
@@ -112,7 +130,8 @@ class GridLoadModel:
         n = len(self.band_mu)
         loads = ModelledLoads(bit_depth, values[0], values[1], values[2], values[3],
                               self.band_mu, tuple(values[4:4 + n]),
-                              tuple(values[4 + n:4 + 2 * n]))
+                              tuple(values[4 + n:4 + 2 * n]),
+                              *(values[4 + 2 * n:] if self._slopes else ()))
         self._last = loads
         return loads
 
@@ -136,7 +155,104 @@ def as_read(loads: ModelledLoads, estimate: SensorEstimate, model_block_weight: 
     return ModelledLoads(loads.bit_depth, read(loads.pick_up, 1), read(loads.slack_off, -1),
                          read(loads.rotating, 0), loads.torque_rotating, loads.band_mu,
                          tuple(read(v, 1) for v in loads.band_pick_up),
-                         tuple(read(v, -1) for v in loads.band_slack_off))
+                         tuple(read(v, -1) for v in loads.band_slack_off),
+                         loads.hookload_per_wob, loads.torque_per_wob)
+
+
+@dataclass(frozen=True, slots=True)
+class DrillingView:
+    """The drilling part of one frame's ``model`` message (docs/drilling.md); None where not
+    known.
+
+    Attributes
+    ----------
+    hookload : the drilling curve: the modelled hook load on bottom with ``wob``, as the
+        sensor reads it lowering [N]
+    torque : the modelled surface torque on bottom with ``wob`` and ``bit_torque`` [N m]
+    wob, wob_source : the weight on bit the curve uses [N] and whose ("downhole", "surface")
+    wob_surface, wob_downhole : the rig's surface and the MWD's downhole weight on bit [N]
+    wob_estimated, wob_estimated_std : the weight at the bit from the hook load
+        (`tdmon.calib.drilling.downhole_wob`) and its standard deviation [N]
+    bit_torque, bit_torque_source : [N m] and whose (``BIT_TORQUE_SOURCES``)
+    """
+
+    hookload: float | None
+    torque: float | None
+    wob: float | None
+    wob_source: str | None
+    wob_surface: float | None
+    wob_downhole: float | None
+    wob_estimated: float | None
+    wob_estimated_std: float | None
+    bit_torque: float | None
+    bit_torque_source: str | None
+
+    def message(self) -> dict[str, Any]:
+        """The ``drilling`` field of the ``model`` message."""
+        return {"wob_N": self.wob, "wob_source": self.wob_source,
+                "wob_surface_N": self.wob_surface, "wob_downhole_N": self.wob_downhole,
+                "wob_estimated_N": self.wob_estimated,
+                "wob_estimated_std_N": self.wob_estimated_std,
+                "bit_torque_Nm": self.bit_torque, "bit_torque_source": self.bit_torque_source}
+
+
+class DrillingMonitor:
+    """The monitor's drilling: tags and the bit torque of each (`tdmon.calib.drilling.track`),
+    the weight at the bit from the hook load, and the drilling curve at the frame's weight on
+    bit and bit torque.
+
+    ``bit`` (diameter [m], specific coefficient of sliding friction [-]) gives the bit torque
+    by Pessier and Fear's model before a tag's torque step is known (None: not known then);
+    ``settle`` [s] is how long after a tag its torque step is averaged."""
+
+    def __init__(self, bit: tuple[float, float] | None = None, settle: float = 30.0) -> None:
+        self.bit = bit
+        self.settle = settle
+        self.state = DrillingState()
+
+    def on_frame(self, frame: Frame, loads: ModelledLoads,
+                 reading: tuple[SensorEstimate, float] | None) -> DrillingView | None:
+        """Follow one frame; its drilling view when it is drilling (None otherwise)."""
+        values = frame.values
+        drilling = frame.state == "drilling"
+        mwd = values.get("downhole_wob")
+        surface = values.get("wob")
+        wob = mwd if mwd is not None else surface
+        change = loads.torque_per_wob * wob if drilling and wob is not None else 0.0
+        hookload = values.get("hookload")
+        self.state = track(self.state, frame.t, frame.state, frame.steady, loads.bit_depth,
+                           values.get("hole_depth"), hookload, values.get("torque"),
+                           string_torque_change=change, settle=self.settle)
+        if not drilling:
+            return None
+        bit_torque, source = self._bit_torque(values.get("downhole_torque"), wob)
+        estimated = std = None
+        if hookload is not None and reading is None:
+            estimated = (hookload - loads.rotating) / loads.hookload_per_wob
+        elif hookload is not None and reading is not None:
+            estimate, block = reading
+            estimated, std = downhole_wob(hookload, loads.rotating - block, estimate,
+                                          load_per_wob=loads.hookload_per_wob)
+        curve = torque = None
+        if wob is not None:
+            curve = loads.rotating + loads.hookload_per_wob * wob
+            if reading is not None:
+                curve = reading[0].reading(curve - reading[1], -1)
+            if bit_torque is not None:
+                torque = loads.torque_rotating + loads.torque_per_wob * wob + bit_torque
+        return DrillingView(curve, torque, wob,
+                            None if wob is None else "downhole" if mwd is not None else "surface",
+                            surface, mwd, estimated, std, bit_torque, source)
+
+    def _bit_torque(self, downhole: float | None, wob: float | None
+                    ) -> tuple[float | None, str | None]:
+        if downhole is not None:
+            return downhole, "downhole"
+        if self.state.bit_torque is not None:
+            return self.state.bit_torque, "tag"
+        if self.bit is not None and wob is not None:
+            return bit_torque_pessier(wob, *self.bit), "model"
+        return None, None
 
 
 def with_fluid(loads: ModelledLoads, effect: FluidEffect) -> ModelledLoads:
@@ -158,13 +274,17 @@ class MonitorStep:
 
     ``sensor`` (None: the hook-load channel is the load on the hook) gives what is known of
     the hook-load measurement now; the modelled hook loads are then shown as that sensor
-    reads them, so that the residual is the measured reading against the modelled one."""
+    reads them, so that the residual is the measured reading against the modelled one.
+    ``drilling`` follows the drilling frames (`DrillingMonitor`; one with no bit model by
+    default): theirs are compared with the drilling curve."""
 
     name = "monitor"
 
-    def __init__(self, model: LoadModel, sensor: SensorReading | None = None) -> None:
+    def __init__(self, model: LoadModel, sensor: SensorReading | None = None,
+                 drilling: DrillingMonitor | None = None) -> None:
         self.model = model
         self.sensor = sensor
+        self.drilling = drilling if drilling is not None else DrillingMonitor()
         self.skipped_no_depth = 0
         self.skipped_out_of_range = 0
 
@@ -181,32 +301,47 @@ class MonitorStep:
         if fluid is not None:
             loads = with_fluid(loads, fluid["effect"])
         reading = self.sensor() if self.sensor is not None else None
+        drilling = self.drilling.on_frame(frame, loads, reading)
         if reading is not None:
             loads = as_read(loads, *reading)
-        emit("model", model_message(frame, loads))
+        emit("model", model_message(frame, loads, drilling))
 
     def close(self, emit: Emit) -> None:
         """Nothing buffered."""
 
 
-def model_message(frame: Frame, loads: ModelledLoads) -> dict[str, Any]:
-    """The ``model`` daemon message for one frame (docs/architecture.md)."""
+def model_message(frame: Frame, loads: ModelledLoads, drilling: DrillingView | None = None
+                  ) -> dict[str, Any]:
+    """The ``model`` daemon message for one frame (docs/architecture.md); a drilling frame's
+    (``drilling`` given) has the drilling curve and is compared with it (docs/drilling.md)."""
     hookload = frame.values.get("hookload")
     torque = frame.values.get("torque")
     curve = _CURVE_FOR_STATE.get(frame.state)
-    modelled = {"pick_up": loads.pick_up, "slack_off": loads.slack_off,
-                "rotating": loads.rotating}
-    hookload_residual = (None if hookload is None or curve is None
-                         else hookload - modelled[curve])
-    torque_residual = (torque - loads.torque_rotating
-                       if torque is not None and frame.state in ROTATING_STATES else None)
-    return {
+    modelled: dict[str, Any] = {"pick_up": loads.pick_up, "slack_off": loads.slack_off,
+                                "rotating": loads.rotating}
+    modelled_torque: dict[str, Any] = {"rotating": loads.torque_rotating}
+    if drilling is not None:
+        modelled["drilling"] = drilling.hookload
+        modelled_torque["drilling"] = drilling.torque
+        hookload_residual = (None if hookload is None or drilling.hookload is None
+                             else hookload - drilling.hookload)
+        torque_residual = (None if torque is None or drilling.torque is None
+                           else torque - drilling.torque)
+    else:
+        hookload_residual = (None if hookload is None or curve is None
+                             else hookload - modelled[curve])
+        torque_residual = (torque - loads.torque_rotating
+                           if torque is not None and frame.state in ROTATING_STATES else None)
+    message = {
         "t": frame.t,
         "bit_depth_m": loads.bit_depth,
         "hookload_N": modelled,
-        "torque_Nm": {"rotating": loads.torque_rotating},
+        "torque_Nm": modelled_torque,
         "band": {"mu": list(loads.band_mu), "pick_up_N": list(loads.band_pick_up),
                  "slack_off_N": list(loads.band_slack_off)},
         "measured": {"hookload_N": hookload, "torque_Nm": torque},
         "residual": {"hookload_N": hookload_residual, "torque_Nm": torque_residual},
     }
+    if drilling is not None:
+        message["drilling"] = drilling.message()
+    return message

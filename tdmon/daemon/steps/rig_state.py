@@ -164,7 +164,8 @@ def _with_sensor_checks(thresholds: RigStateThresholds, rs: RigStateConfig
     return replace(thresholds, rotating_torque=rs.rotating_torque,
                    torque_average=rs.torque_average, frozen_time=rs.frozen_time,
                    frozen_samples=rs.frozen_samples,
-                   frozen_resolution={**FROZEN_RESOLUTION, **rs.frozen_resolution})
+                   frozen_resolution={**FROZEN_RESOLUTION, **rs.frozen_resolution},
+                   drilling_ahead_time=rs.drilling_ahead_time)
 
 
 def calibration_thresholds(config: DaemonConfig, block_weight: float) -> RigStateThresholds:
