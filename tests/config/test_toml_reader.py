@@ -98,11 +98,11 @@ def test_one_prefix_rule_in_daemon_and_scenario_files(tmp_path: Path) -> None:
 
 def test_every_bundled_scenario_and_expectations_file_reads() -> None:
     scenarios = sorted((REPO / "replays" / "scenarios").glob("*.toml"))
-    assert len(scenarios) == 15
+    assert len(scenarios) == 16
     prefixes = {load_scenario(path).scenario.prefix for path in scenarios}
     assert prefixes == {"sim/trip-out", "sim/trip-in", "sim/faults", "sim/drill",
                         "sim/model-error", "sim/sheave", "sim/shallow", "sim/fluids",
-                        "sim/fluids-pill", "sim/fluids-ream"}
+                        "sim/fluids-pill", "sim/fluids-ream", "sim/drilling"}
     for path in sorted((REPO / "replays" / "expectations").glob("*.toml")):
         expectations = load_expectations(path)
         assert expectations.replay_path.exists(), path
@@ -114,7 +114,7 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
                                                     "sim/faults", "sim/drill",
                                                     "sim/model-error", "sim/sheave",
                                                     "sim/shallow", "sim/fluids",
-                                                    "sim/fluids-pill", "sim/fluids-ream",
+                                                    "sim/fluids-pill", "sim/fluids-ream", "sim/drilling",
                                                     "rig"}, path  # rig: fleet-zenoh.toml's root
 
 

@@ -112,9 +112,11 @@ def test_the_report_as_a_browser_renders_it(tmp_path: Path,
     assert sum(t["empty_header_rows"] for t in page["tables"]) == 0
     assert sum(t["empty_cells"] for t in page["tables"]) == 0
     # every figure drawn and inside the page, or explained; numbers without gaps
+    # (a trip recording: the torque figure and the drilling page are notes saying why)
     assert [h["shown"] for h in page["headings"]] == [
-        "figure", "note", "figure", "figure", "figure"], page["headings"]
+        "figure", "note", "figure", "figure", "figure", "note"], page["headings"]
     assert page["headings"][1]["title"] == "Surface torque against bit depth"
+    assert page["headings"][5]["title"].startswith("Drilling")
     assert len(page["images"]) == 4
     assert all(i["loaded"] and i["visible"] and i["inside"] for i in page["images"])
     assert [c.split(".")[0] for c in page["captions"]] == [f"Figure {n}" for n in range(1, 5)]
