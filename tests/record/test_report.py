@@ -53,8 +53,9 @@ def test_report_of_a_recording_without_model_data(tmp_path: Path) -> None:
     page = (out / "report.html").read_text()
     assert "&lt;b&gt;escaped&lt;/b&gt;" in page
     assert list(out.glob("*.png")) == []
-    # no empty axes: every figure is replaced by its note
-    assert page.count("class='note'") == 5
+    # no empty axes: every figure is replaced by its note (the drilling one's included)
+    assert page.count("class='note'") == 6
+    assert "No drilling figure: the recording holds no drilling frame." in page
     assert "No mu(T) figure. No mu(T) fit: no mu(T) calibration in this recording" in page
 
 
