@@ -58,9 +58,11 @@ def test_report_of_a_recording_without_model_data(tmp_path: Path) -> None:
     page = (out / "report.html").read_text()
     assert "&lt;b&gt;escaped&lt;/b&gt;" in page
     assert list(out.glob("*.png")) == []
-    # no empty axes: every figure is replaced by its note, unnumbered; no empty table
-    assert page.count("</h3><p class='note'>") == 5 and "Figure 1." not in page
+    # no empty axes: every figure is replaced by its note (the drilling one's included),
+    # unnumbered; no empty table
+    assert page.count("</h3><p class='note'>") == 6 and "Figure 1." not in page
     assert "No model frames in the recording" in page and "<tbody></tbody>" not in page
+    assert "No drilling figure: the recording holds no drilling frame." in page
     assert "No mu(T) figure. No mu(T) fit: no mu(T) calibration in this recording" in page
 
 
