@@ -119,6 +119,15 @@ _SCATTER_KIND = {RigState.PICK_UP: "pick_up", RigState.SLACK_OFF: "slack_off",
                  RigState.ROTATING_OFF_BOTTOM: "rotating_torque"}
 
 
+def _mwd_sources(window: Window) -> dict[str, str | None]:
+    """A drilling window estimate's ``wob_source`` and ``bit_torque_source`` where the MWD gave
+    either (docs/drilling.md); without the MWD the message stays as it was before the MWD fed
+    the windows (surface weight on bit, the tag's bit torque)."""
+    if "downhole" not in (window.wob_source, window.bit_torque_source):
+        return {}
+    return {"wob_source": window.wob_source, "bit_torque_source": window.bit_torque_source}
+
+
 def _alarm(alarm: Alarm) -> Output:
     return Output("alarm", alarm.to_message())
 
@@ -243,8 +252,10 @@ class FrictionEstimator:
         state = EstimatorState(SampleState(accumulator, block, slips, drilling), state.windows)
         if window is None:
             return state, outputs
-        if window.state == RigState.DRILLING:
-            window = replace(window, bit_torque=drilling.bit_torque)
+        if window.state == RigState.DRILLING and window.bit_torque is None:
+            # no MWD torque at the bit on every sample: the torque step at the last tag
+            window = replace(window, bit_torque=drilling.bit_torque,
+                             bit_torque_source=None if drilling.bit_torque is None else "tag")
         state, more = self.update(state, window)
         return state, outputs + more
 
@@ -417,7 +428,7 @@ class FrictionEstimator:
             low_confidence=bool(window.low_confidence), flags=list(window.flags),
             measured=window.torque, measured_se=window.torque_se, quantity="torque",
             mu_std_measurement=solved.mu_std, scatter_std=scatter, wob_N=window.wob,
-            bit_torque_Nm=window.bit_torque)))
+            bit_torque_Nm=window.bit_torque, **_mwd_sources(window))))
         return w
 
     def _resolution(self, window: Window, sensor: SensorEstimate) -> Resolution | None:

@@ -212,6 +212,8 @@ class RigSample:
         (static hook load less the block weight; None: not known, the fixed in-slips margin)
     ages : how old each channel's value is [s] (the aligner's ``Frame.ages``; None: every
         value sampled at ``t``), so that a repeated frame is not a new sample of a channel
+    downhole_wob, downhole_torque : the MWD's weight on bit [N] and torque at the bit [N m]
+        (None: not streamed); a drilling window prefers them (`tdmon.calib.windows`)
     """
 
     t: float
@@ -228,6 +230,8 @@ class RigSample:
     bit_time: float | None = None
     string_weight: float | None = None
     ages: Mapping[str, float] | None = None
+    downhole_wob: float | None = None
+    downhole_torque: float | None = None
 
 
 _NO_CHANNELS: Final[frozenset[str]] = frozenset()

@@ -80,9 +80,12 @@ class Window:
     rejected : why the window must not be used (None when usable)
     suspect : channels judged frozen that its samples' state rested on (sorted; the window
         is then fed to no estimate)
-    wob : a drilling window's mean surface weight on bit [N] (None otherwise)
-    bit_torque : a drilling window's bit torque [N m] (the estimator's, from the last tag;
-        None: not known)
+    wob : a drilling window's weight on bit [N]: the mean MWD weight on bit when every kept
+        sample has one, else the mean surface weight on bit (None: another state, or neither)
+    wob_source : whose ``wob`` is: ``"downhole"`` (the MWD's), ``"surface"`` (None: no ``wob``)
+    bit_torque : a drilling window's bit torque [N m]: the mean MWD torque at the bit when
+        every kept sample has one, else the estimator's from the last tag (None: not known)
+    bit_torque_source : whose ``bit_torque`` is: ``"downhole"``, ``"tag"`` (None: not known)
     """
 
     state: RigState
@@ -102,7 +105,9 @@ class Window:
     rejected: str | None = None
     suspect: tuple[str, ...] = ()
     wob: float | None = None
+    wob_source: str | None = None
     bit_torque: float | None = None
+    bit_torque_source: str | None = None
 
     @property
     def low_confidence(self) -> bool:
@@ -211,6 +216,7 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
         if abs(travel - expected) > max(1.0, 0.5 * abs(expected)):
             # bit depth and block disagree: depth tracking reset or a stuck depth channel
             flags.append("depth_not_following_block")
+    wob, wob_source, bit_torque = _drilling_bit(state, [s for s, _ in kept])
     return Window(
         state=state, t_start=kept[0][0].t if kept else rows[0][0].t,
         t_end=kept[-1][0].t if kept else rows[-1][0].t, n=len(kept),
@@ -220,17 +226,35 @@ def summarise(state: RigState, samples: tuple[RigSample, ...],
         hookload=mean if hookload.size else 0.0, hookload_se=se if hookload.size else 0.0,
         torque=torque, torque_se=torque_se, rpm=rpm, velocity=velocity, flags=tuple(flags),
         rejected=rejected, suspect=tuple(sorted(suspect)),
-        wob=_drilling_wob(state, kept),
+        wob=wob, wob_source=wob_source, bit_torque=bit_torque,
+        bit_torque_source=None if bit_torque is None else "downhole",
     )
 
 
-def _drilling_wob(state: RigState, kept: list[tuple[RigSample, float | None]]) -> float | None:
-    """A drilling window's mean surface weight on bit [N] (None: another state, or a sample
-    without it)."""
+def _mean_of_all(values: list[float | None]) -> float | None:
+    """The mean of ``values`` when every one is a finite number (None otherwise)."""
+    finite = [x for x in values if x is not None and math.isfinite(x)]
+    return _mean(finite) if finite and len(finite) == len(values) else None
+
+
+def _drilling_bit(state: RigState, kept: list[RigSample]
+                  ) -> tuple[float | None, str | None, float | None]:
+    """A drilling window's weight on bit [N] and whose, and its MWD bit torque [N m].
+
+    The MWD weighs the bit itself; the rig's surface weight on bit is the hook load off
+    bottom less the hook load now, so a hook-load balance with it says again what the
+    hook load at the tag said, and with the MWD's it is a measurement of its own
+    (docs/drilling.md, "Drilling windows and the joint estimate"). Each is taken only when
+    every kept sample has it, so that a window's mean is of one source.
+    """
     if state != RigState.DRILLING:
-        return None
-    wob = [s.wob for s, _ in kept if s.wob is not None and math.isfinite(s.wob)]
-    return _mean(wob) if wob and len(wob) == len(kept) else None
+        return None, None, None
+    bit_torque = _mean_of_all([s.downhole_torque for s in kept])
+    downhole = _mean_of_all([s.downhole_wob for s in kept])
+    if downhole is not None:
+        return downhole, "downhole", bit_torque
+    surface = _mean_of_all([s.wob for s in kept])
+    return surface, None if surface is None else "surface", bit_torque
 
 
 def close(acc: WindowAccumulator, settings: WindowSettings

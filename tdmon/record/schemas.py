@@ -253,6 +253,17 @@ ESTIMATE: Final = _object(
         # a window's friction spread: the measurement's and the between-window scatter
         "mu_std_measurement": _OPTIONAL_NUMBER,
         "scatter_std": _OPTIONAL_NUMBER,
+        # a drilling window's weight on bit and bit torque, and whose where the MWD gave
+        # either (docs/drilling.md)
+        "wob_N": _OPTIONAL_NUMBER,
+        "bit_torque_Nm": _OPTIONAL_NUMBER,
+        "wob_source": {**_OPTIONAL_SOURCE,
+                       "description": "drilling window: whose weight on bit (downhole: the "
+                                      "MWD's, surface: the rig's); absent: surface"},
+        "bit_torque_source": {**_OPTIONAL_SOURCE,
+                              "description": "drilling window: whose bit torque (downhole: "
+                                             "the MWD's, tag: the torque step at the last "
+                                             "tag); absent: tag"},
     },
     ("t", "kind", "operation", "mu", "mu_std"),
 )

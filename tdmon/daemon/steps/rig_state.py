@@ -96,9 +96,10 @@ def _sampled_at(frame: Frame, channel: str) -> float | None:
     return frame.t - age if age is not None and math.isfinite(age) else None
 
 
-#: Frame channels of a RigSample, in the order of its fields after ``t``.
+#: Frame channels of a RigSample, in the order of its fields after ``t`` (the MWD's two come
+#: last, after ``ages``).
 _SAMPLE_CHANNELS = ("hookload", "bit_depth", "block_position", "rpm", "flow_in", "spp",
-                    "hole_depth", "torque", "wob")
+                    "hole_depth", "torque", "wob", "downhole_wob", "downhole_torque")
 
 
 def rig_sample(frame: Frame, string_weight: StringWeight | None = None) -> RigSample:
@@ -106,13 +107,15 @@ def rig_sample(frame: Frame, string_weight: StringWeight | None = None) -> RigSa
     modelled weight at its bit depth when ``string_weight`` is given."""
     # once per frame: one comprehension and positional arguments rather than a helper call
     # and a keyword per channel
-    hookload, bit_depth, block_position, rpm, flow, spp, hole_depth, torque, wob = [
+    (hookload, bit_depth, block_position, rpm, flow, spp, hole_depth, torque, wob,
+     downhole_wob, downhole_torque) = [
         float(x) if x is not None and math.isfinite(x) else None
         for x in map(frame.values.get, _SAMPLE_CHANNELS)]
     weight = string_weight(bit_depth) if string_weight is not None else None
     return RigSample(frame.t, hookload, bit_depth, block_position, rpm, flow, spp, hole_depth,
                      torque, wob, _sampled_at(frame, "block_position"),
-                     _sampled_at(frame, "bit_depth"), weight, frame.ages)
+                     _sampled_at(frame, "bit_depth"), weight, frame.ages, downhole_wob,
+                     downhole_torque)
 
 
 class RigStateStep:
