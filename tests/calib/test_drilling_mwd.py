@@ -1,7 +1,7 @@
 """The MWD's weight on bit and torque at the bit in the drilling windows (issue 29): a window
 takes the MWD's means when every kept sample has them, says whose values it carries, and the
 joint estimate's hook-load balance then sees a drifted hook-load offset that the surface weight
-on bit (itself read off the hook load) hides."""
+on bit (itself read off the hook load) hides, and the estimator keeps the MWD's bit torque."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from tdmon.calib.estimator import _mwd_sources
+from tdmon.calib.estimator import FrictionEstimator, Output, _mwd_sources
 from tdmon.calib.joint import JointSettings, _linearise, drilling_measurements
-from tdmon.calib.rigstate import RigSample
+from tdmon.calib.rigstate import Detection, RigSample
 from tdmon.calib.windows import Window, WindowSettings, summarise
 from tdmon.daemon.pipeline import Frame
 from tdmon.daemon.steps.rig_state import rig_sample
@@ -93,3 +93,35 @@ def test_the_mwd_weight_shows_the_hook_load_offset_the_surface_weight_hides(
     # surface weight carries the same offset and cancels it
     assert residuals["downhole"] == pytest.approx(OFFSET, abs=1.5e3)
     assert residuals["surface"] == pytest.approx(0.0, abs=1.5e3)
+
+
+def test_the_estimator_keeps_the_mwd_torque_and_names_the_sources(
+        model_open: WellModel) -> None:
+    # a minute drilling at 3000 m, friction 0.25, 80 kN and 2.5 kN m at the bit, no tag seen:
+    # the MWD's torque at the bit gives the window its friction; without it nothing does
+    mu, bit_torque = 0.25, 2.5e3
+    load, torque = model_open.evaluate(Operation.ON_BOTTOM, DEPTH, mu, wob=TRUE_WOB,
+                                       bit_torque=bit_torque)
+    drilling = Detection(RigState.DRILLING, True, 0.005)
+    messages = {}
+    for name, mwd in (("downhole", True), ("none", False)):
+        estimator = FrictionEstimator(model_open)
+        state = estimator.initial_state()
+        outputs: list[Output] = []
+        for k in range(12):
+            wiggle = 1.0 if k % 2 else -1.0
+            sample = RigSample(5.0 * k, load + 300.0 * wiggle, DEPTH + 0.005 * k, rpm=12.0,
+                               torque=torque + 30.0 * wiggle, wob=TRUE_WOB - OFFSET,
+                               downhole_wob=TRUE_WOB if mwd else None,
+                               downhole_torque=bit_torque if mwd else None)
+            state, more = estimator.add_sample(state, sample, drilling)
+            outputs += more
+        state, more = estimator.close(state)
+        outputs += more
+        messages[name] = [m for topic, m in outputs
+                          if topic == "estimate" and m["operation"] == "drilling"]
+    [window] = messages["downhole"]
+    assert (window["wob_N"], window["bit_torque_Nm"]) == (TRUE_WOB, bit_torque)
+    assert (window["wob_source"], window["bit_torque_source"]) == ("downhole", "downhole")
+    assert window["mu"] == pytest.approx(mu, abs=0.005)
+    assert messages["none"] == []  # no bit torque: no friction from the drilling torque
