@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -17,6 +18,7 @@ from tdmon.calib.windows import Window, WindowSettings, summarise
 from tdmon.daemon.pipeline import Frame
 from tdmon.daemon.steps.rig_state import rig_sample
 from tdmon.model.torque_drag import Operation, WellModel
+from tdmon.record.schemas import ESTIMATE
 from tdmon.vocabulary import RigState
 
 DEPTH = 3000.0
@@ -124,4 +126,7 @@ def test_the_estimator_keeps_the_mwd_torque_and_names_the_sources(
     assert (window["wob_N"], window["bit_torque_Nm"]) == (TRUE_WOB, bit_torque)
     assert (window["wob_source"], window["bit_torque_source"]) == ("downhole", "downhole")
     assert window["mu"] == pytest.approx(mu, abs=0.005)
+    jsonschema.validate(window, ESTIMATE)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({**window, "wob_source": "mwd"}, ESTIMATE)
     assert messages["none"] == []  # no bit torque: no friction from the drilling torque
