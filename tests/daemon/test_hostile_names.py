@@ -89,6 +89,9 @@ class _Pipeline:
     def flush(self) -> None:
         self.flushed = True
 
+    def save_state(self) -> None:
+        pass
+
 
 class _Clock:
     def __init__(self) -> None:
