@@ -46,6 +46,7 @@ from tdmon.daemon.supervisor import Backoff
 from tdmon.daemon.wiring import Wiring, wire
 from tdmon.errors import TdmonError
 from tdmon.ingest.decode import parse_payload
+from tdmon.ingest.loss_state import LOSS_STATE_FILE
 from tdmon.ingest.types import RawMessage
 from tdmon.record.sink import Recorder
 
@@ -72,6 +73,15 @@ SUMMED = ("messages_in", "samples_in", "rejected", "dropped", "duplicates", "out
 def rig_folder_name(prefix: str) -> str:
     """The recording folder (and file name prefix) of rig ``prefix``: "rig/F4" -> "rig_F4"."""
     return prefix.replace("/", "_")
+
+
+def keep_loss_state(pipeline: Pipeline, config: DaemonConfig, live: bool) -> None:
+    """As for one rig (``build_daemon``): a rig with a recorder on a live source keeps its loss
+    state beside its own recordings, so its counting goes on across the daemon's restarts and
+    its own retirement (``config``: the rig's, ``DaemonConfig.for_rig``)."""
+    if config.recorder.enabled and live:
+        pipeline.loss.keep_state(config.resolve(config.recorder.output)
+                                 / rig_folder_name(config.prefix) / LOSS_STATE_FILE)
 
 
 class WellCache:
@@ -326,6 +336,8 @@ class FleetPipeline:
             rig = self.rigs.pop(prefix)
             del self._rig_of[rig.pipeline]
             rig.pipeline.flush()
+            # its loss state, as a stopping daemon's: a rig that sends again goes on from it
+            rig.pipeline.save_state()
             for recorder in rig.pipeline.recorders:
                 # durable now: acknowledgements waiting on this recorder's marks can go
                 recorder.flush()
@@ -353,7 +365,7 @@ class FleetPipeline:
         return silent
 
     def save_state(self) -> None:
-        """Each rig's :meth:`Pipeline.save_state` (a fleet's rigs keep no loss state yet)."""
+        """Each rig's :meth:`Pipeline.save_state`: its loss state, beside its recordings."""
         for rig in self.rigs.values():
             rig.pipeline.save_state()
 
@@ -418,6 +430,7 @@ async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
             sink.close()
         wells = (None if config.fleet is None or config.fleet.wells is None
                  else config.resolve(config.fleet.wells))
+        live = any(not source.finite for source in wiring.sources)
 
         def make_rig(prefix: str, rig: RigConfig | None) -> Rig | None:
             well = None
@@ -449,6 +462,7 @@ async def build_fleet(config: DaemonConfig, *, backoff: Backoff | None = None,
             pipeline = assemble_pipeline(rig_config, well_obj, steps, rig_wiring.sinks,
                                          rig_wiring.stats)
             rig_wiring.pipeline = pipeline
+            keep_loss_state(pipeline, rig_config, live)
             return Rig(prefix, rig_config, pipeline, owned=list(rig_wiring.owned))
 
         fleet = FleetPipeline(config, make_rig, stats)

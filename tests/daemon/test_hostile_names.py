@@ -89,6 +89,9 @@ class _Pipeline:
     def flush(self) -> None:
         self.flushed = True
 
+    def save_state(self) -> None:
+        pass
+
 
 class _Clock:
     def __init__(self) -> None:
@@ -349,6 +352,10 @@ def test_fuzz_fleet_over_zenoh(tmp_path: Path, free_tcp_port: Callable[[], int],
             @SETTINGS
             @given(name=names, channel=channels, data=payloads)
             def fuzz(name: str, channel: str, data: bytes) -> None:
+                if any(chunk.startswith("@") for chunk in name.split("/")):
+                    # a verbatim chunk: zenoh takes the key but `rig/**` does not match it,
+                    # so it never reaches the daemon
+                    return
                 before = harness.handled()
                 try:
                     send(f"rig/{name}/{channel}", data)
