@@ -53,6 +53,8 @@ SERVED_UNITS: Final[Mapping[str, tuple[str, str, str]]] = {
     "flow_in": ("L/min", "L2", "l/min"),
     "spp": ("bar", "BAR", "bar"),
     "wob": ("kN", "B47", "kN"),
+    "downhole_wob": ("kN", "B47", "kN"),
+    "downhole_torque": ("kN*m", "B48", "kN·m"),
     "mud_temp_in": ("degC", "CEL", "°C"),
     "mud_temp_out": ("degC", "CEL", "°C"),
     "mud_density": ("kg/m**3", "KMQ", "kg/m³"),

@@ -115,7 +115,8 @@ def test_every_bundled_scenario_and_expectations_file_reads() -> None:
                                                     "sim/model-error", "sim/sheave",
                                                     "sim/shallow", "sim/fluids",
                                                     "sim/fluids-pill", "sim/fluids-ream",
-                                                    "sim/drilling", "rig"}, path  # rig: fleet-zenoh.toml's root
+                                                    "sim/drilling",
+                                                    "rig"}, path  # rig: fleet-zenoh.toml's root
 
 
 def test_scenario_words() -> None:

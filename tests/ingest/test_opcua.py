@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from tdmon.channels import ChannelSpec
+from tdmon.channels import CHANNEL_UNITS, ChannelSpec
 from tdmon.config.daemon import OpcUaConfig, parse_daemon_config
 from tdmon.errors import ConfigError, IngestError
 from tdmon.ingest.decode import Decoder
@@ -31,7 +31,7 @@ from tdmon.ingest.opcua import (
     unit_id,
     value_message,
 )
-from tdmon.ingest.opcua_server import OpcUaRigServer
+from tdmon.ingest.opcua_server import SERVED_UNITS, OpcUaRigServer
 from tdmon.ingest.opcua_source import OpcUaSource
 from tdmon.ingest.publish import recording_messages
 from tdmon.ingest.types import RawMessage, Rejected, Sample
@@ -305,6 +305,14 @@ async def test_signed_and_encrypted_with_a_user_name_and_the_mistakes(tmp_path: 
 
 
 # -- `tdmon publish --opcua` -------------------------------------------------------------------
+
+def test_every_channel_is_served_in_a_unit_that_converts_from_its_own() -> None:
+    """A channel added to tdmon.channels without a served unit made `publish --opcua` fail."""
+    assert set(SERVED_UNITS) == set(CHANNEL_UNITS)
+    for channel, (unit, code, _) in SERVED_UNITS.items():
+        factor = conversion(CHANNEL_UNITS[channel][0], unit)
+        assert factor is not None and code in UNECE_UNITS, channel
+
 
 def test_publish_serves_a_replay_to_a_subscriber(free_tcp_port: Callable[[], int]) -> None:
     """The simulator in its own process, the source here: every step of the first 300 of the
