@@ -8,12 +8,15 @@ cd "$(dirname "$0")/.."
 # the report (tests/record/test_report_browser.py) and loads the live web view
 missing=()
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || missing+=(mosquitto)
-command -v chromium >/dev/null 2>&1 || missing+=(chromium)
+# (chromium without its recommends, which pull in printing, Samba and a Perl web stack: 2.5
+# minutes of CI; fonts-liberation, one of them, is the fonts the report's text is drawn in)
+command -v chromium >/dev/null 2>&1 || missing+=(chromium fonts-liberation)
 if [ ${#missing[@]} -gt 0 ]; then
     sudo_cmd=""
     [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
     $sudo_cmd apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${missing[@]}"
+    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends \
+        "${missing[@]}"
 fi
 
 [ -x .venv/bin/python ] || python3 -m venv .venv
