@@ -260,3 +260,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.path.name in FAULT_TEST_FILES:
             item.add_marker(pytest.mark.faults)
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """The headless Chromium the browser tests drive (``TDMON_CHROMIUM`` names another): the
+    test fails without it, as scripts/test.sh installs it."""
+    for name in (os.environ.get("TDMON_CHROMIUM"), "chromium", "chromium-browser",
+                 "google-chrome"):
+        found = shutil.which(name) if name else None
+        if found:
+            return found
+    pytest.fail("headless Chromium not found: scripts/test.sh installs it "
+                "(apt-get install chromium), or set TDMON_CHROMIUM")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -62,16 +61,6 @@ def test_run_web_serves_the_views_live(capsys: pytest.CaptureFixture[str],
     assert f"--web-port {taken}: cannot serve the web viewer" in capsys.readouterr().err
 
 
-def _chromium() -> str:
-    for name in (os.environ.get("TDMON_CHROMIUM"), "chromium", "chromium-browser",
-                 "google-chrome"):
-        found = shutil.which(name) if name else None
-        if found:
-            return found
-    pytest.fail("headless Chromium not found: scripts/test.sh installs it "
-                "(apt-get install chromium), or set TDMON_CHROMIUM")
-
-
 def _browser_connections(browser: psutil.Process, port: int) -> int:
     """Connections of the browser's processes to the Rerun stream's port."""
     processes = [browser, *browser.children(recursive=True)]
@@ -81,8 +70,8 @@ def _browser_connections(browser: psutil.Process, port: int) -> int:
                and c.status == psutil.CONN_ESTABLISHED)
 
 
-def test_fleet_web_view_loads_in_a_browser(tmp_path: Path,
-                                           free_tcp_port: Callable[[], int]) -> None:
+def test_fleet_web_view_loads_in_a_browser(tmp_path: Path, free_tcp_port: Callable[[], int],
+                                           chromium: str) -> None:
     router, rerun_port, web_port = free_tcp_port(), free_tcp_port(), free_tcp_port()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     fleet = subprocess.Popen(
@@ -114,7 +103,7 @@ def test_fleet_web_view_loads_in_a_browser(tmp_path: Path,
                  "mu_std": 0.01}))
             # one browser start: the page loads the viewer, which connects to the stream
             browser = psutil.Process(subprocess.Popen(
-                [_chromium(), "--headless", "--no-sandbox", "--use-angle=swiftshader",
+                [chromium, "--headless", "--no-sandbox", "--use-angle=swiftshader",
                  "--enable-unsafe-swiftshader", "--no-first-run", "--remote-debugging-port=0",
                  f"--user-data-dir={tmp_path / 'chromium-profile'}", "--window-size=1200,800",
                  url.strip()], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).pid)

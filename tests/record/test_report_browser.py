@@ -8,14 +8,10 @@ fails, not skips, without it.
 from __future__ import annotations
 
 import json
-import os
 import re
-import shutil
 import subprocess
 from pathlib import Path
 from typing import Any
-
-import pytest
 
 from tdmon.record.mcap_recorder import McapRecorder
 from tdmon.record.reader import RecordedMessage
@@ -67,22 +63,12 @@ window.addEventListener("load", () => {
 """
 
 
-def _chromium() -> str:
-    for name in (os.environ.get("TDMON_CHROMIUM"), "chromium", "chromium-browser",
-                 "google-chrome"):
-        found = shutil.which(name) if name else None
-        if found:
-            return found
-    pytest.fail("headless Chromium not found: scripts/test.sh installs it "
-                "(apt-get install chromium), or set TDMON_CHROMIUM")
-
-
-def _render(page: Path, screenshot: Path, profile: Path) -> dict[str, Any]:
+def _render(chromium: str, page: Path, screenshot: Path, profile: Path) -> dict[str, Any]:
     """One browser start: the screenshot and the measured page."""
     measured = page.with_name("measured.html")
     measured.write_text(page.read_text().replace("</body>", _MEASURE + "</body>"))
     result = subprocess.run(
-        [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+        [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
          "--no-first-run", f"--user-data-dir={profile}", "--window-size=1100,3000",
          f"--screenshot={screenshot}", "--dump-dom", "--virtual-time-budget=5000",
          measured.as_uri()],
@@ -93,14 +79,14 @@ def _render(page: Path, screenshot: Path, profile: Path) -> dict[str, Any]:
                            .replace("&gt;", ">").replace("&quot;", '"')))
 
 
-def test_the_report_as_a_browser_renders_it(tmp_path: Path,
-                                            stream: list[RecordedMessage]) -> None:
+def test_the_report_as_a_browser_renders_it(tmp_path: Path, stream: list[RecordedMessage],
+                                            chromium: str) -> None:
     with McapRecorder(tmp_path / "rec") as recorder:
         for item in stream:
             recorder.write(*item)
     report = write_report(recorder.stats.files, tmp_path / "report", title="Synthetic trip")
     screenshot = tmp_path / "report.png"
-    page = _render(report.html, screenshot, tmp_path / "chromium-profile")
+    page = _render(chromium, report.html, screenshot, tmp_path / "chromium-profile")
 
     # the headline first, saying what was found against the plan (the synthetic well file
     # plans no friction, and says so)
